@@ -1,0 +1,51 @@
+"""jaxgear: global analysis of nonlinear planetary gear trains in JAX.
+
+Every coexisting periodic motion of a forced gear model and the share of the state
+space each attracts, by Poincaré-like cell mapping, Hsu's simple cell mapping and
+direct integration, with shooting/Floquet for exact orbits (the method of
+"Global Analysis of a Planetary Gear Train"). Float64 is enabled on import.
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from ._system import ForcedSystem as ForcedSystem, check_system as check_system
+from ._params import (
+    GearParams as GearParams,
+    GearSet as GearSet,
+    PARAM_NAMES as PARAM_NAMES,
+    paper_gear_set as paper_gear_set,
+    get_preset as get_preset,
+    resolve_params as resolve_params,
+)
+from ._model import (
+    REDUCED as REDUCED,
+    backlash as backlash,
+    nplanet_system as nplanet_system,
+    reduced_vector_field as reduced_vector_field,
+    nplanet_vector_field as nplanet_vector_field,
+    reduced_to_nplanet as reduced_to_nplanet,
+)
+from ._integrate import RK4 as RK4, Adaptive as Adaptive, advance as advance
+from ._poincare import (
+    stroboscopic_map as stroboscopic_map,
+    stroboscopic_orbit as stroboscopic_orbit,
+    section_map as section_map,
+    SectionHit as SectionHit,
+    sample_trajectory as sample_trajectory,
+    STATUS_OK as STATUS_OK,
+    STATUS_DIVERGED as STATUS_DIVERGED,
+    STATUS_NO_CROSSING as STATUS_NO_CROSSING,
+)
+
+__version__ = "0.1.0"
+
+
+def paper_params(**overrides) -> GearParams:
+    """Dimensionless parameters of the ``paper`` preset (MODEL.md §4, §7).
+
+    ``overrides`` may name physical fields of :class:`GearSet` or canonical
+    dimensionless names (see :func:`resolve_params`).
+    """
+    return resolve_params("paper", overrides)[1]

@@ -1,0 +1,166 @@
+"""Time integration of a :class:`~jaxgear.ForcedSystem`: fixed-step RK4 and diffrax.
+
+Two strategies behind one interface (:func:`advance`, :func:`sample`):
+
+- :class:`RK4` — the classical fourth-order Runge-Kutta method with a fixed number of
+  steps per forcing period, the paper's integrator (§4.1). Batches of states are kept
+  as ``(dim, n)`` arrays (struct of arrays) so each coordinate is one contiguous
+  vector, and time-only terms (mesh stiffness, errors) are evaluated once per stage
+  for the whole batch.
+- :class:`Adaptive` — any diffrax solver with a PID step-size controller.
+
+Times are in the system's own unit; durations are whole forcing periods.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._system import ForcedSystem
+
+__all__ = ["RK4", "Adaptive", "Integrator", "advance", "advance_batch", "sample", "rk4_step_batch"]
+
+
+class Integrator(eqx.Module):
+    """Base class of the integration strategies."""
+
+
+class RK4(Integrator):
+    """Classical RK4 with ``steps_per_period`` fixed steps per forcing period (paper §4.1).
+
+    The gear model's vector field has kinks at ``|X| = b`` (backlash), where RK4
+    converges at about second order; 200-400 steps per period give periodic points
+    to ~1e-4 (MODEL.md §8). Use :class:`Adaptive` for reference solutions.
+    """
+
+    steps_per_period: int = eqx.field(static=True, default=200)
+
+    def __check_init__(self):
+        if int(self.steps_per_period) < 1:
+            raise ValueError(f"steps_per_period={self.steps_per_period} must be >= 1.")
+
+
+class Adaptive(Integrator):
+    """A diffrax solver with adaptive steps (default Tsit5, rtol=atol=1e-10).
+
+    ``max_steps`` bounds the steps over one call; a lane that exceeds it is returned as
+    non-finite (it ends in the sink of a cell map, never as a silent wrong value).
+    """
+
+    solver: Any = eqx.field(static=True, default_factory=diffrax.Tsit5)
+    rtol: float = eqx.field(static=True, default=1e-10)
+    atol: float = eqx.field(static=True, default=1e-10)
+    max_steps: int = eqx.field(static=True, default=200_000)
+
+
+# ----------------------------------------------------------------------- RK4 kernel
+def _batched_field(system: ForcedSystem):
+    """``f(t, Y, params)`` on a ``(dim, n)`` batch; time-only terms computed once."""
+    return jax.vmap(system.vector_field, in_axes=(None, 1, None), out_axes=1)
+
+
+def _lane_field(system: ForcedSystem):
+    """``f(t, Y, params)`` on a ``(dim, n)`` batch with one time per lane (``t`` of shape ``(n,)``)."""
+    return jax.vmap(system.vector_field, in_axes=(0, 1, None), out_axes=1)
+
+
+def rk4_step_batch(f, t, Y, h, params):
+    """One classical RK4 step of size ``h`` for a batch ``Y`` of shape ``(dim, n)``.
+
+    ``f`` is :func:`_batched_field` (scalar ``t`` and ``h``) or :func:`_lane_field`
+    (``t`` and ``h`` of shape ``(n,)``).
+    """
+    h2 = 0.5 * h
+    k1 = f(t, Y, params)
+    k2 = f(t + h2, Y + h2 * k1, params)
+    k3 = f(t + h2, Y + h2 * k2, params)
+    k4 = f(t + h, Y + h * k3, params)
+    return Y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+
+
+def _rk4_advance_T(system, params, Y, t0, n_steps, h):
+    f = _batched_field(system)
+
+    def body(i, Y):
+        return rk4_step_batch(f, t0 + i * h, Y, h, params)
+
+    return jax.lax.fori_loop(0, n_steps, body, Y)
+
+
+# ----------------------------------------------------------------------- interface
+def advance_batch(system: ForcedSystem, params, Y, t0, periods: int, integrator: Integrator = RK4()):
+    """Advance a batch ``Y`` of shape ``(dim, n)`` from ``t0`` by ``periods`` forcing periods.
+
+    ``periods`` is a Python int (it sets the loop length). Returns ``(dim, n)``.
+    """
+    T = system.period(params)
+    if isinstance(integrator, RK4):
+        n = integrator.steps_per_period * int(periods)
+        return _rk4_advance_T(system, params, Y, t0, n, T / integrator.steps_per_period)
+    if isinstance(integrator, Adaptive):
+        one = lambda y: _diffrax_solve(system, params, y, t0, t0 + periods * T, integrator)
+        return jax.vmap(one, in_axes=1, out_axes=1)(Y)
+    raise TypeError(f"unknown integrator {integrator!r}; use jaxgear.RK4 or jaxgear.Adaptive.")
+
+
+def advance(system: ForcedSystem, params, x0, t0, periods: int, integrator: Integrator = RK4()):
+    """Advance states ``x0`` of shape ``(..., dim)`` by ``periods`` forcing periods from ``t0``."""
+    x0 = jnp.asarray(x0, dtype=jnp.float64)
+    lead = x0.shape[:-1]
+    Y = x0.reshape(-1, system.dim).T
+    Y = advance_batch(system, params, Y, t0, periods, integrator)
+    return Y.T.reshape(*lead, system.dim)
+
+
+def _diffrax_solve(system, params, y0, t0, t1, integ: Adaptive, ts=None):
+    term = diffrax.ODETerm(lambda t, y, args: system.vector_field(t, y, args))
+    T = system.period(params)
+    saveat = diffrax.SaveAt(t1=True) if ts is None else diffrax.SaveAt(ts=ts)
+    sol = diffrax.diffeqsolve(
+        term, integ.solver, t0, t1, dt0=T / 64, y0=y0, args=params, saveat=saveat,
+        stepsize_controller=diffrax.PIDController(rtol=integ.rtol, atol=integ.atol),
+        max_steps=integ.max_steps, throw=False,
+    )
+    ok = sol.result == diffrax.RESULTS.successful
+    ys = sol.ys if ts is not None else sol.ys[-1]
+    return jnp.where(ok, ys, jnp.nan)
+
+
+def sample(system: ForcedSystem, params, x0, t0, periods: int, samples_per_period: int = 100,
+           integrator: Integrator = RK4()):
+    """Sample trajectories for plots: times ``(m,)`` and states ``(..., m, dim)``.
+
+    ``m = periods * samples_per_period + 1`` points from ``t0`` to ``t0 + periods*T``.
+    With :class:`RK4` the sample spacing is a whole number of steps: ``steps_per_period``
+    is rounded up to a multiple of ``samples_per_period``.
+    """
+    x0 = jnp.asarray(x0, dtype=jnp.float64)
+    lead = x0.shape[:-1]
+    Y0 = x0.reshape(-1, system.dim).T
+    T = system.period(params)
+    m = int(periods) * int(samples_per_period)
+    ts = t0 + T * jnp.arange(m + 1) / samples_per_period
+    if isinstance(integrator, RK4):
+        sub = -(-integrator.steps_per_period // samples_per_period)
+        h = T / (sub * samples_per_period)
+        f = _batched_field(system)
+
+        def one_sample(Y, i):
+            t_start = t0 + i * sub * h
+            Y = jax.lax.fori_loop(0, sub, lambda j, Y: rk4_step_batch(f, t_start + j * h, Y, h, params), Y)
+            return Y, Y
+
+        _, Ys = jax.lax.scan(one_sample, Y0, jnp.arange(m))
+        Ys = jnp.concatenate([Y0[None], Ys], axis=0)  # (m+1, dim, n)
+    elif isinstance(integrator, Adaptive):
+        Ys = jax.vmap(lambda y: _diffrax_solve(system, params, y, t0, ts[-1], integrator, ts=ts),
+                      in_axes=1, out_axes=2)(Y0)  # (m+1, dim, n)
+    else:
+        raise TypeError(f"unknown integrator {integrator!r}")
+    states = jnp.moveaxis(Ys, 2, 0).reshape(*lead, m + 1, system.dim)
+    return ts, states

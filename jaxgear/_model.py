@@ -1,0 +1,148 @@
+"""Equations of motion of the planetary set (paper eq. 1-5, MODEL.md §2-§4).
+
+Two :class:`~jaxgear.ForcedSystem` instances:
+
+- :data:`REDUCED` — the reduced 2-DOF model of paper §4.1, state
+  ``x = (x1, x2, x3, x4) = (X_sp, X_sp', X_sc, X_sc')`` (MODEL.md §4);
+- :func:`nplanet_system` — the general model with N planets (N+1 DOF), state
+  ``(X_sp1, X_sp1', ..., X_spN, X_spN', X_sc, X_sc')`` (MODEL.md §2, dimensionless).
+
+Both are pure functions of ``(t, x, params)`` with ``params`` a :class:`GearParams`;
+time is the dimensionless ``tau = omega_n t`` and lengths are in units of ``b_c``.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax.numpy as jnp
+
+from ._params import GearParams
+from ._system import ForcedSystem
+
+__all__ = [
+    "backlash",
+    "mesh_excitation",
+    "reduced_vector_field",
+    "nplanet_vector_field",
+    "REDUCED",
+    "nplanet_system",
+    "gear_period",
+    "reduced_to_nplanet",
+]
+
+
+def backlash(X, b):
+    """Backlash (dead-zone) function f(X, b) of paper eq. (3); ``b`` is the HALF backlash."""
+    return jnp.where(X > b, X - b, jnp.where(X < -b, X + b, 0.0))
+
+
+def gear_period(p: GearParams):
+    """Forcing (mesh) period ``T = 2 pi / Omega`` in dimensionless time."""
+    return 2.0 * jnp.pi / p.Omega
+
+
+def mesh_excitation(t, p: GearParams):
+    """Time-varying stiffness and errors (paper eq. 1-2, MODEL.md §4) at time ``t``.
+
+    Returns ``k_sp, k_rp, e_sp, e_sp', e_sp'', e_rp, e_rp'`` (each scalar or per-planet).
+    These depend on time only, so under ``vmap`` over states they are computed once
+    and shared by every state.
+    """
+    W = p.Omega
+    k_sp = p.kappa_sp_mean + p.kappa_sp_amp * jnp.sin(W * t + p.phi_sp)
+    k_rp = p.kappa_rp_mean + p.kappa_rp_amp * jnp.sin(W * t + p.phi_rp)
+    a_sp = W * t + p.beta_sp
+    a_rp = W * t + p.beta_rp + p.gamma_sr
+    s_sp, c_sp = jnp.sin(a_sp), jnp.cos(a_sp)
+    e_sp = p.e_sp_amp * s_sp
+    de_sp = p.e_sp_amp * W * c_sp
+    dde_sp = -p.e_sp_amp * W * W * s_sp
+    e_rp = p.e_rp_amp * jnp.sin(a_rp)
+    de_rp = p.e_rp_amp * W * jnp.cos(a_rp)
+    return k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp
+
+
+def reduced_vector_field(t, x, p: GearParams):
+    """Reduced 2-DOF model (MODEL.md §4): identical planets, ``x = (X_sp, X_sp', X_sc, X_sc')``.
+
+    ``x1' = x2``, ``x2' = -(N + mu_p) g_sp + (mu_p - N mu_c) g_rp + mu_s f_D + mu_c f_L - e_sp''``,
+    ``x3' = x4``, ``x4' = -N (mu_s + 2 mu_c) g_sp - 2 N mu_c g_rp + mu_s f_D + 2 mu_c f_L``,
+    with the mesh forces ``g`` of paper eq. (3) and (5).
+    """
+    x1, x2, x3, x4 = x[0], x[1], x[2], x[3]
+    k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp = mesh_excitation(t, p)
+    X_rp = x3 - x1 - e_sp - e_rp
+    V_rp = x4 - x2 - de_sp - de_rp
+    g_sp = k_sp * backlash(x1, p.b_sp) + p.c_sp * x2
+    g_rp = k_rp * backlash(X_rp, p.b_rp) + p.c_rp * V_rp
+    N = p.N
+    load1 = p.mu_s * p.f_D + p.mu_c * p.f_L - dde_sp
+    load2 = p.mu_s * p.f_D + 2.0 * p.mu_c * p.f_L
+    dx2 = -(N + p.mu_p) * g_sp + (p.mu_p - N * p.mu_c) * g_rp + load1
+    dx4 = -N * (p.mu_s + 2.0 * p.mu_c) * g_sp - 2.0 * N * p.mu_c * g_rp + load2
+    return jnp.stack([x2, dx2, x4, dx4])
+
+
+def nplanet_vector_field(t, x, p: GearParams):
+    """General N-planet model (MODEL.md §2 in dimensionless form), N+1 DOF.
+
+    State ``(X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc)``; per-planet stiffness,
+    errors, backlash, damping, phases and planet masses (``mu_p`` per planet):
+
+    ``X_spi'' = mu_s f_D + mu_c f_L - e_spi'' - (mu_s + mu_c) sum_j g_spj - mu_c sum_j g_rpj
+    - mu_pi (g_spi - g_rpi)``, ``X_sc'' = mu_s f_D + 2 mu_c f_L - (mu_s + 2 mu_c) sum_j g_spj
+    - 2 mu_c sum_j g_rpj``.
+    """
+    N = p.N
+    X = x[0 : 2 * N : 2]
+    V = x[1 : 2 * N : 2]
+    Xsc, Vsc = x[2 * N], x[2 * N + 1]
+    k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp = mesh_excitation(t, p)
+    X_rp = Xsc - X - e_sp - e_rp
+    V_rp = Vsc - V - de_sp - de_rp
+    g_sp = k_sp * backlash(X, p.b_sp) + p.c_sp * V
+    g_rp = k_rp * backlash(X_rp, p.b_rp) + p.c_rp * V_rp
+    S_sp, S_rp = jnp.sum(g_sp), jnp.sum(g_rp)
+    dde_sp = jnp.broadcast_to(dde_sp, (N,))
+    acc = (p.mu_s * p.f_D + p.mu_c * p.f_L - dde_sp
+           - (p.mu_s + p.mu_c) * S_sp - p.mu_c * S_rp - p.mu_p * (g_sp - g_rp))
+    acc_sc = p.mu_s * p.f_D + 2.0 * p.mu_c * p.f_L - (p.mu_s + 2.0 * p.mu_c) * S_sp - 2.0 * p.mu_c * S_rp
+    pos_vel = jnp.stack([V, acc], axis=-1).reshape(-1)
+    return jnp.concatenate([pos_vel, jnp.stack([Vsc, acc_sc])])
+
+
+REDUCED = ForcedSystem(
+    vector_field=reduced_vector_field,
+    period=gear_period,
+    state_names=("x1", "x2", "x3", "x4"),
+    section_index=3,
+    name="planetary-reduced",
+)
+"""The reduced 2-DOF model of paper §4.1; Σ = {x4 = 0} is its default section."""
+
+
+@functools.lru_cache(maxsize=None)
+def nplanet_system(N: int) -> ForcedSystem:
+    """The general model with ``N`` planets (paper eq. 5) as a :class:`ForcedSystem`.
+
+    State names ``X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc``; the default section is
+    ``{V_sc = 0}``, the N-planet counterpart of Σ = {x4 = 0}.
+    """
+    if int(N) < 1:
+        raise ValueError(f"N={N}: the number of planets must be >= 1.")
+    names = sum(((f"X_sp{i}", f"V_sp{i}") for i in range(1, N + 1)), ()) + ("X_sc", "V_sc")
+    return ForcedSystem(
+        vector_field=nplanet_vector_field,
+        period=gear_period,
+        state_names=names,
+        section_index=2 * N + 1,
+        name=f"planetary-{N}-planets",
+    )
+
+
+def reduced_to_nplanet(x, N: int):
+    """Reduced state(s) ``(..., 4)`` -> N-planet state(s) ``(..., 2N+2)`` with identical planets."""
+    x = jnp.asarray(x)
+    planets = jnp.tile(x[..., 0:2], (1,) * (x.ndim - 1) + (N,))
+    return jnp.concatenate([planets, x[..., 2:4]], axis=-1)

@@ -1,0 +1,16 @@
+"""Options shared by several sub-commands."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_param_options(p: argparse.ArgumentParser) -> None:
+    """``--preset`` and repeatable ``--set NAME=VALUE``."""
+    p.add_argument("--preset", default="paper", help="gear-set preset (default: paper, the set of paper §4.1)")
+    p.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
+        help="override a parameter: a physical GearSet field (face_width=0.03, input_rpm=3000, "
+        "k_sp_amp=2e8, ...) or a canonical dimensionless name (Omega=0.9, b_sp=4, "
+        "kappa_sp_amp=0.3, ...); per-planet values as comma lists; repeatable",
+    )
