@@ -49,3 +49,11 @@ def paper_params(**overrides) -> GearParams:
     dimensionless names (see :func:`resolve_params`).
     """
     return resolve_params("paper", overrides)[1]
+
+
+from ._examples import (  # noqa: E402
+    DUFFING as DUFFING,
+    DuffingParams as DuffingParams,
+    SPUR_PAIR as SPUR_PAIR,
+    SpurPairParams as SpurPairParams,
+)

@@ -1,0 +1,77 @@
+"""Small forced systems with known answers, used in examples and tests.
+
+- :data:`DUFFING` — the forced Duffing oscillator ``x'' + delta x' + alpha x + beta x^3
+  = gamma cos(omega t)`` (``beta = 0`` is the forced linear oscillator, closed form);
+- :data:`SPUR_PAIR` — the classic single-DOF spur-gear pair with backlash and mesh
+  stiffness variation (dimensionless, Kahraman & Singh type):
+  ``x'' + 2 zeta x' + (1 + kappa sin(Omega t)) f(x, b) = f_m + e_amp Omega^2 sin(Omega t)``;
+  with ``b = 0``, ``f_m = e_amp = 0`` it is the damped Mathieu equation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ._model import backlash
+from ._system import ForcedSystem
+
+__all__ = ["DuffingParams", "DUFFING", "SpurPairParams", "SPUR_PAIR"]
+
+
+def _f64(x):
+    return jnp.asarray(x, dtype=jnp.float64)
+
+
+class DuffingParams(eqx.Module):
+    """Forced Duffing parameters (all float64 arrays, so sweeps do not recompile)."""
+
+    delta: Any = eqx.field(converter=_f64, default=0.1)
+    alpha: Any = eqx.field(converter=_f64, default=1.0)
+    beta: Any = eqx.field(converter=_f64, default=0.0)
+    gamma: Any = eqx.field(converter=_f64, default=1.0)
+    omega: Any = eqx.field(converter=_f64, default=1.0)
+
+
+def _duffing_field(t, x, p: DuffingParams):
+    return jnp.stack([x[1], p.gamma * jnp.cos(p.omega * t) - p.delta * x[1] - p.alpha * x[0] - p.beta * x[0] ** 3])
+
+
+DUFFING = ForcedSystem(
+    vector_field=_duffing_field,
+    period=lambda p: 2.0 * jnp.pi / p.omega,
+    state_names=("x", "v"),
+    section_index=1,
+    name="duffing",
+)
+"""Forced Duffing oscillator, state ``(x, v)``, period ``2 pi / omega``."""
+
+
+class SpurPairParams(eqx.Module):
+    """Single spur-gear pair (dimensionless): damping ratio, stiffness amplitude,
+    half backlash, mean load, transmission-error amplitude, mesh frequency."""
+
+    zeta: Any = eqx.field(converter=_f64, default=0.05)
+    kappa: Any = eqx.field(converter=_f64, default=0.2)
+    b: Any = eqx.field(converter=_f64, default=1.0)
+    f_m: Any = eqx.field(converter=_f64, default=0.1)
+    e_amp: Any = eqx.field(converter=_f64, default=0.1)
+    Omega: Any = eqx.field(converter=_f64, default=1.0)
+
+
+def _spur_field(t, x, p: SpurPairParams):
+    k = 1.0 + p.kappa * jnp.sin(p.Omega * t)
+    acc = p.f_m + p.e_amp * p.Omega**2 * jnp.sin(p.Omega * t) - 2.0 * p.zeta * x[1] - k * backlash(x[0], p.b)
+    return jnp.stack([x[1], acc])
+
+
+SPUR_PAIR = ForcedSystem(
+    vector_field=_spur_field,
+    period=lambda p: 2.0 * jnp.pi / p.Omega,
+    state_names=("x", "v"),
+    section_index=1,
+    name="spur-pair",
+)
+"""Single spur-gear pair with backlash, state ``(x, v)`` (dynamic transmission error)."""
