@@ -57,3 +57,19 @@ from ._examples import (  # noqa: E402
     SPUR_PAIR as SPUR_PAIR,
     SpurPairParams as SpurPairParams,
 )
+
+from ._cells import CellGrid as CellGrid, PAPER_REGION as PAPER_REGION  # noqa: E402
+from ._result import (  # noqa: E402
+    Attractor as Attractor,
+    GlobalResult as GlobalResult,
+    load_result as load_result,
+    SINK as SINK,
+    UNRESOLVED as UNRESOLVED,
+)
+from ._cellmap import (  # noqa: E402
+    analyze_global as analyze_global,
+    analyze_cell_map as analyze_cell_map,
+    cell_images as cell_images,
+    detect_period as detect_period,
+    compare_with_direct as compare_with_direct,
+)

@@ -1,0 +1,12 @@
+"""Figures (matplotlib). Every function reads a result (or data) and returns a Figure;
+nothing here computes an analysis. Colours: attractor ``i`` is ``attractor_color(i)``
+everywhere; the sink is light grey, unresolved cells black.
+"""
+
+from ._style import attractor_color as attractor_color, SINK_COLOR as SINK_COLOR
+from ._basins import (
+    plot_domains as plot_domains,
+    plot_domains_3d as plot_domains_3d,
+    plot_attractors as plot_attractors,
+    plot_shares as plot_shares,
+)

@@ -1,0 +1,208 @@
+"""Cell mapping (paper §3-§4): graph analysis, methods, invariants, period detection."""
+
+import warnings
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgear as jg
+from jaxgear import CellGrid, ForcedSystem
+
+# ---------------------------------------------------------------- test systems
+
+
+class BistableParams(eqx.Module):
+    a: jnp.ndarray = eqx.field(converter=lambda v: jnp.asarray(v, jnp.float64), default=1.0)
+
+
+# x' = a x - x^3: attractors x = +-sqrt(a), separatrix exactly x = 0 (any period works)
+BISTABLE_1D = ForcedSystem(vector_field=lambda t, x, p: p.a * x - x**3, period=lambda p: 1.0 + 0 * p.a,
+                           state_names=("x",), name="bistable-1d")
+
+LINEAR = jg.DuffingParams(delta=0.4, alpha=1.0, beta=0.0, gamma=0.5, omega=0.8)
+DOUBLE_WELL = jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
+PERIOD_TWO = jg.DuffingParams(delta=0.3, alpha=-1.0, beta=1.0, gamma=0.28, omega=1.2)
+
+
+def linear_response(p, t=0.0):
+    """Closed-form steady state of x'' + delta x' + alpha x = gamma cos(omega t)."""
+    H = p.gamma / (p.alpha - p.omega**2 + 1j * p.delta * p.omega)
+    z = complex(H) * np.exp(1j * float(p.omega) * t)
+    return np.array([z.real, (1j * float(p.omega) * z).real])
+
+
+# ---------------------------------------------------------------- graph analysis
+
+
+def test_cell_map_graph_on_hand_built_map():
+    # 0->1->2->0 (3-cycle), 3->3 (fixed), 4->0, 5->4, 6->sink(7), 7 is the sink index
+    images = np.array([1, 2, 0, 3, 0, 4, 7])
+    cm = jg.analyze_cell_map(images, 7)
+    assert list(cm["groups"]) == [0, 3]
+    assert list(cm["cycle_length"]) == [3, 1]
+    assert list(cm["periodic"]) == [True, True, True, True, False, False, False]
+    assert list(cm["group"]) == [0, 0, 0, 3, 0, 0, 7]
+
+
+def test_cell_map_graph_random_maps_agree_with_brute_force():
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        n = int(rng.integers(1, 60))
+        images = rng.integers(0, n + 1, size=n)
+        cm = jg.analyze_cell_map(images, n)
+        f = np.append(images, n)
+        for i in range(n):
+            seen, x = [], i
+            while x not in seen:
+                seen.append(x)
+                x = f[x]
+            cycle = seen[seen.index(x):]
+            assert cm["group"][i] == min(cycle)
+            assert cm["periodic"][i] == (i in cycle)
+
+
+def test_cell_map_rejects_bad_images():
+    with pytest.raises(ValueError):
+        jg.analyze_cell_map(np.array([0, 5]), 2)
+
+
+# ---------------------------------------------------------------- one attractor
+
+
+@pytest.mark.parametrize("method", ["stroboscopic", "direct"])
+def test_forced_linear_oscillator_one_p1_at_closed_form(method):
+    grid = CellGrid.box([(-3, 3), (-3, 3)], (12, 12), names=("x", "v"))
+    r = jg.analyze_global(jg.DUFFING, LINEAR, grid, method=method, mapping_steps=3 if method != "direct" else None,
+                          steps_per_period=200, settle_periods=150, progress=False)
+    assert len(r.attractors) == 1
+    a = r.attractors[0]
+    assert a.period == 1
+    np.testing.assert_allclose(a.points[0], linear_response(LINEAR), atol=1e-7)
+    # domain = every cell not sent to the sink
+    assert a.cell_count + r.n_sink + r.n_unresolved == r.n_cells
+    assert np.all((r.labels == 0) | (r.labels == jg.SINK))
+
+
+def test_poincare_like_on_linear_oscillator():
+    # grid over x on the section v = 0; the single attractor is P-1 at the closed form
+    grid = CellGrid.box([(-3, 3)], (30,), axes=(0,), base=(0.0, 0.0), names=("x", "v"))
+    r = jg.analyze_global(jg.DUFFING, LINEAR, grid, method="poincare-like", mapping_steps=20, direction=-1,
+                          settle_periods=150, progress=False)
+    assert [a.period for a in r.attractors] == [1]
+    np.testing.assert_allclose(r.attractors[0].points[0], linear_response(LINEAR), atol=1e-7)
+    sec = r.attractors[0].section_points
+    assert len(sec) == 1 and abs(sec[0, 1]) < 1e-12  # one downward crossing of v = 0 per period
+    # on the closed-form orbit, v = 0 with v decreasing where x is at its maximum |H|
+    assert sec[0, 0] == pytest.approx(abs(complex(LINEAR.gamma / (LINEAR.alpha - LINEAR.omega**2
+                                                                   + 1j * LINEAR.delta * LINEAR.omega))), abs=1e-6)
+
+
+# ---------------------------------------------------------------- two attractors
+
+
+@pytest.mark.parametrize("method", ["stroboscopic", "direct"])
+def test_bistable_1d_exact_separatrix(method):
+    grid = CellGrid.box([(-2, 2)], (40,), names=("x",))
+    p = BistableParams(a=1.0)
+    r = jg.analyze_global(BISTABLE_1D, p, grid, method=method, mapping_steps=2 if method != "direct" else None,
+                          settle_periods=60, progress=False)
+    assert sorted(a.period for a in r.attractors) == [1, 1]
+    centres = grid.centres()[:, 0]
+    pos = [a for a in r.attractors if a.points[0, 0] > 0][0]
+    neg = [a for a in r.attractors if a.points[0, 0] < 0][0]
+    np.testing.assert_allclose([pos.points[0, 0], neg.points[0, 0]], [1.0, -1.0], atol=1e-8)
+    # the separatrix is x = 0: each cell belongs to the attractor on its side
+    assert np.all(r.labels[centres > 0] == pos.id)
+    assert np.all(r.labels[centres < 0] == neg.id)
+
+
+def test_double_well_mirror_symmetric_basins():
+    grid = CellGrid.box([(-2, 2), (-2, 2)], (16, 16), names=("x", "v"))
+    r = jg.analyze_global(jg.DUFFING, DOUBLE_WELL, grid, method="direct", progress=False)
+    assert sorted(a.period for a in r.attractors) == [1, 1]
+    np.testing.assert_allclose(sorted(a.points[0, 0] for a in r.attractors), [-1.0, 1.0], atol=1e-8)
+    L = r.labels
+    ids = {a.id: np.sign(a.points[0, 0]) for a in r.attractors}
+    mirror = np.vectorize(lambda l: [k for k, s in ids.items() if s == -ids[l]][0] if l >= 0 else l)(L)
+    # (x, v) -> (-x, -v) maps the grid onto itself and swaps the basins
+    assert np.array_equal(L[::-1, ::-1], mirror)
+    shares = sorted(a.share for a in r.attractors)
+    assert shares[0] == pytest.approx(0.5, abs=1.0 / 16)
+
+
+# ---------------------------------------------------------------- invariants
+
+
+def test_invariants_and_chunk_size_independence():
+    p = jg.paper_params()
+    grid = CellGrid.paper(counts=(6, 4, 6))
+    images_a = jg.cell_images(jg.REDUCED, p, grid, mapping_steps=5, chunk_size=7, progress=False)
+    images_b = jg.cell_images(jg.REDUCED, p, grid, mapping_steps=5, chunk_size=1000, progress=False)
+    assert images_a.shape == (grid.n_cells,)  # exactly one image per cell
+    assert np.array_equal(images_a, images_b)
+    r = jg.analyze_global(jg.REDUCED, p, grid, method="direct", chunk_size=32, progress=False)
+    r2 = jg.analyze_global(jg.REDUCED, p, grid, method="direct", chunk_size=50, progress=False)
+    assert np.array_equal(r.labels, r2.labels)
+    # labels partition the grid and shares sum to one
+    ids = {a.id for a in r.attractors}
+    assert set(np.unique(r.labels)) <= ids | {jg.SINK, jg.UNRESOLVED}
+    assert sum(a.cell_count for a in r.attractors) + r.n_sink + r.n_unresolved == r.n_cells
+    assert sum(r.shares.values()) == pytest.approx(1.0)
+    # every reported periodic point returns to itself after k periods, to integration accuracy
+    for a in r.attractors:
+        back = np.asarray(jg.stroboscopic_map(jg.REDUCED, p, a.points, periods=a.period))
+        assert np.max(np.abs(back - a.points)) < 1e-8
+        fine = np.asarray(jg.stroboscopic_map(jg.REDUCED, p, a.points, periods=a.period,
+                                              integrator=jg.RK4(800)))
+        assert np.max(np.abs(fine - a.points)) < 1e-2  # RK4 error at 200 steps with backlash kinks
+
+
+@pytest.mark.parametrize("l", [1, 2, 3])
+def test_period_two_reported_as_p2_whatever_l(l):
+    grid = CellGrid.box([(-1.6, 1.6), (-1.2, 1.2)], (10, 8), names=("x", "v"))
+    r = jg.analyze_global(jg.DUFFING, PERIOD_TWO, grid, method="stroboscopic", mapping_steps=l,
+                          settle_periods=300, progress=False)
+    periodic = [a for a in r.attractors if a.share > 0.05]
+    assert periodic and all(a.period == 2 for a in periodic)
+    for a in periodic:
+        p2 = np.asarray(jg.stroboscopic_map(jg.DUFFING, PERIOD_TWO, a.points, periods=2))
+        p1 = np.asarray(jg.stroboscopic_map(jg.DUFFING, PERIOD_TWO, a.points, periods=1))
+        assert np.max(np.abs(p2 - a.points)) < 1e-8 and np.min(np.abs(p1 - a.points).max(axis=1)) > 1e-3
+
+
+def test_detect_period():
+    t = np.arange(40)
+    seq = np.stack([np.cos(np.pi * t / 2), np.sin(np.pi * t / 2)], -1)  # period 4
+    assert jg.detect_period(seq[None], 8, 1e-9)[0] == 4
+    assert jg.detect_period(np.stack([t * 0.1, t * 0.0], -1)[None], 8, 1e-9)[0] == 0
+    bad = seq.copy()
+    bad[3] = np.nan
+    assert jg.detect_period(bad[None], 8, 1e-9)[0] == -1
+
+
+def test_escaping_orbits_go_to_sink_not_nan():
+    # x' = x^2 blows up in finite time from x > 0; x <= 0 stays bounded (-> 0^-)
+    blow = ForcedSystem(vector_field=lambda t, x, p: x**2 - 0 * p.a * x, period=lambda p: 1.0 + 0 * p.a,
+                        state_names=("x",), name="blow-up")
+    grid = CellGrid.box([(-1, 1)], (10,), names=("x",))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = jg.analyze_global(blow, BistableParams(), grid, method="direct", max_periods=60, progress=False)
+    centres = grid.centres()[:, 0]
+    assert np.all(r.labels[centres > 0.5] == jg.SINK)
+    assert r.n_sink >= 2
+    for a in r.attractors:
+        assert np.all(np.isfinite(a.points))
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="method"):
+        jg.analyze_global(method="nope", grid=CellGrid.paper(counts=(2, 2, 2)), progress=False)
+    with pytest.raises(ValueError, match="every state coordinate"):
+        jg.analyze_global(method="stroboscopic", grid=CellGrid.paper(counts=(2, 2, 2)), progress=False)
+    with pytest.raises(ValueError):
+        CellGrid.box([(1, -1)], (3,))
+    with pytest.raises(ValueError):
+        CellGrid.box([(0, 1)], (0,))
