@@ -235,8 +235,9 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
                    integrator: Integrator | None = None, steps_per_period: int | None = None,
                    direction: int = 1, section_index: int | None = None, chunk_size: int = 16384,
                    max_period: int = 16, period_tol: float = 1e-6, settle_periods: int = 400,
-                   merge_tol: float = 1e-4, round_periods: int = 10, max_periods: int = 2000,
-                   capture_radius: float = 1e-3, escape_bound: float = 1e6, progress: bool = True,
+                   merge_tol: float = 1e-4, round_periods: int = 5, max_periods: int = 2000,
+                   capture_radius: float = 1e-3, escape_bound: float = 1e6, revisit_box: float | None = None,
+                   revisit_hits: int = 3, progress: bool = True,
                    version: str | None = None) -> GlobalResult:
     """Every coexisting attractor in a region, its period and its domain (paper §3-§4).
 
@@ -259,6 +260,13 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
             periods per round between checks, limit per cell (then ``UNRESOLVED``),
             distance to a known attractor's point that decides a cell, and the norm
             beyond which a state counts as escaped (sink).
+        revisit_box, revisit_hits: ``direct`` method: a trajectory whose last
+            ``revisit_hits`` stroboscopic points fall in boxes (side ``revisit_box``, state
+            units) crossed so far only by trajectories of one known fate takes that fate
+            (default ``None``: off). It saves ~10 % of the periods on the paper grid, but
+            it is unsafe when attractors lie close together: on a 5 × 3 × 6 paper grid it
+            relabelled every P-8 cell as P-4, whose trajectories had marked the boxes
+            near both attractors first.
         progress: show progress bars (tqdm); ``False`` silences them.
     Returns:
         :class:`GlobalResult`. Warnings are issued when many cells go to the sink,
@@ -294,9 +302,14 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     if mapping_steps is None:
         mapping_steps = 50 if method == "poincare-like" else 1
     for name, v, lo in (("max_period", max_period, 1), ("settle_periods", settle_periods, 0),
-                        ("round_periods", round_periods, 1), ("max_periods", max_periods, 1)):
+                        ("round_periods", round_periods, 1), ("max_periods", max_periods, 1),
+                        ("revisit_hits", revisit_hits, 1)):
         if int(v) < lo:
             raise ValueError(f"{name}={v} must be >= {lo}.")
+    if revisit_box is not None and not revisit_box > 0:
+        raise ValueError(f"revisit_box={revisit_box} must be > 0 (or None to disable).")
+    if revisit_hits > round_periods:
+        raise ValueError(f"revisit_hits={revisit_hits} cannot exceed round_periods={round_periods}.")
     check_system(system, params, grid.centres(np.array([0]))[0])
     sec_idx = system.section_index if section_index is None else section_index
     n = grid.n_cells
@@ -310,10 +323,12 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
 
     if method == "direct":
         settings.update(round_periods=int(round_periods), max_periods=int(max_periods),
-                        capture_radius=capture_radius, escape_bound=escape_bound)
-        labels, att_points, mean_periods = _direct(system, params, grid.centres(), integrator, chunk_size, round_periods,
-                                                   max_periods, max_period, period_tol, capture_radius,
-                                                   escape_bound, merge_tol, progress)
+                        capture_radius=capture_radius, escape_bound=escape_bound, revisit_box=revisit_box,
+                        revisit_hits=int(revisit_hits))
+        labels, att_points, mean_periods = _direct(system, params, grid.centres(), integrator, chunk_size,
+                                                   round_periods, max_periods, max_period, period_tol,
+                                                   capture_radius, escape_bound, merge_tol, progress,
+                                                   revisit=revisit_box, revisit_hits=revisit_hits)
         cycles = [np.zeros(0, np.int64)] * len(att_points)
     else:
         images = cell_images(system, params, grid, method=method, mapping_steps=mapping_steps,
@@ -423,13 +438,67 @@ def _direct_round(system, params, X, periods, integrator):
     return jnp.transpose(Ys, (2, 0, 1))
 
 
+class _VisitTable:
+    """Labels of coarse state-space boxes visited by trajectories whose fate is known.
+
+    The recurrence idea of cell-to-cell mapping applied at point level (as in
+    recurrence-based basin mappers): a box of side ``h`` (state units) gets the label
+    of every decided trajectory that passed through it (a box reached by trajectories
+    of different fates is marked ambiguous and never used). Keys pack the box's integer
+    coordinates (16 bits each) into one ``uint64``; states outside ``|x| < 2^15 h`` or
+    with more than 4 coordinates use a hash of the coordinates.
+    """
+
+    AMBIGUOUS = -3
+    NONE = np.uint64(np.iinfo(np.uint64).max)
+
+    def __init__(self, h: float):
+        self.h = float(h)
+        self.keys = np.zeros(0, np.uint64)
+        self.labels = np.zeros(0, np.int64)
+
+    def key(self, X: np.ndarray) -> np.ndarray:
+        q = np.floor(X / self.h)
+        ok = np.all(np.isfinite(q) & (np.abs(q) < 2**15), axis=-1)
+        q = (np.where(np.isfinite(q), q, 0) + 2**15).astype(np.uint64)
+        k = np.zeros(X.shape[:-1], np.uint64)
+        for j in range(X.shape[-1]):
+            k = k * np.uint64(1 << 16) + q[..., j] if j < 4 else (k * np.uint64(1000003)) ^ q[..., j]
+        return np.where(ok, k, self.NONE)
+
+    def add(self, keys: np.ndarray, labels: np.ndarray) -> None:
+        m = keys != self.NONE
+        keys, labels = keys[m], labels[m]
+        if not len(keys):
+            return
+        k = np.concatenate([self.keys, keys])
+        lab = np.concatenate([self.labels, labels])
+        order = np.argsort(k, kind="stable")
+        k, lab = k[order], lab[order]
+        uk, start = np.unique(k, return_index=True)
+        lo = np.minimum.reduceat(lab, start)
+        hi = np.maximum.reduceat(lab, start)
+        self.keys, self.labels = uk, np.where(lo == hi, lo, self.AMBIGUOUS)
+
+    def lookup(self, keys: np.ndarray) -> np.ndarray:
+        if not len(self.keys):
+            return np.full(keys.shape, self.AMBIGUOUS, np.int64)
+        i = np.clip(np.searchsorted(self.keys, keys), 0, len(self.keys) - 1)
+        hit = (self.keys[i] == keys) & (keys != self.NONE)
+        return np.where(hit, self.labels[i], self.AMBIGUOUS)
+
+
 def _direct(system, params, X, integrator, chunk, R, max_periods, max_period, tol, capture, bound, merge_tol,
-            progress):
+            progress, revisit: float | None = None, revisit_hits: int = 3):
     """Integrate every cell centre on the stroboscopic map until its fate is known.
 
-    Lanes leave the batch as soon as they are decided (recurrence with a period <=
-    max_period, capture within ``capture`` of a known attractor's point, or escape),
-    and the remaining lanes are compacted into full chunks, so no lane idles.
+    Lanes leave the batch as soon as they are decided: recurrence with a period <=
+    max_period (a new or known attractor), capture within ``capture`` of a known
+    attractor's point, escape (norm > ``bound`` or non-finite: the sink), or, with
+    ``revisit=h``, ``revisit_hits`` successive stroboscopic points in boxes of side ``h``
+    already crossed only by trajectories of one known fate. The remaining lanes are
+    compacted into full chunks, so no lane idles. Returns
+    ``(labels, [(points, period, residual)], mean periods per lane)``.
     """
     X = np.asarray(X, dtype=float)
     n = len(X)
@@ -441,9 +510,10 @@ def _direct(system, params, X, integrator, chunk, R, max_periods, max_period, to
     state = X.copy()
     attractors: list[list] = []  # [points (k, dim), period, residual]
     chunk = min(int(chunk), n)
+    table = _VisitTable(revisit) if revisit else None
+    visits: list[tuple[np.ndarray, np.ndarray]] = []  # (lanes, keys (lanes, R)) per round, lanes undecided
     bar = _progress(n, "direct", progress)
     while len(active) and done_periods[active[0]] < max_periods:
-        newX = np.empty((len(active), system.dim))
         pts_all = np.empty((len(active), R, system.dim))
         for a, b in _chunks(len(active), chunk):
             P = np.asarray(_direct_round(system, params, jnp.asarray(_pad(state[active[a:b]], chunk)), int(R),
@@ -487,6 +557,21 @@ def _direct(system, params, X, integrator, chunk, R, max_periods, max_period, to
                     found = len(attractors) - 1
                 labels[active[li]] = found
                 decided[li] = True
+        if table is not None:
+            keys = table.key(pts_all)  # (lanes, R)
+            known = table.lookup(keys[:, -revisit_hits:])
+            same = np.all(known == known[:, :1], axis=1) & (known[:, 0] >= 0) & ~decided
+            labels[active[same]] = known[same, 0]
+            decided |= same
+            visits.append((active.copy(), keys))
+            # teach the table the boxes of every lane decided this round (its whole path)
+            now = np.zeros(n, bool)
+            now[active[decided]] = True
+            for lanes, kk in visits:
+                sel = now[lanes]
+                if sel.any():
+                    table.add(kk[sel].reshape(-1), np.repeat(labels[lanes[sel]], kk.shape[1]))
+            visits = [(lanes[~now[lanes]], kk[~now[lanes]]) for lanes, kk in visits]
         bar.update(int(decided.sum()))
         active = active[~decided]
     bar.close()
@@ -544,8 +629,9 @@ def compare_with_direct(result: GlobalResult, system: ForcedSystem | None = None
     n = result.n_cells
     cells = rng.choice(n, size=min(int(n_samples), n), replace=False)
     X = result.grid.centres(cells)
-    labels, atts, _ = _direct(system, params, X, integrator, 4096, 10, 2000, int(s.get("max_period", 16)),
-                              float(s.get("period_tol", 1e-6)), 1e-3, 1e6, float(s.get("merge_tol", 1e-4)), progress)
+    labels, atts, _ = _direct(system, params, X, integrator, 4096, 5, 2000, int(s.get("max_period", 16)),
+                              float(s.get("period_tol", 1e-6)), 1e-3, 1e6, float(s.get("merge_tol", 1e-4)), progress,
+                              revisit=None)
     # map direct attractor ids -> result attractor ids
     mapping = {}
     direct_only = []

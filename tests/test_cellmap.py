@@ -206,3 +206,11 @@ def test_bad_arguments():
         CellGrid.box([(1, -1)], (3,))
     with pytest.raises(ValueError):
         CellGrid.box([(0, 1)], (0,))
+
+
+def test_direct_round_length_does_not_change_labels():
+    grid = CellGrid.paper(counts=(5, 3, 6))
+    a = jg.analyze_global(grid=grid, method="direct", round_periods=5, progress=False)
+    b = jg.analyze_global(grid=grid, method="direct", round_periods=10, progress=False)
+    assert np.array_equal(a.labels, b.labels)
+    assert sorted(x.period for x in a.attractors) == [4, 8]  # the paper's coexisting P-4 and P-8

@@ -112,7 +112,9 @@ def plot_domains_3d(result: GlobalResult, attractors=None, *, max_cells: int = 2
         if len(cells) > max_cells:
             cells = rng.choice(cells, max_cells, replace=False)
         X = g.centres(cells)
-        ax.scatter(X[:, g.axes[0]], X[:, g.axes[1]], X[:, g.axes[2]], s=1, alpha=0.25, color=attractor_color(a.id),
+        size = float(np.clip(30000.0 / max(len(cells), 1), 1.5, 12.0))
+        ax.scatter(X[:, g.axes[0]], X[:, g.axes[1]], X[:, g.axes[2]], s=size, alpha=0.55, color=attractor_color(a.id),
+                   depthshade=False,
                    label=f"{a.label} domain ({100 * a.share:.1f} %)")
         if len(a.periodic_cells):
             P = g.centres(a.periodic_cells)
