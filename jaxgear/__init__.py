@@ -73,3 +73,12 @@ from ._cellmap import (  # noqa: E402
     detect_period as detect_period,
     compare_with_direct as compare_with_direct,
 )
+
+
+def __getattr__(name):
+    # ``jaxgear.plotting`` is imported on first use (keeps matplotlib out of import time).
+    if name == "plotting":
+        import importlib
+
+        return importlib.import_module(".plotting", __name__)
+    raise AttributeError(f"module 'jaxgear' has no attribute {name!r}")
