@@ -157,11 +157,16 @@ def _section_kernel(system, params, Y, t0, periods, index, direction, max_extra_
         lo = jnp.where(same_side, s, lo)
         hi = jnp.where(same_side, hi, s)
         s_new = s - g / jnp.where(dg == 0, 1.0, dg)
+        # Converged: the Newton correction is at round-off. Keep s; otherwise the bracket
+        # end that round-off just moved onto s would reject the step and bisection would
+        # throw the converged root away.
+        converged = (dg != 0) & (jnp.abs(s_new - s) <= tiny)
         ok = (s_new > lo) & (s_new < hi) & (dg != 0)
         s_new = jnp.where(ok, s_new, 0.5 * (lo + hi))
-        s_new = jnp.where(g == 0, s, s_new)
+        s_new = jnp.where((g == 0) | converged, s, s_new)
         return s_new, lo, hi
 
+    tiny = 8 * jnp.finfo(jnp.float64).eps * jnp.abs(h)
     s0 = jnp.full(n, 0.5 * h)
     s, _, _ = jax.lax.fori_loop(0, refine_iters, refine, (s0, lo, hi))
     Yc = rk4_step_batch(fl, tb, Yb, s, params)
