@@ -51,6 +51,15 @@ def _chunks(n: int, size: int):
         yield start, min(start + size, n)
 
 
+def _bucket(n: int, chunk: int, smallest: int = 256) -> int:
+    """Batch size for ``n`` remaining lanes: ``chunk`` or ``chunk / 4^j`` (>= ``smallest``),
+    so a shrinking batch is padded to a nearby size (few compiled shapes, little idle work)."""
+    size = chunk
+    while size // 4 >= max(n, smallest):
+        size //= 4
+    return size
+
+
 def _pad(X: np.ndarray, size: int) -> np.ndarray:
     """Pad a chunk to a fixed size (one compiled shape) by repeating its first row."""
     if len(X) == size:
@@ -515,8 +524,9 @@ def _direct(system, params, X, integrator, chunk, R, max_periods, max_period, to
     bar = _progress(n, "direct", progress)
     while len(active) and done_periods[active[0]] < max_periods:
         pts_all = np.empty((len(active), R, system.dim))
-        for a, b in _chunks(len(active), chunk):
-            P = np.asarray(_direct_round(system, params, jnp.asarray(_pad(state[active[a:b]], chunk)), int(R),
+        size = _bucket(len(active), chunk)
+        for a, b in _chunks(len(active), size):
+            P = np.asarray(_direct_round(system, params, jnp.asarray(_pad(state[active[a:b]], size)), int(R),
                                          integrator))[: b - a]
             pts_all[a:b] = P
         newX = pts_all[:, -1]
