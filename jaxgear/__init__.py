@@ -57,3 +57,17 @@ from ._examples import (  # noqa: E402
     SPUR_PAIR as SPUR_PAIR,
     SpurPairParams as SpurPairParams,
 )
+
+from ._shooting import (  # noqa: E402
+    periodic_orbit as periodic_orbit,
+    find_periodic_orbits as find_periodic_orbits,
+    verify_orbit as verify_orbit,
+    monodromy as monodromy,
+    floquet_multipliers as floquet_multipliers,
+    seeds_from_result as seeds_from_result,
+    seeds_in_box as seeds_in_box,
+    ShootResult as ShootResult,
+    PeriodicOrbit as PeriodicOrbit,
+    OrbitSearch as OrbitSearch,
+    OrbitCheck as OrbitCheck,
+)
