@@ -74,6 +74,20 @@ from ._cellmap import (  # noqa: E402
     compare_with_direct as compare_with_direct,
 )
 
+from ._shooting import (  # noqa: E402
+    periodic_orbit as periodic_orbit,
+    find_periodic_orbits as find_periodic_orbits,
+    verify_orbit as verify_orbit,
+    monodromy as monodromy,
+    floquet_multipliers as floquet_multipliers,
+    seeds_from_result as seeds_from_result,
+    seeds_in_box as seeds_in_box,
+    ShootResult as ShootResult,
+    PeriodicOrbit as PeriodicOrbit,
+    OrbitSearch as OrbitSearch,
+    OrbitCheck as OrbitCheck,
+)
+
 
 def __getattr__(name):
     # ``jaxgear.plotting`` is imported on first use (keeps matplotlib out of import time).

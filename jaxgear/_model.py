@@ -33,8 +33,14 @@ __all__ = [
 
 
 def backlash(X, b):
-    """Backlash (dead-zone) function f(X, b) of paper eq. (3); ``b`` is the HALF backlash."""
-    return jnp.where(X > b, X - b, jnp.where(X < -b, X + b, 0.0))
+    """Backlash (dead-zone) function f(X, b) of paper eq. (3); ``b`` is the HALF backlash.
+
+    At the kinks ``|X| = b`` the contact branch is taken (non-strict comparisons): the
+    value is the same, and with ``b = 0`` the function is exactly ``X`` for autodiff too
+    (derivative 1 at ``X = 0``, so the trivial orbit of a backlash-free mesh linearises
+    to the Mathieu equation rather than to a free mass).
+    """
+    return jnp.where(X >= b, X - b, jnp.where(X <= -b, X + b, 0.0))
 
 
 def gear_period(p: GearParams):

@@ -1,6 +1,7 @@
 """Figures (matplotlib). Every function reads a result (or data) and returns a Figure;
-nothing here computes an analysis. Colours: attractor ``i`` is ``attractor_color(i)``
-everywhere; the sink is light grey, unresolved cells black.
+nothing here computes an analysis beyond sampling a trajectory to draw it. Colours:
+attractor ``i`` is ``attractor_color(i)`` everywhere; the sink is light grey,
+unresolved cells black.
 """
 
 from ._style import attractor_color as attractor_color, SINK_COLOR as SINK_COLOR
@@ -10,3 +11,4 @@ from ._basins import (
     plot_attractors as plot_attractors,
     plot_shares as plot_shares,
 )
+from ._orbit import plot_orbit as plot_orbit

@@ -1,0 +1,199 @@
+"""``jaxgear shoot``: periodic orbits of the gear model by shooting, with Floquet multipliers.
+
+The paper's local method (§4.1): damped Newton on ``P^k(x) - x = 0`` for the
+stroboscopic map of the reduced 2-DOF model, from user points (``--from``), from a
+cell-mapping result (``--seeds-from``) or from random points of a box (``--random``).
+Prints each distinct orbit: its points, minimal period, Floquet multipliers,
+stability and kind of instability; ``--verify`` adds the paper's check by direct
+integration; ``--json`` prints one JSON object (with the full parameter set).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .common import add_param_options
+
+# The paper's region D (x1, x2, x3) with x4 in [-5, 5].
+DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
+
+
+def _point(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(t) for t in text.split(","))
+    except ValueError as exc:
+        raise ValueError(f"--from expects comma-separated numbers like 1.27,-2.71,5.54,0, got {text!r}") from exc
+
+
+def _ranges(text: str) -> tuple[tuple[float, float], ...]:
+    out = []
+    for part in text.split(","):
+        lo, sep, hi = part.partition(":")
+        if not sep:
+            raise ValueError(f"--region expects LO:HI per coordinate, comma-separated "
+                             f"(e.g. -25:25,-10:20,-10:50,-5:5), got {text!r}")
+        out.append((float(lo), float(hi)))
+    return tuple(out)
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "shoot", help="periodic orbits by shooting: points, minimal period, Floquet multipliers, stability",
+        description="Shooting method (paper §4.1): damped Newton on P^k(x) - x = 0 for the stroboscopic map "
+        "of the reduced 2-DOF gear model (state x1..x4 at forcing phase 0), Jacobian by automatic "
+        "differentiation through the RK4 integrator. Prints every distinct orbit found, its minimal period, "
+        "Floquet multipliers, stability and how an unstable orbit is unstable (fold: real multiplier > 1; "
+        "flip: real multiplier < -1; neimark-sacker: complex pair outside the unit circle).",
+    )
+    add_param_options(p)
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--from", dest="points", type=_point, action="append", metavar="x1,x2,x3,x4",
+                     help="a seed point (repeatable)")
+    src.add_argument("--seeds-from", metavar="RESULT",
+                     help="a saved global-analysis result (jaxgear analyze): every point of each P-k attractor "
+                     "seeds a P-k orbit; the result's own parameters are used (--set overrides canonical names)")
+    src.add_argument("--random", type=int, metavar="N", help="N random seeds in --region")
+    p.add_argument("--region", type=_ranges, default=DEFAULT_REGION, metavar="LO:HI,...",
+                   help="box for --random, one LO:HI per coordinate (default the paper's D with x4 in [-5,5]: "
+                   "-25:25,-10:20,-10:50,-5:5)")
+    p.add_argument("--seed", type=int, default=0, help="random seed for --random (default 0)")
+    p.add_argument("--period", type=int, action="append", metavar="K",
+                   help="shoot for P-K orbits (fixed points of P^K); repeatable (default 1, or the attractors' "
+                   "periods with --seeds-from)")
+    p.add_argument("--steps-per-period", type=int, default=200, help="RK4 steps per forcing period (default 200)")
+    p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on ||P^K(x) - x|| (default 1e-10)")
+    p.add_argument("--max-iter", type=int, default=40, help="Newton iteration limit (default 40)")
+    p.add_argument("--verify", type=int, default=0, metavar="PERIODS",
+                   help="check each orbit by direct integration over PERIODS periods from a perturbed start")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.set_defaults(func=run)
+
+
+def _load_seeds(path: str):
+    try:
+        from .. import load_result
+    except ImportError as exc:
+        raise ValueError("--seeds-from needs jaxgear.load_result (saved global-analysis results), which this "
+                         "build of jaxgear does not provide; give seeds with --from or --random.") from exc
+    from .._shooting import seeds_from_result
+
+    result = load_result(path)
+    return result, seeds_from_result(result)
+
+
+def _canonical_overrides(overrides) -> dict:
+    from .._params import PARAM_NAMES, _parse_value
+
+    out = {}
+    for item in overrides:
+        if "=" not in item:
+            raise ValueError(f"--set expects NAME=VALUE, got {item!r}")
+        k, v = (s.strip() for s in item.split("=", 1))
+        k = k.removeprefix("dimless.")
+        if k not in PARAM_NAMES or k == "N":
+            raise ValueError(f"with --seeds-from only canonical dimensionless names can be overridden "
+                             f"({', '.join(PARAM_NAMES[1:])}); got {k!r}")
+        out[k] = _parse_value(v)
+    return out
+
+
+def run(args) -> int:
+    from .. import REDUCED, RK4
+    from .._params import GearParams, resolve_params
+    from .._shooting import find_periodic_orbits, seeds_in_box, verify_orbit
+
+    periods = args.period
+    if periods is not None and min(periods) < 1:
+        raise ValueError(f"--period must be >= 1, got {min(periods)}.")
+    if args.steps_per_period < 1:
+        raise ValueError(f"--steps-per-period must be >= 1, got {args.steps_per_period}.")
+    source = None
+    if args.seeds_from:
+        result, groups = _load_seeds(args.seeds_from)
+        if getattr(result, "params", None):
+            params = GearParams.from_dict(result.params)
+            if args.overrides:
+                params = params.replace(**_canonical_overrides(args.overrides))
+            source = f"parameters of {args.seeds_from}"
+        else:
+            params = resolve_params(args.preset, args.overrides)[1]
+        if not groups:
+            raise ValueError(f"{args.seeds_from} has no periodic attractor to seed shooting from.")
+        seeds = groups if periods is None else np.concatenate(list(groups.values()))
+    else:
+        params = resolve_params(args.preset, args.overrides)[1]
+        if args.points:
+            seeds = np.asarray(args.points, dtype=float)
+            if seeds.shape[1] != REDUCED.dim:
+                raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {seeds.shape[1]}.")
+        else:
+            if args.random < 1:
+                raise ValueError(f"--random N needs N >= 1, got {args.random}.")
+            region = np.asarray(args.region, dtype=float)
+            if region.shape != (REDUCED.dim, 2):
+                raise ValueError(f"--region needs {REDUCED.dim} LO:HI ranges (x1..x4), got {len(region)}.")
+            seeds = seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)
+    if not params.is_uniform:
+        raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
+                         "the given parameters differ per planet.")
+    params = params.uniform()
+    integ = RK4(steps_per_period=args.steps_per_period)
+    search = find_periodic_orbits(REDUCED, params, seeds, period=periods or [1], integrator=integ,
+                                  tol=args.tol, max_iter=args.max_iter)
+    n_seeds = sum(np.asarray(r.status).size for r in search.shots.values())
+    checks = []
+    if args.verify > 0:
+        checks = [verify_orbit(REDUCED, params, o, periods=args.verify, integrator=integ) for o in search.orbits]
+
+    if args.json:
+        orbits = []
+        for i, o in enumerate(search.orbits):
+            d = o.to_dict()
+            if checks:
+                c = checks[i]
+                d["verification"] = {"periods": args.verify, "kept": c.kept, "left_at": c.left_at.tolist(),
+                                     "final_points": np.where(np.isfinite(c.final_points[:, -1]),
+                                                              c.final_points[:, -1], None).tolist()}
+            orbits.append(d)
+        out = {
+            "command": "shoot", "system": REDUCED.name, "state_names": list(REDUCED.state_names),
+            "params": params.to_dict(),
+            "settings": {"periods_tried": sorted(search.shots), "n_seeds": n_seeds,
+                         "steps_per_period": args.steps_per_period, "tol": args.tol, "max_iter": args.max_iter,
+                         "t0": 0.0, "seeds_from": args.seeds_from, "random": args.random, "seed": args.seed},
+            "status_counts": search.status_counts,
+            "orbits": orbits,
+        }
+        print(json.dumps(out))
+        return 0
+
+    names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
+    print(f"jaxgear shoot: {REDUCED.name} model, {source or 'preset ' + args.preset}, "
+          f"Omega={float(params.Omega):.4g}, {n_seeds} seed runs, P^K for K in {sorted(search.shots)}, "
+          f"RK4 {args.steps_per_period} steps/period, tol {args.tol:g}")
+    print("Newton: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
+    if not search.orbits:
+        print("no periodic orbit converged from these seeds.")
+        return 0
+    for i, o in enumerate(search.orbits):
+        kind = "stable" if o.stable else f"unstable ({o.instability})"
+        print(f"\norbit {i + 1}: P-{o.period}, {kind}, max |multiplier| {o.max_multiplier:.4f}, "
+              f"residual {o.residual:.1e}, from {o.n_seeds} seed(s)")
+        print("  |multipliers|: " + " ".join(f"{abs(z):.4f}" for z in o.multipliers))
+        print("  multipliers:   " + " ".join(f"{z.real:+.4f}{z.imag:+.4f}j" for z in o.multipliers))
+        print(f"  points (phase 0): {names}")
+        for pt in o.points:
+            print("                   " + " ".join(f"{v:11.5f}" for v in pt))
+        if checks:
+            c = checks[i]
+            if c.kept:
+                print(f"  direct integration ({args.verify} periods): stays on the orbit")
+            else:
+                first = int(np.min(c.left_at[c.left_at > 0]))
+                ends = c.final_points[:, -1]
+                print(f"  direct integration ({args.verify} periods): leaves the orbit after {first} period(s); "
+                      f"ends at " + "; ".join("diverged" if not np.all(np.isfinite(e)) else
+                                               "[" + ", ".join(f"{v:.4f}" for v in e) + "]" for e in ends))
+    return 0

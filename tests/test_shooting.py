@@ -1,0 +1,288 @@
+"""Shooting, Floquet multipliers and verification (jaxgear._shooting), checked against
+closed forms (forced linear oscillator), perturbation theory (Mathieu tongue),
+finite differences and Liouville's formula."""
+
+import io
+import json
+from contextlib import redirect_stdout
+from types import SimpleNamespace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import jaxgear as jg
+from jaxgear._shooting import FLIP, SHOOT_CONVERGED, SHOOT_SINGULAR, STABLE
+
+# Hardening Duffing with three P-1 orbits (checked by shooting from a box of seeds;
+# harmonic balance gives amplitudes 0.34, 0.95, 1.24): two stable, one saddle between.
+BISTABLE = dict(delta=0.1, alpha=1.0, beta=1.0, gamma=0.3, omega=1.4)
+
+
+def duffing(**kw):
+    return jg.DuffingParams(**{**BISTABLE, **kw})
+
+
+# --------------------------------------------------------------------------- linear limit
+def test_linear_oscillator_matches_closed_form():
+    # x'' + d x' + a x = g cos(w t): steady state x = Re(g H e^{iwt}), H = 1/(a - w^2 + i d w)
+    p = duffing(beta=0.0, gamma=1.0, omega=1.3)
+    r = jg.periodic_orbit(jg.DUFFING, p, jnp.array([2.0, -3.0]), period=1)
+    assert int(r.status) == SHOOT_CONVERGED and float(r.residual) <= 1e-10
+    H = 1.0 / (1.0 - 1.3**2 + 1j * 0.1 * 1.3)
+    exact = np.array([(1.0 * H).real, (1j * 1.3 * 1.0 * H).real])
+    np.testing.assert_allclose(np.asarray(r.point), exact, atol=1e-7)
+    # Floquet multipliers = exp(lambda_i T), lambda_i eigenvalues of [[0, 1], [-a, -d]]
+    T = 2 * np.pi / 1.3
+    lam = np.exp(np.linalg.eigvals(np.array([[0.0, 1.0], [-1.0, -0.1]])) * T)
+    got = np.asarray(r.multipliers)
+    np.testing.assert_allclose(np.sort_complex(got), np.sort_complex(lam), atol=1e-7)
+    assert bool(r.stable) and int(r.min_period) == 1 and int(r.instability) == STABLE
+
+
+def test_linear_oscillator_with_adaptive_integrator():
+    # the same closed form with diffrax (Tsit5): the residual is that of the adaptive map
+    p = duffing(beta=0.0, gamma=1.0, omega=1.3)
+    integ = jg.Adaptive(rtol=1e-12, atol=1e-12, max_steps=4096)
+    r = jg.periodic_orbit(jg.DUFFING, p, jnp.array([2.0, -3.0]), integrator=integ)
+    assert int(r.status) == SHOOT_CONVERGED and float(r.residual) <= 1e-10
+    H = 1.0 / (1.0 - 1.3**2 + 1j * 0.1 * 1.3)
+    np.testing.assert_allclose(np.asarray(r.point), [H.real, (1j * 1.3 * H).real], atol=1e-10)
+
+
+# --------------------------------------------------------------------------- Mathieu tongue
+def _max_modulus(Omega, kappa, zeta):
+    p = jg.SpurPairParams(zeta=zeta, kappa=kappa, b=0.0, f_m=0.0, e_amp=0.0, Omega=Omega)
+    return float(jnp.max(jnp.abs(jg.floquet_multipliers(jg.SPUR_PAIR, p, jnp.zeros(2)))))
+
+
+def _bisect_edge(lo, hi, kappa, zeta, threshold):
+    f = lambda W: _max_modulus(W, kappa, zeta) - 1.0 - threshold
+    f_lo = f(lo)
+    assert f_lo * f(hi) < 0
+    for _ in range(36):
+        mid = 0.5 * (lo + hi)
+        if (f(mid) > 0) == (f_lo > 0):
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def test_mathieu_first_parametric_tongue():
+    # x'' + 2 zeta x' + (1 + kappa sin(Omega t)) x = 0 (spur pair, b = f_m = e_amp = 0).
+    # In s = Omega t: x'' + (delta + eps cos s) x = 0 with delta = 1/Omega^2, eps = kappa/Omega^2
+    # (sin vs cos is a time shift). Undamped transition curves from delta = 1/4 (Rand,
+    # Lecture notes on nonlinear vibrations; Nayfeh & Mook): delta = 1/4 +- eps/2 - eps^2/8 + O(eps^3),
+    # i.e. Omega = 2 -+ kappa/2 to first order.
+    kappa = 0.1
+    lo = _bisect_edge(1.8, 2.0, kappa, 0.0, 1e-9)
+    hi = _bisect_edge(2.0, 2.3, kappa, 0.0, 1e-9)
+    lo2 = brentq(lambda W: W * W / 4 + kappa / 2 - kappa**2 / (8 * W * W) - 1, 1.5, 2.0)
+    hi2 = brentq(lambda W: W * W / 4 - kappa / 2 - kappa**2 / (8 * W * W) - 1, 2.0, 2.5)
+    assert abs(lo - lo2) < kappa**3 and abs(hi - hi2) < kappa**3
+    # Damped (Landau & Lifshitz §27): growth rate (1/2) sqrt((kappa/2)^2 - (Omega-2)^2) > zeta,
+    # so the tongue is |Omega - 2| < (1/2) sqrt(kappa^2 - 16 zeta^2) to first order in kappa.
+    zeta = 0.01
+    lo_d = _bisect_edge(1.8, 2.0, kappa, zeta, 0.0)
+    hi_d = _bisect_edge(2.0, 2.3, kappa, zeta, 0.0)
+    w = 0.5 * np.sqrt(kappa**2 - 16 * zeta**2)
+    assert abs(lo_d - (2 - w)) < 0.5 * kappa**2 and abs(hi_d - (2 + w)) < 0.5 * kappa**2
+    assert lo < lo_d < hi_d < hi  # damping narrows the tongue
+    # inside the tongue the trivial orbit loses stability by a flip (response at Omega/2)
+    p = jg.SpurPairParams(zeta=zeta, kappa=kappa, b=0.0, f_m=0.0, e_amp=0.0, Omega=2.0)
+    r = jg.periodic_orbit(jg.SPUR_PAIR, p, jnp.zeros(2))
+    assert int(r.status) == SHOOT_CONVERGED and not bool(r.stable) and int(r.instability) == FLIP
+    assert float(jnp.real(r.multipliers[0])) < -1.0
+
+
+# --------------------------------------------------------------------------- Jacobian, Newton
+def test_autodiff_jacobian_matches_central_difference():
+    cases = [(jg.DUFFING, duffing(), np.array([0.4, -0.7]), 2),
+             (jg.REDUCED, jg.paper_params(), np.array([5.4, -0.2, 8.3, -0.8]), 1)]
+    for system, p, x, k in cases:
+        J = np.asarray(jg.monodromy(system, p, x, period=k))
+        h = 1e-6
+        E = np.eye(system.dim) * h
+        fd = (np.asarray(jg.stroboscopic_map(system, p, x + E, periods=k))
+              - np.asarray(jg.stroboscopic_map(system, p, x - E, periods=k))).T / (2 * h)
+        np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-6 * np.abs(J).max())
+
+
+def test_newton_converges_quadratically():
+    r = jg.periodic_orbit(jg.DUFFING, duffing(), jnp.array([0.7, 1.3]))
+    assert int(r.status) == SHOOT_CONVERGED and float(r.residual) <= 1e-10
+    h = np.asarray(r.history)
+    h = h[np.isfinite(h)]
+    pairs = [(a, b) for a, b in zip(h[:-1], h[1:]) if a < 1e-2 and b > 1e-13]  # above round-off
+    assert len(pairs) >= 2
+    for a, b in pairs:
+        assert b <= 20.0 * a * a, (a, b)  # r_{n+1} <= C r_n^2 (linear convergence would fail)
+
+
+# --------------------------------------------------------------------------- orbits, verification
+def test_bistable_duffing_three_orbits_saddle_left_stable_kept():
+    p = duffing()
+    seeds = jg.seeds_in_box(40, [-2.0, -2.0], [2.0, 2.0], seed=1)
+    search = jg.find_periodic_orbits(jg.DUFFING, p, seeds, period=1)
+    assert len(search.orbits) == 3 and all(o.period == 1 for o in search.orbits)
+    assert sum(search.status_counts.values()) == 40
+    T = 2 * np.pi / 1.4
+    for o in search.orbits:
+        assert o.residual <= 1e-10
+        # Liouville: det of the monodromy = exp(-delta T)
+        assert abs(np.prod(o.multipliers).real - np.exp(-0.1 * T)) < 1e-7
+    stable = [o for o in search.orbits if o.stable]
+    saddle = [o for o in search.orbits if not o.stable]
+    assert len(stable) == 2 and len(saddle) == 1
+    assert saddle[0].instability == "fold" and np.max(np.abs(saddle[0].multipliers).real) > 1
+    amp = lambda o: np.linalg.norm(o.points[0])
+    assert amp(stable[0]) < amp(saddle[0]) < amp(stable[1]) or amp(stable[1]) < amp(saddle[0]) < amp(stable[0])
+    for o in stable:
+        chk = jg.verify_orbit(jg.DUFFING, p, o, periods=150)
+        assert chk.kept and np.all(chk.left_at == -1) and np.max(chk.distance) < 1e-5
+    chk = jg.verify_orbit(jg.DUFFING, p, saddle[0], periods=150)
+    assert not chk.kept and np.all(chk.left_at > 0) and not chk.diverged.any()
+    # it ends on one of the stable orbits
+    ends = chk.final_points[:, -1]
+    d = np.min([np.linalg.norm(ends - o.points[0], axis=1) for o in stable], axis=0)
+    assert np.all(d < 1e-4)
+
+
+def test_minimal_period_and_dedup_via_seeds_from_result():
+    p = duffing()
+    stable = jg.periodic_orbit(jg.DUFFING, p, jnp.array([[-0.3, 0.1], [1.0, 1.1]]))
+    a, b = np.asarray(stable.point)
+    b1 = np.asarray(jg.stroboscopic_map(jg.DUFFING, p, b))
+    # stand-in cell-mapping result: approximate points, one P-1 attractor reported as P-2
+    fake = SimpleNamespace(attractors=[
+        SimpleNamespace(points=(a + 0.01)[None], period=1),
+        SimpleNamespace(points=np.stack([b + 0.01, b1 - 0.01]), period=2),
+        SimpleNamespace(points=np.zeros((0, 2)), period=0),  # non-periodic: skipped
+    ])
+    groups = jg.seeds_from_result(fake)
+    assert sorted(groups) == [1, 2] and groups[1].shape == (1, 2) and groups[2].shape == (2, 2)
+    search = jg.find_periodic_orbits(jg.DUFFING, p, groups)
+    assert len(search.orbits) == 2  # the P-2 request found the large P-1 twice: reported once
+    assert all(o.period == 1 and o.stable for o in search.orbits)
+    assert np.asarray(search.shots[2].min_period).tolist() == [1, 1]
+    big = max(search.orbits, key=lambda o: np.linalg.norm(o.points[0]))
+    np.testing.assert_allclose(big.points[0], b, atol=1e-8)
+    assert big.n_seeds == 2
+    with pytest.raises(ValueError):
+        jg.seeds_from_result(object())
+
+
+@pytest.fixture(scope="module")
+def paper_p4():
+    p = jg.paper_params()
+    x0 = jg.seeds_in_box(1, [-5, -3, 0, -2], [5, 3, 10, 2], seed=7)[0]
+    x = jg.stroboscopic_map(jg.REDUCED, p, x0, periods=600)
+    pts = np.asarray(jg.stroboscopic_orbit(jg.REDUCED, p, x, n_points=8))
+    assert np.max(np.abs(pts[4:] - pts[:4])) < 1e-6  # the motion settled on a P-4 orbit
+    assert np.min(np.linalg.norm(pts[1:4] - pts[0], axis=1)) > 1e-2  # not P-1 or P-2
+    return p, pts[:4]
+
+
+def test_paper_preset_stable_p4(paper_p4):
+    p, pts = paper_p4
+    rng = np.random.default_rng(0)
+    seeds = pts + 0.05 * rng.standard_normal(pts.shape)
+    r = jg.periodic_orbit(jg.REDUCED, p, seeds, period=4)
+    assert np.all(np.asarray(r.status) == SHOOT_CONVERGED)
+    assert np.all(np.asarray(r.residual) <= 1e-10)
+    assert np.all(np.asarray(r.iterations) >= 2)  # it had work to do
+    assert np.all(np.asarray(r.min_period) == 4) and np.all(np.asarray(r.stable))
+    # each seed converged to the point it was near (a cyclic shift of the same orbit)
+    np.testing.assert_allclose(np.asarray(r.point), pts, atol=1e-6)
+    # asking for P-8 reports the same orbit with minimal period 4, once
+    search = jg.find_periodic_orbits(jg.REDUCED, p, seeds[:2], period=(4, 8))
+    assert len(search.orbits) == 1 and search.orbits[0].period == 4 and search.orbits[0].n_seeds == 4
+
+
+def test_cli_shoot_json(paper_p4, monkeypatch):
+    from jaxgear.cli import main
+
+    p, pts = paper_p4
+    argv = ["shoot", "--period", "4", "--json"] + sum((["--from", ",".join(map(str, x))] for x in pts[:2]), [])
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(argv) == 0
+    out = json.loads(buf.getvalue())
+    assert out["params"] == p.to_dict()
+    assert len(out["orbits"]) == 1 and out["orbits"][0]["period"] == 4 and out["orbits"][0]["stable"]
+    # --seeds-from: any loader returning an object with .attractors and .params
+    fake = SimpleNamespace(params=p.to_dict(), attractors=[SimpleNamespace(points=pts + 0.01, period=4)])
+    monkeypatch.setattr(jg, "load_result", lambda path: fake, raising=False)
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["shoot", "--seeds-from", "whatever.nc"]) == 0
+    text = buf.getvalue()
+    assert "P-4, stable" in text and "4 converged" in text
+    assert main(["shoot", "--period", "0", "--from", "1,2,3,4"]) == 2
+    assert main(["shoot", "--from", "1,2,3"]) == 2
+
+
+# --------------------------------------------------------------------------- gradients
+def test_implicit_gradient_matches_finite_difference_of_reconverged_orbits():
+    x0 = jnp.array([1.0, 1.1])  # the large-amplitude stable orbit
+
+    def amplitude(gamma):
+        r = jg.periodic_orbit(jg.DUFFING, duffing(gamma=gamma), x0)
+        return jnp.sum(r.point**2)
+
+    g = float(jax.grad(amplitude)(0.3))
+    h = 1e-5
+    fd = (float(amplitude(0.3 + h)) - float(amplitude(0.3 - h))) / (2 * h)
+    assert np.isfinite(g) and abs(g) > 0.1
+    assert abs(g - fd) <= 1e-6 * abs(fd)
+
+
+# --------------------------------------------------------------------------- input checks
+def test_bad_input_rejected():
+    p = duffing()
+    with pytest.raises(ValueError, match="shape"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(3))
+    with pytest.raises(ValueError, match="period"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), period=0)
+    with pytest.raises(ValueError, match="period"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), period=1.5)
+    with pytest.raises(ValueError):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.array([np.nan, 0.0]))
+    with pytest.raises(ValueError, match="shape"):
+        jg.find_periodic_orbits(jg.DUFFING, p, np.zeros((3, 4)))
+    with pytest.raises(ValueError):
+        jg.seeds_in_box(5, [0, 0], [1, -1])
+    with pytest.raises(ValueError):
+        jg.verify_orbit(jg.DUFFING, p, np.zeros((1, 3)))
+
+
+def test_failures_are_reported_as_data():
+    # free flight (no stiffness in reach): DP - I is singular, reported per seed, no orbit
+    p = jg.SpurPairParams(zeta=0.0, kappa=0.0, b=100.0, f_m=0.0, e_amp=0.0, Omega=1.0)
+    r = jg.periodic_orbit(jg.SPUR_PAIR, p, jnp.array([[0.0, 0.5], [1.0, 0.0]]))
+    st = np.asarray(r.status)
+    assert st[0] == SHOOT_SINGULAR and np.all(np.isnan(np.asarray(r.point[0])))
+    assert st[1] in (SHOOT_CONVERGED, SHOOT_SINGULAR)  # at rest: a fixed point of P
+
+
+# --------------------------------------------------------------------------- figure
+def test_plot_orbit_figure():
+    from matplotlib.figure import Figure
+
+    from jaxgear.plotting import plot_orbit
+
+    p = duffing()
+    o = jg.find_periodic_orbits(jg.DUFFING, p, np.array([[1.0, 1.1]])).orbits[0]
+    fig = plot_orbit(jg.DUFFING, p, o, coords=(0, 1), samples_per_period=50)
+    assert isinstance(fig, Figure) and len(fig.axes) == 1
+    ax = fig.axes[0]
+    line = ax.lines[0].get_xydata()
+    assert np.linalg.norm(line[0] - o.points[0]) < 1e-12 and np.linalg.norm(line[-1] - o.points[0]) < 1e-4
+    fig3 = plot_orbit(jg.REDUCED, jg.paper_params(), np.array([[5.4, -0.2, 8.3, -0.8]]), coords=(0, 1, 2),
+                      samples_per_period=20)
+    assert fig3.axes[0].name == "3d"
+    with pytest.raises(ValueError):
+        plot_orbit(jg.DUFFING, p, o, coords=(0, 5))
