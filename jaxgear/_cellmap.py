@@ -41,9 +41,14 @@ METHODS = ("poincare-like", "stroboscopic", "direct")
 
 
 def _progress(total: int, desc: str, enabled: bool, unit: str = "cell"):
-    from tqdm.auto import tqdm
+    """A tqdm bar (a widget in notebooks when ipywidgets is installed) with time left."""
+    import warnings as _w
 
-    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=not enabled, leave=False)
+    with _w.catch_warnings():
+        _w.simplefilter("ignore")  # tqdm.auto warns when ipywidgets is missing, then falls back
+        from tqdm.auto import tqdm
+
+        return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=not enabled, leave=False)
 
 
 def _chunks(n: int, size: int):
