@@ -407,6 +407,25 @@ def _worker(kind: str, n: int, repeat: int) -> dict:
         Yj = jnp.asarray(X.T.copy())
         f = jax.jit(lambda p, Y: _rk4_loop(jaxgear.REDUCED, p, Y, 0.0, STEPS, jaxgear.REDUCED.period(p) / STEPS))
         fn = lambda: _block(f(p, Yj))  # noqa: E731
+    elif kind == "direct":
+        # The whole direct global analysis on a paper-region grid of about n cells.
+        from jaxgear import CellGrid
+
+        side = round((n / 1.0) ** (1 / 3))
+        grid = CellGrid.paper(counts=(side, side, side))
+        m = {}
+        t = time.perf_counter()
+        res = jaxgear.analyze_global(method="direct", grid=grid, progress=False)
+        m["first_s"] = m["steady_s"] = time.perf_counter() - t
+        m["compile_s"] = float("nan")
+        m["mean_periods"] = res.mean_periods
+        m["cells"] = grid.n_cells
+        m["attractors"] = [(int(a.period), round(float(a.share), 4)) for a in res.attractors]
+        m["ns_per_step_cell"] = ns_per_step(m["steady_s"], grid.n_cells, periods=res.mean_periods)
+        m["peak_rss_MB"] = peak_rss_mb()
+        m["rss_before_kernel_MB"] = rss0
+        m["state_MB"] = X.nbytes / 2**20
+        return m
     elif kind == "numba-blocked":
         import baselines as B
 
@@ -532,8 +551,10 @@ def print_table(R) -> list[str]:
         if "steady_s" not in m:
             L.append(f"  {kind:20s} {int(n):10,d}  error")
             continue
-        L.append(f"  {kind:20s} {int(n):10,d} {m['compile_s']:9.2f} {m['steady_s']:9.3f} "
-                 f"{m['ns_per_step_cell']:12.2f} {m['peak_rss_MB']:11.0f} {m['rss_before_kernel_MB']:9.0f}")
+        extra = (f"  whole direct analysis, {m['cells']:,d} cells, {m['mean_periods']:.1f} periods/cell"
+                 if kind == "direct" else "")
+        L.append(f"  {kind:20s} {int(n):10,d} {_fmt(m['compile_s'], '9.2f'):>9s} {m['steady_s']:9.3f} "
+                 f"{m['ns_per_step_cell']:12.2f} {m['peak_rss_MB']:11.0f} {m['rss_before_kernel_MB']:9.0f}{extra}")
     L.append("")
     if "strobe_numba_blocked" in R and "steady_s" in R["strobe_numba_blocked"]:
         j, nb = R["strobe_jaxgear"]["steady_s"], R["strobe_numba_blocked"]["steady_s"]
@@ -585,7 +606,7 @@ def main(argv=None):
     bench_shooting(R, a.quick)
     print("item 5: scaling ...", flush=True)
     sizes = [10_000, 100_000] if a.quick else [10_000, 100_000, 1_000_000]
-    bench_scaling(R, sizes, ["jaxgear", "jaxgear-unchunked", "numba-blocked"])
+    bench_scaling(R, sizes, ["jaxgear", "jaxgear-unchunked", "numba-blocked", "direct"])
     R["load_end"] = loadavg()
     R["total_wall_s"] = time.perf_counter() - t_all
     R.pop("_Y_jaxgear", None)
