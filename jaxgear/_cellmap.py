@@ -81,7 +81,7 @@ def _strobe_chunk(system, params, X, periods, integrator):
 
 def cell_images(system: ForcedSystem, params, grid: CellGrid, *, method: str = "poincare-like",
                 mapping_steps: int = 50, integrator: Integrator = RK4(), direction: int = 1,
-                section_index: int | None = None, chunk_size: int = 16384, progress: bool = True) -> np.ndarray:
+                section_index: int | None = None, chunk_size: int = 131072, progress: bool = True) -> np.ndarray:
     """Image cell of every cell (paper eq. 9): an int array ``(n_cells,)``; the sink is ``n_cells``.
 
     ``poincare-like``: centre on Σ at phase 0 -> ``mapping_steps`` periods -> next
@@ -110,7 +110,7 @@ def cell_images(system: ForcedSystem, params, grid: CellGrid, *, method: str = "
             f"this grid covers {grid.axes}. Use CellGrid.box(bounds, counts) with {system.dim} axes."
         )
     n = grid.n_cells
-    chunk = min(int(chunk_size), n)
+    chunk = -(-n // -(-n // int(chunk_size)))  # equal chunks of at most chunk_size cells
     images = np.empty(n, dtype=np.int64)
     bar = _progress(n, f"{method} map", progress)
     search = integrator.steps_per_period if isinstance(integrator, RK4) else 400
@@ -247,11 +247,10 @@ def _refine_orbit(system, params, x: np.ndarray, k: int, integrator, settle: int
 def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGrid | None = None, *,
                    method: str = "poincare-like", mapping_steps: int | None = None,
                    integrator: Integrator | None = None, steps_per_period: int | None = None,
-                   direction: int = 1, section_index: int | None = None, chunk_size: int = 16384,
+                   direction: int = 1, section_index: int | None = None, chunk_size: int = 131072,
                    max_period: int = 16, period_tol: float = 1e-6, settle_periods: int = 400,
                    merge_tol: float = 1e-4, round_periods: int = 5, max_periods: int = 2000,
-                   capture_radius: float = 1e-3, escape_bound: float = 1e6, revisit_box: float | None = None,
-                   revisit_hits: int = 3, progress: bool = True,
+                   capture_radius: float | str = "auto", escape_bound: float = 1e6, progress: bool = True,
                    version: str | None = None) -> GlobalResult:
     """Every coexisting attractor in a region, its period and its domain (paper §3-§4).
 
@@ -270,17 +269,16 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         period_tol: relative recurrence tolerance of the period detection.
         settle_periods: periods each periodic group is followed before its period is read.
         merge_tol: groups whose attractor points lie within this distance are one attractor.
+        chunk_size: cells integrated in one batch (memory is bounded by it, not by the
+            grid; results do not depend on it). On a 2-core CPU batches below ~65,000
+            cells run single-threaded, about twice slower per cell.
         round_periods, max_periods, capture_radius, escape_bound: ``direct`` method:
             periods per round between checks, limit per cell (then ``UNRESOLVED``),
-            distance to a known attractor's point that decides a cell, and the norm
-            beyond which a state counts as escaped (sink).
-        revisit_box, revisit_hits: ``direct`` method: a trajectory whose last
-            ``revisit_hits`` stroboscopic points fall in boxes (side ``revisit_box``, state
-            units) crossed so far only by trajectories of one known fate takes that fate
-            (default ``None``: off). It saves ~10 % of the periods on the paper grid, but
-            it is unsafe when attractors lie close together: on a 5 × 3 × 6 paper grid it
-            relabelled every P-8 cell as P-4, whose trajectories had marked the boxes
-            near both attractors first.
+            the radius within which a trajectory's last k stroboscopic points must follow
+            the whole cycle of a known P-k attractor to be decided (``"auto"``: a quarter
+            of the smallest distance between two attractors' points, at most 1 % of their
+            scale; see :func:`_capture_radius`), and the norm beyond which a state counts
+            as escaped (sink).
         progress: show progress bars (tqdm); ``False`` silences them.
     Returns:
         :class:`GlobalResult`. Warnings are issued when many cells go to the sink,
@@ -317,13 +315,11 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         mapping_steps = 50 if method == "poincare-like" else 1
     for name, v, lo in (("max_period", max_period, 1), ("settle_periods", settle_periods, 0),
                         ("round_periods", round_periods, 1), ("max_periods", max_periods, 1),
-                        ("revisit_hits", revisit_hits, 1)):
+                        ("chunk_size", chunk_size, 1)):
         if int(v) < lo:
             raise ValueError(f"{name}={v} must be >= {lo}.")
-    if revisit_box is not None and not revisit_box > 0:
-        raise ValueError(f"revisit_box={revisit_box} must be > 0 (or None to disable).")
-    if revisit_hits > round_periods:
-        raise ValueError(f"revisit_hits={revisit_hits} cannot exceed round_periods={round_periods}.")
+    if not (capture_radius == "auto" or (isinstance(capture_radius, (int, float)) and capture_radius >= 0)):
+        raise ValueError(f"capture_radius={capture_radius!r} must be 'auto' or a number >= 0.")
     check_system(system, params, grid.centres(np.array([0]))[0])
     sec_idx = system.section_index if section_index is None else section_index
     n = grid.n_cells
@@ -337,12 +333,10 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
 
     if method == "direct":
         settings.update(round_periods=int(round_periods), max_periods=int(max_periods),
-                        capture_radius=capture_radius, escape_bound=escape_bound, revisit_box=revisit_box,
-                        revisit_hits=int(revisit_hits))
+                        capture_radius=capture_radius, escape_bound=escape_bound)
         labels, att_points, mean_periods = _direct(system, params, grid.centres(), integrator, chunk_size,
                                                    round_periods, max_periods, max_period, period_tol,
-                                                   capture_radius, escape_bound, merge_tol, progress,
-                                                   revisit=revisit_box, revisit_hits=revisit_hits)
+                                                   capture_radius, escape_bound, merge_tol, progress)
         cycles = [np.zeros(0, np.int64)] * len(att_points)
     else:
         images = cell_images(system, params, grid, method=method, mapping_steps=mapping_steps,
@@ -452,149 +446,186 @@ def _direct_round(system, params, X, periods, integrator):
     return jnp.transpose(Ys, (2, 0, 1))
 
 
-class _VisitTable:
-    """Labels of coarse state-space boxes visited by trajectories whose fate is known.
+def _pool_size(n_busy: int, pool: int, smallest: int = 256) -> int:
+    """Padded batch size for ``n_busy`` lanes: the pool size, or ``smallest * 4^j`` below it,
+    so a draining pool compiles few shapes (each costs ~0.5 s) for some idle lanes."""
+    if n_busy >= pool:
+        return pool
+    size = smallest
+    while size < n_busy:
+        size *= 4
+    return min(size, pool)
 
-    The recurrence idea of cell-to-cell mapping applied at point level (as in
-    recurrence-based basin mappers): a box of side ``h`` (state units) gets the label
-    of every decided trajectory that passed through it (a box reached by trajectories
-    of different fates is marked ambiguous and never used). Keys pack the box's integer
-    coordinates (16 bits each) into one ``uint64``; states outside ``|x| < 2^15 h`` or
-    with more than 4 coordinates use a hash of the coordinates.
+
+def _capture_radius(attractors: list, capture) -> float:
+    """Capture radius around known attractors' points (state units).
+
+    ``capture="auto"``: a quarter of the smallest distance between points of two
+    different known attractors, and at most 1 % of ``1 + max |point|`` (the attractors'
+    scale); a number is used as given.
     """
+    if capture != "auto":
+        return float(capture)
+    pts = [np.asarray(p) for p, _, _ in attractors]
+    r = 0.01 * (1.0 + max(float(np.abs(p).max()) for p in pts))
+    for i in range(len(pts)):
+        for j in range(i):
+            d = np.linalg.norm(pts[i][:, None, :] - pts[j][None, :, :], axis=-1).min()
+            r = min(r, 0.25 * float(d))
+    return r
 
-    AMBIGUOUS = -3
-    NONE = np.uint64(np.iinfo(np.uint64).max)
 
-    def __init__(self, h: float):
-        self.h = float(h)
-        self.keys = np.zeros(0, np.uint64)
-        self.labels = np.zeros(0, np.int64)
+def _shadowing(hist: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """How closely each lane's last ``k`` stroboscopic points follow a period-k cycle.
 
-    def key(self, X: np.ndarray) -> np.ndarray:
-        q = np.floor(X / self.h)
-        ok = np.all(np.isfinite(q) & (np.abs(q) < 2**15), axis=-1)
-        q = (np.where(np.isfinite(q), q, 0) + 2**15).astype(np.uint64)
-        k = np.zeros(X.shape[:-1], np.uint64)
-        for j in range(X.shape[-1]):
-            k = k * np.uint64(1 << 16) + q[..., j] if j < 4 else (k * np.uint64(1000003)) ^ q[..., j]
-        return np.where(ok, k, self.NONE)
-
-    def add(self, keys: np.ndarray, labels: np.ndarray) -> None:
-        m = keys != self.NONE
-        keys, labels = keys[m], labels[m]
-        if not len(keys):
-            return
-        k = np.concatenate([self.keys, keys])
-        lab = np.concatenate([self.labels, labels])
-        order = np.argsort(k, kind="stable")
-        k, lab = k[order], lab[order]
-        uk, start = np.unique(k, return_index=True)
-        lo = np.minimum.reduceat(lab, start)
-        hi = np.maximum.reduceat(lab, start)
-        self.keys, self.labels = uk, np.where(lo == hi, lo, self.AMBIGUOUS)
-
-    def lookup(self, keys: np.ndarray) -> np.ndarray:
-        if not len(self.keys):
-            return np.full(keys.shape, self.AMBIGUOUS, np.int64)
-        i = np.clip(np.searchsorted(self.keys, keys), 0, len(self.keys) - 1)
-        hit = (self.keys[i] == keys) & (keys != self.NONE)
-        return np.where(hit, self.labels[i], self.AMBIGUOUS)
+    ``hist (lanes, H, dim)`` (newest last), ``points (k, dim)`` in the cycle's order
+    (``points[j+1] = P(points[j])``). Returns ``(lanes,)``: the smallest, over the k
+    alignments of the cycle, of the largest distance along the last k points, and
+    ``inf`` for lanes whose window holds non-finite values (not yet filled).
+    """
+    k = len(points)
+    W = hist[:, -k:]  # (lanes, k, dim), W[:, i] aligned with points[(j + i) % k]
+    best = np.full(len(hist), np.inf)
+    for j in range(k):
+        d = np.linalg.norm(W - np.roll(points, -j, axis=0)[None], axis=-1).max(axis=1)
+        best = np.minimum(best, np.where(np.isfinite(d), d, np.inf))
+    return best
 
 
 def _direct(system, params, X, integrator, chunk, R, max_periods, max_period, tol, capture, bound, merge_tol,
-            progress, revisit: float | None = None, revisit_hits: int = 3):
-    """Integrate every cell centre on the stroboscopic map until its fate is known.
+            progress, pilot: int = 1024):
+    """Direct classification of the states ``X (n, dim)``: a pilot sample first, then the rest.
 
-    Lanes leave the batch as soon as they are decided: recurrence with a period <=
-    max_period (a new or known attractor), capture within ``capture`` of a known
-    attractor's point, escape (norm > ``bound`` or non-finite: the sink), or, with
-    ``revisit=h``, ``revisit_hits`` successive stroboscopic points in boxes of side ``h``
-    already crossed only by trajectories of one known fate. The remaining lanes are
-    compacted into full chunks, so no lane idles. Returns
-    ``(labels, [(points, period, residual)], mean periods per lane)``.
+    The pilot (``pilot`` cells drawn with a fixed seed) runs alone until each of its
+    trajectories recurs, so the common attractors are known before the bulk of the
+    cells starts and those can be decided by capture (:func:`_direct_pool`) as soon as
+    they reach an attractor instead of after a full recurrence test. Attractors the
+    pilot misses are still found by recurrence in the second pass; the labels do not
+    depend on the pilot, only the time does.
+    Returns ``(labels, [(points, period, residual)], mean periods per cell)``.
     """
     X = np.asarray(X, dtype=float)
     n = len(X)
-    H = 2 * max_period + 1
-    hist = np.full((n, H, system.dim), np.nan)
+    attractors: list[list] = []
     labels = np.full(n, UNRESOLVED, dtype=np.int64)
-    done_periods = np.zeros(n, dtype=np.int64)
-    active = np.arange(n)
-    state = X.copy()
-    attractors: list[list] = []  # [points (k, dim), period, residual]
-    chunk = min(int(chunk), n)
-    table = _VisitTable(revisit) if revisit else None
-    visits: list[tuple[np.ndarray, np.ndarray]] = []  # (lanes, keys (lanes, R)) per round, lanes undecided
+    used = np.zeros(n, dtype=np.int64)
+    first = np.sort(np.random.default_rng(0).choice(n, size=min(int(pilot), n), replace=False))
+    rest = np.setdiff1d(np.arange(n), first)
     bar = _progress(n, "direct", progress)
-    while len(active) and done_periods[active[0]] < max_periods:
-        pts_all = np.empty((len(active), R, system.dim))
-        size = _bucket(len(active), chunk)
-        for a, b in _chunks(len(active), size):
-            P = np.asarray(_direct_round(system, params, jnp.asarray(_pad(state[active[a:b]], size)), int(R),
-                                         integrator))[: b - a]
-            pts_all[a:b] = P
-        newX = pts_all[:, -1]
-        state[active] = newX
-        done_periods[active] += R
-        hist[active] = np.concatenate([hist[active], pts_all], axis=1)[:, -H:]
-        # escape
-        norms = np.linalg.norm(newX, axis=1)
-        escaped = ~np.isfinite(norms) | (norms > bound)
-        labels[active[escaped]] = SINK
-        decided = escaped.copy()
-        # capture by a known attractor
-        if attractors:
-            allp = np.concatenate([p for p, _, _ in attractors])
-            owner = np.concatenate([np.full(len(p), i) for i, (p, _, _) in enumerate(attractors)])
-            d = np.linalg.norm(newX[:, None, :] - allp[None], axis=-1)
-            j = np.argmin(d, axis=1)
-            cap = (d[np.arange(len(j)), j] <= capture) & ~decided
-            labels[active[cap]] = owner[j[cap]]
-            decided |= cap
-        # recurrence -> new attractors
-        cand = np.nonzero(~decided & (done_periods[active] >= H))[0]
-        if len(cand):
-            per = detect_period(hist[active[cand]], max_period, tol)
-            rec = cand[per > 0]
-            per = per[per > 0]
-            for li, k in zip(rec, per):
-                if labels[active[li]] != UNRESOLVED:
-                    continue
-                pts = hist[active[li], -k:]
-                found = -1
-                for ai, (apts, ak, _) in enumerate(attractors):
-                    if ak == k and _set_distance(pts, apts) <= merge_tol * (1 + np.abs(apts).max()):
-                        found = ai
-                        break
-                if found < 0:
-                    attractors.append([pts, int(k), np.nan])
-                    found = len(attractors) - 1
-                labels[active[li]] = found
-                decided[li] = True
-        if table is not None:
-            keys = table.key(pts_all)  # (lanes, R)
-            known = table.lookup(keys[:, -revisit_hits:])
-            same = np.all(known == known[:, :1], axis=1) & (known[:, 0] >= 0) & ~decided
-            labels[active[same]] = known[same, 0]
-            decided |= same
-            visits.append((active.copy(), keys))
-            # teach the table the boxes of every lane decided this round (its whole path)
-            now = np.zeros(n, bool)
-            now[active[decided]] = True
-            for lanes, kk in visits:
-                sel = now[lanes]
-                if sel.any():
-                    table.add(kk[sel].reshape(-1), np.repeat(labels[lanes[sel]], kk.shape[1]))
-            visits = [(lanes[~now[lanes]], kk[~now[lanes]]) for lanes, kk in visits]
-        bar.update(int(decided.sum()))
-        active = active[~decided]
+    for part in (first, rest):
+        if len(part):
+            labels[part], used[part] = _direct_pool(system, params, X[part], integrator, chunk, R, max_periods,
+                                                    max_period, tol, capture, bound, merge_tol, attractors, bar)
     bar.close()
     out = []
     for pts, k, _ in attractors:
         pts, res = _refine_orbit(system, params, pts[-1], k, integrator, settle=200)
         out.append((pts, k, res))
-    return labels, out, float(done_periods.mean())
+    return labels, out, float(used.mean())
+
+
+def _direct_pool(system, params, X, integrator, chunk, R, max_periods, max_period, tol, capture, bound, merge_tol,
+                 attractors, bar):
+    """Integrate every cell centre on the stroboscopic map until its fate is known.
+
+    A pool of ``chunk`` lanes runs rounds of ``R`` periods; after each round a lane is
+    decided and leaves the pool when its trajectory escapes (norm > ``bound`` or not
+    finite: the sink), when its last k stroboscopic points follow, within the capture
+    radius (:func:`_capture_radius`), the whole cycle of a known P-k attractor and their
+    distance to it has not grown over that cycle (:func:`_shadowing`; a single close
+    point is not enough), when it recurs with a period ``<= max_period`` (a new or known
+    attractor, :func:`detect_period`), or after ``max_periods`` periods (unresolved).
+    Freed lanes take the next cells, so the pool stays full until the grid is used up;
+    then the busy lanes are compacted into a batch padded to a power of two, so no
+    lane idles for long and memory stays bounded by ``chunk``, not by the grid.
+    ``attractors`` (a list of ``[points (k, dim) in cycle order, period, residual]``) is
+    extended in place. Returns ``(labels (n,), periods integrated per cell (n,))``.
+    """
+    n, dim = X.shape
+    H = 2 * max_period + 1
+    pool = max(1, min(int(chunk), n))
+    labels = np.full(n, UNRESOLVED, dtype=np.int64)
+    used = np.zeros(n, dtype=np.int64)  # periods integrated per cell
+    cell = np.full(pool, -1, dtype=np.int64)  # cell held by each lane, -1: free
+    state = np.zeros((pool, dim))
+    hist = np.full((pool, H, dim), np.nan)
+    age = np.zeros(pool, dtype=np.int64)
+    fed = 0
+    while True:
+        free = np.nonzero(cell < 0)[0][: n - fed]
+        if len(free):
+            cell[free] = np.arange(fed, fed + len(free))
+            state[free] = X[fed : fed + len(free)]
+            hist[free] = np.nan
+            age[free] = 0
+            fed += len(free)
+        busy = np.nonzero(cell >= 0)[0]
+        if not len(busy):
+            break
+        size = _pool_size(len(busy), pool)
+        P = np.empty((len(busy), R, dim))
+        for a, b in _chunks(len(busy), size):
+            P[a:b] = np.asarray(_direct_round(system, params, jnp.asarray(_pad(state[busy[a:b]], size)), int(R),
+                                              integrator))[: b - a]
+        state[busy] = P[:, -1]
+        age[busy] += R
+        H_b = np.concatenate([hist[busy], P], axis=1)[:, -H:]
+        hist[busy] = H_b
+        newX = P[:, -1]
+        lab = np.full(len(busy), UNRESOLVED, dtype=np.int64)
+        decided = np.zeros(len(busy), dtype=bool)
+        # escape -> sink
+        norms = np.linalg.norm(newX, axis=1)
+        esc = ~np.isfinite(norms) | (norms > bound)
+        lab[esc] = SINK
+        decided |= esc
+        # capture: the last k points shadow a known P-k cycle, not moving away from it
+        if attractors:
+            r = _capture_radius(attractors, capture)
+            for ai, (apts, k, _) in enumerate(attractors):
+                und = np.nonzero(~decided)[0]
+                if len(und) and k <= H:  # cheap pre-filter: the newest point must be close already
+                    und = und[np.linalg.norm(newX[und, None] - apts[None], axis=-1).min(axis=1) <= r]
+                if not len(und) or k > H:
+                    continue
+                d_now = _shadowing(H_b[und], apts)
+                d_before = _shadowing(H_b[und, :-k], apts) if H > 2 * k else np.full(len(und), np.inf)
+                cap = und[(d_now <= r) & ((d_now <= d_before) | ~np.isfinite(d_before))]
+                lab[cap] = ai
+                decided[cap] = True
+        # recurrence -> a new attractor, or one found in this round by another lane
+        cand = np.nonzero(~decided & (age[busy] >= H))[0]
+        if len(cand):  # cheap pre-filter: the newest point must return within max_period periods
+            back = np.linalg.norm(H_b[cand, -1:] - H_b[cand, -1 - max_period : -1], axis=-1).min(axis=1)
+            cand = cand[~(back > tol * (1.0 + norms[cand]))]  # keeps non-finite for detect_period
+        if len(cand):
+            per = detect_period(H_b[cand], max_period, tol)
+            rec, per = cand[per > 0], per[per > 0]
+            while len(rec):
+                li, k = rec[0], int(per[0])
+                pts = H_b[li, -k:]
+                scale = 1.0 + np.abs(pts).max()
+                found = next((ai for ai, (apts, ak, _) in enumerate(attractors)
+                              if ak == k and _set_distance(pts, apts) <= merge_tol * scale), -1)
+                if found < 0:
+                    attractors.append([pts, k, np.nan])
+                    found = len(attractors) - 1
+                apts = attractors[found][0]
+                last = H_b[rec, -1]
+                same = (per == k) & (np.linalg.norm(last[:, None] - apts[None], axis=-1).min(axis=1)
+                                     <= merge_tol * scale)
+                same[0] = True
+                lab[rec[same]] = found
+                decided[rec[same]] = True
+                rec, per = rec[~same], per[~same]
+        # out of time -> unresolved
+        decided |= age[busy] >= max_periods
+        done = busy[decided]
+        labels[cell[done]] = lab[decided]
+        used[cell[done]] = age[done]
+        cell[done] = -1
+        bar.update(int(decided.sum()))
+    return labels, used
 
 
 def _warn_if_unreliable(r: GlobalResult) -> None:
@@ -644,9 +675,9 @@ def compare_with_direct(result: GlobalResult, system: ForcedSystem | None = None
     n = result.n_cells
     cells = rng.choice(n, size=min(int(n_samples), n), replace=False)
     X = result.grid.centres(cells)
-    labels, atts, _ = _direct(system, params, X, integrator, 4096, 5, 2000, int(s.get("max_period", 16)),
-                              float(s.get("period_tol", 1e-6)), 1e-3, 1e6, float(s.get("merge_tol", 1e-4)), progress,
-                              revisit=None)
+    labels, atts, _ = _direct(system, params, X, integrator, int(s.get("chunk_size", 131072)), 5, 2000,
+                              int(s.get("max_period", 16)), float(s.get("period_tol", 1e-6)), "auto", 1e6,
+                              float(s.get("merge_tol", 1e-4)), progress)
     # map direct attractor ids -> result attractor ids
     mapping = {}
     direct_only = []

@@ -84,6 +84,48 @@ def rk4_step_batch(f, t, Y, h, params):
 
 
 def _rk4_advance_T(system, params, Y, t0, n_steps, h):
+    """``n_steps`` RK4 steps of size ``h`` on a batch ``Y (dim, n)``, chunked when large.
+
+    A batch larger than :func:`_chunk_cells` is cut into equal chunks that run one
+    after the other, each through all its steps, inside the same computation: a
+    chunk's working set (the state and the RK4 stages) stays in the last-level cache
+    instead of streaming through main memory at every stage. Chunks are read from
+    ``Y`` and written into the result in place; the last one is shifted back to end at
+    lane ``n`` (its overlap with the previous chunk is computed twice, from the same
+    input, to the same values). Each lane's arithmetic is unchanged, so the result is
+    bit-for-bit that of the unchunked loop.
+    """
+    dim, n = Y.shape
+    chunk = _chunk_cells(dim)
+    if n <= chunk:
+        return _rk4_loop(system, params, Y, t0, n_steps, h)
+    n_chunks = -(-n // chunk)
+    per_chunk = -(-n // n_chunks)
+    size = min(n, -(-per_chunk // 8) * 8)  # equal chunks of whole SIMD vectors
+
+    def one_chunk(i, out):
+        start = jnp.minimum(i * size, n - size)
+        Yb = jax.lax.dynamic_slice_in_dim(Y, start, size, axis=1)
+        Yb = _rk4_loop(system, params, Yb, t0, n_steps, h)
+        return jax.lax.dynamic_update_slice_in_dim(out, Yb, start, axis=1)
+
+    return jax.lax.fori_loop(0, n_chunks, one_chunk, Y)
+
+
+# Working set of one chunk of the RK4 loop (state, three stages and the new state,
+# 5 arrays of dim x chunk float64), sized for a shared last-level cache of >= 16 MiB.
+# Measured on 2-core AMD EPYC (32 MiB L3), reduced model, 10^6 cells: 22.7 ns per
+# step per cell unchunked, 6.0 ns with chunks of 65,536-100,000 cells, 9.8 ns with
+# 32,768 (each stage is one multithreaded XLA loop whose start-up cost then shows).
+_CHUNK_BYTES = 16 * 2**20
+
+
+def _chunk_cells(dim: int) -> int:
+    """Largest number of lanes :func:`_rk4_advance_T` integrates in one piece."""
+    return max(4096, _CHUNK_BYTES // (5 * 8 * int(dim)))
+
+
+def _rk4_loop(system, params, Y, t0, n_steps, h):
     f = _batched_field(system)
 
     def body(i, Y):

@@ -214,3 +214,28 @@ def test_direct_round_length_does_not_change_labels():
     b = jg.analyze_global(grid=grid, method="direct", round_periods=10, progress=False)
     assert np.array_equal(a.labels, b.labels)
     assert sorted(x.period for x in a.attractors) == [4, 8]  # the paper's coexisting P-4 and P-8
+
+
+def test_direct_shortcuts_do_not_change_labels():
+    """Capture by shadowing a known cycle, the pilot sample and the lane pool only save
+    time: with capture off (pure recurrence) and with a pool far smaller than the grid
+    (lanes refilled many times) every cell gets the same attractor."""
+    grid = CellGrid.paper(counts=(6, 4, 6))
+    fast = jg.analyze_global(grid=grid, method="direct", progress=False)
+    slow = jg.analyze_global(grid=grid, method="direct", capture_radius=0.0, chunk_size=37, progress=False)
+    assert np.array_equal(fast.labels, slow.labels)
+    assert [a.period for a in fast.attractors] == [a.period for a in slow.attractors]
+    assert fast.mean_periods < slow.mean_periods  # capture decides cells before a full recurrence test
+
+
+def test_capture_radius_stays_below_attractor_separation():
+    from jaxgear._cellmap import _capture_radius
+
+    a = np.array([[0.0, 0.0], [1.0, 0.0]])
+    b = np.array([[0.0, 0.04], [1.0, 1.0]])
+    r = _capture_radius([[a, 2, 0.0], [b, 2, 0.0]], "auto")
+    assert r == pytest.approx(0.01)  # a quarter of the 0.04 gap between the two attractors
+    assert _capture_radius([[a, 2, 0.0]], "auto") == pytest.approx(0.02)  # 1 % of 1 + max|x|
+    assert _capture_radius([[a, 2, 0.0]], 0.3) == 0.3
+    with pytest.raises(ValueError, match="capture_radius"):
+        jg.analyze_global(grid=CellGrid.paper(counts=(2, 2, 2)), method="direct", capture_radius=-1, progress=False)

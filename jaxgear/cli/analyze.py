@@ -60,7 +60,7 @@ def add_parser(sub) -> None:
     p.add_argument("--direction", type=int, default=1, choices=(-1, 0, 1),
                    help="crossing direction of the section x4 = 0 (+1 increasing, -1 decreasing, 0 both)")
     p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
-    p.add_argument("--chunk-size", type=int, default=16384, help="cells per batch (bounds memory)")
+    p.add_argument("--chunk-size", type=int, default=131072, help="cells per batch (bounds memory; default %(default)s)")
     p.add_argument("--compare", nargs="?", type=int, const=500, default=None, metavar="N",
                    help="also run the direct method on N random cells (default 500) and report agreement")
     p.add_argument("--out", default="jaxgear-out", help="output folder (default jaxgear-out)")
