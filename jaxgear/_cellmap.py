@@ -625,6 +625,7 @@ def _direct_pool(system, params, X, integrator, chunk, R, max_periods, max_perio
         used[cell[done]] = age[done]
         cell[done] = -1
         bar.update(int(decided.sum()))
+        bar.set_postfix_str(f"{len(busy) - int(decided.sum())} in flight, {len(attractors)} attractors", refresh=False)
     return labels, used
 
 
