@@ -661,8 +661,6 @@ def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds
                 ds = max(0.7 * ds, ds_min)
     finally:
         bar.close()
-    if len(steps) > max_steps and status == "max_steps":
-        pass
     Z = np.array([s.z for s in steps])
     m = len(steps)
     pts = np.array([s.pts for s in steps])
@@ -762,9 +760,6 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
     if first.status != _OK:
         raise ValueError(f"the orbit found from x0 at {param}={p0:.6g} could not be refined by the corrector "
                          f"(status {int(first.status)}); try a smaller tol or another integrator.")
-    if abs(first.tangent[-1]) < 1e-12:
-        # at a fold already: go along the null vector, either way
-        pass
     settings = _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, origin="start")
     return _run(ctx, first, stop=float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=int(max_steps),
                 bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol, progress=progress,

@@ -26,15 +26,44 @@ def _measure(branch, coordinate):
     return y, yb, f"{branch.state_names[j]} (stroboscopic points)"
 
 
-def _runs(stable: np.ndarray):
-    """Index ranges ``(start, stop, stable)`` of constant stability; each run includes the
-    first point of the next so the drawn curve has no gaps."""
-    m = len(stable)
+def _bottom_row(ax) -> bool:
+    spec = ax.get_subplotspec() if hasattr(ax, "get_subplotspec") else None
+    return spec is None or spec.is_last_row()
+
+
+def _nodes(branch, y, yb):
+    """Branch points with the located bifurcations inserted in arclength order.
+
+    Returns ``(p, Y, lam, seg_stable)``: parameter ``(n,)``, values ``(n, k)``, largest
+    ``|lambda|`` ``(n,)`` and the stability of the segment from node ``i`` to ``i + 1``
+    ``(n - 1,)`` (so stability changes at the bifurcation, not at the next step).
+    """
+    stable = np.asarray(branch.stable, bool)
+    lam = branch.max_multiplier
+    after = {}
+    for b_i, bif in enumerate(branch.bifurcations):
+        after.setdefault(int(bif.index), []).append(b_i)
+    P, Y, L, right = [], [], [], []
+    for i in range(len(branch)):
+        P.append(branch.values[i]), Y.append(y[i]), L.append(lam[i]), right.append(stable[i])
+        if i + 1 < len(branch):
+            # bifurcations between i and i + 1, ordered by distance from point i
+            bs = sorted(after.get(i, []), key=lambda j: abs(branch.bifurcations[j].param_value - branch.values[i]))
+            for j in bs:
+                bif = branch.bifurcations[j]
+                P.append(bif.param_value), Y.append(yb[j]), L.append(np.max(np.abs(bif.multipliers)))
+                right.append(stable[i + 1])
+    return np.array(P), np.array(Y).reshape(len(P), -1), np.array(L), np.array(right[:-1], bool)
+
+
+def _runs(seg_stable: np.ndarray):
+    """Node ranges ``(start, stop, stable)`` of segments of constant stability (``stop`` inclusive + 1)."""
     out = []
     start = 0
-    for i in range(1, m + 1):
-        if i == m or stable[i] != stable[start]:
-            out.append((start, min(i + 1, m), bool(stable[start])))
+    n = len(seg_stable)
+    for i in range(1, n + 1):
+        if i == n or seg_stable[i] != seg_stable[start]:
+            out.append((start, i + 1, bool(seg_stable[start])))
             start = i
     return out
 
@@ -77,15 +106,17 @@ def plot_branch(branch, coordinate: str | int | None = None, ax=None, *, multipl
         own = True
     else:
         fig, ax2, own = ax.figure, None, False
-    p = branch.values
+    p, Y, L, seg = _nodes(branch, y, yb)
     first = {True: True, False: True}
-    for a, b, st in _runs(np.asarray(branch.stable)):
-        for j in range(y.shape[1]):
+    runs = _runs(seg) if len(seg) else [(0, 1, bool(branch.stable[0]))]
+    for a, b, st in runs:
+        for j in range(Y.shape[1]):
             lab = None
             if first[st] and j == 0:
                 lab = f"{label} {'stable' if st else 'unstable'}"
                 first[st] = False
-            ax.plot(p[a:b], y[a:b, j], ls="-" if st else "--", lw=1.4 if st else 1.1, color=color, label=lab)
+            ax.plot(p[a:b], Y[a:b, j], ls="-" if st else "--", lw=1.4 if st else 1.1, color=color, label=lab,
+                    marker="." if b - a == 1 else None)
     seen = set()
     for i, bif in enumerate(branch.bifurcations):
         mk, c = _MARKERS.get(bif.kind, ("x", "k"))
@@ -100,7 +131,7 @@ def plot_branch(branch, coordinate: str | int | None = None, ax=None, *, multipl
     ax.set_ylabel(ylabel)
     ax.legend(loc="best", fontsize=8)
     if ax2 is not None:
-        ax2.plot(p, branch.max_multiplier, color=color, lw=1.2)
+        ax2.plot(p, L, color=color, lw=1.2)
         ax2.axhline(1.0, color="0.4", lw=0.8, ls=":")
         for bif in branch.bifurcations:
             mk, c = _MARKERS.get(bif.kind, ("x", "k"))
@@ -108,7 +139,7 @@ def plot_branch(branch, coordinate: str | int | None = None, ax=None, *, multipl
                         edgecolor="k", linewidths=0.5)
         ax2.set_ylabel("max |lambda|")
         ax2.set_xlabel(branch.param)
-    else:
+    elif own or _bottom_row(ax):
         ax.set_xlabel(branch.param)
     if own:
         ax.set_title(title or f"P-{branch.period} branch of {branch.system} in {branch.param}")
