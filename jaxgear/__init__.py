@@ -56,6 +56,8 @@ from ._examples import (  # noqa: E402
     DuffingParams as DuffingParams,
     SPUR_PAIR as SPUR_PAIR,
     SpurPairParams as SpurPairParams,
+    PARAM_DUFFING as PARAM_DUFFING,
+    ParamDuffingParams as ParamDuffingParams,
 )
 
 from ._cells import CellGrid as CellGrid, PAPER_REGION as PAPER_REGION  # noqa: E402
@@ -86,6 +88,15 @@ from ._shooting import (  # noqa: E402
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
     OrbitCheck as OrbitCheck,
+)
+
+from ._params import with_param as with_param, get_param as get_param, param_names as param_names  # noqa: E402
+from ._continuation import (  # noqa: E402
+    continue_orbit as continue_orbit,
+    switch_branch as switch_branch,
+    Branch as Branch,
+    BifurcationPoint as BifurcationPoint,
+    load_branch as load_branch,
 )
 
 

@@ -5,7 +5,12 @@
 - :data:`SPUR_PAIR` — the classic single-DOF spur-gear pair with backlash and mesh
   stiffness variation (dimensionless, Kahraman & Singh type):
   ``x'' + 2 zeta x' + (1 + kappa sin(Omega t)) f(x, b) = f_m + e_amp Omega^2 sin(Omega t)``;
-  with ``b = 0``, ``f_m = e_amp = 0`` it is the damped Mathieu equation.
+  with ``b = 0``, ``f_m = e_amp = 0`` it is the damped Mathieu equation;
+- :data:`PARAM_DUFFING` — the parametrically excited Duffing oscillator
+  ``x'' + 2 zeta x' + (1 + epsilon cos(Omega t)) x + beta x^3 = 0`` (a Mathieu-type
+  system: ``x = 0`` is a P-1 orbit for every ``Omega``, unstable inside the tongues
+  around ``Omega = 2/n``, with a P-2 branch born by period doubling at the edges of
+  the first tongue).
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import jax.numpy as jnp
 from ._model import backlash
 from ._system import ForcedSystem
 
-__all__ = ["DuffingParams", "DUFFING", "SpurPairParams", "SPUR_PAIR"]
+__all__ = ["DuffingParams", "DUFFING", "SpurPairParams", "SPUR_PAIR", "ParamDuffingParams", "PARAM_DUFFING"]
 
 
 def _f64(x):
@@ -75,3 +80,38 @@ SPUR_PAIR = ForcedSystem(
     name="spur-pair",
 )
 """Single spur-gear pair with backlash, state ``(x, v)`` (dynamic transmission error)."""
+
+
+class ParamDuffingParams(eqx.Module):
+    """Parametrically excited Duffing parameters: damping ratio ``zeta``, stiffness
+    modulation depth ``epsilon``, cubic stiffness ``beta``, excitation frequency ``Omega``
+    (time scaled by the natural frequency; all float64 arrays)."""
+
+    zeta: Any = eqx.field(converter=_f64, default=0.005)
+    epsilon: Any = eqx.field(converter=_f64, default=0.1)
+    beta: Any = eqx.field(converter=_f64, default=1.0)
+    Omega: Any = eqx.field(converter=_f64, default=2.0)
+
+
+def _param_duffing_field(t, x, p: ParamDuffingParams):
+    k = 1.0 + p.epsilon * jnp.cos(p.Omega * t)
+    return jnp.stack([x[1], -2.0 * p.zeta * x[1] - k * x[0] - p.beta * x[0] ** 3])
+
+
+PARAM_DUFFING = ForcedSystem(
+    vector_field=_param_duffing_field,
+    period=lambda p: 2.0 * jnp.pi / p.Omega,
+    state_names=("x", "v"),
+    section_index=1,
+    name="param-duffing",
+)
+"""Parametrically excited Duffing oscillator ``x'' + 2 zeta x' + (1 + epsilon cos(Omega t)) x
++ beta x^3 = 0``, state ``(x, v)``, period ``2 pi / Omega``.
+
+Its linearisation at ``x = 0`` is the damped Mathieu equation. To first order in
+``epsilon`` (harmonic balance with ``x = a cos(Omega t/2) + b sin(Omega t/2)``) the
+trivial orbit loses stability by period doubling (a Floquet multiplier through -1) on
+the edges of the first tongue, ``(1 - Omega^2/4)^2 = (epsilon^2 - 4 zeta^2 Omega^2)/4``,
+i.e. ``Omega_pm ~ 2 sqrt(1 +- sqrt(epsilon^2 - 16 zeta^2)/2)``; the P-2 branch of
+amplitude ``A`` satisfies ``(1 - Omega^2/4 + 3 beta A^2/4)^2 + zeta^2 Omega^2 = epsilon^2/4``.
+"""

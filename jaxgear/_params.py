@@ -29,6 +29,10 @@ __all__ = [
     "get_preset",
     "resolve_params",
     "format_table",
+    "PARAM_ALIASES",
+    "param_names",
+    "with_param",
+    "get_param",
 ]
 
 # Canonical dimensionless names (MODEL.md §4), in the order they are written out.
@@ -593,3 +597,123 @@ def resolve_params(preset: str = "paper", overrides: Mapping[str, Any] | Sequenc
 # which is what users sweeping the paper's b̄ and Ω expect.
 _DIMLESS_PREFERRED = {"b_sp", "b_rp", "e_sp_amp", "e_rp_amp", "phi_sp", "phi_rp", "beta_sp",
                       "beta_rp", "gamma_sr"}
+
+
+# --------------------------------------------------------------------------- one parameter by name
+# Names that move several canonical fields together (sweeps, continuation, the CLI).
+PARAM_ALIASES = {
+    "b": ("b_sp", "b_rp"),
+    "kappa_amp": ("kappa_sp_amp", "kappa_rp_amp"),
+}
+
+
+def _is_numeric_leaf(v) -> bool:
+    if isinstance(v, bool):
+        return False
+    return eqx.is_array(v) or isinstance(v, (float, int, np.number))
+
+
+def _field_names(params) -> tuple[str, ...]:
+    """Names of the numeric fields of a parameter pytree (GearParams, eqx.Module, NamedTuple, dict)."""
+    if isinstance(params, GearParams):
+        return PARAM_NAMES[1:]
+    if isinstance(params, Mapping):
+        return tuple(k for k, v in params.items() if isinstance(k, str) and _is_numeric_leaf(v))
+    if hasattr(params, "_fields"):  # NamedTuple
+        return tuple(f for f in params._fields if _is_numeric_leaf(getattr(params, f)))
+    if dataclasses.is_dataclass(params):  # eqx.Module and frozen dataclasses
+        return tuple(f.name for f in dataclasses.fields(params)
+                     if not f.metadata.get("static", False) and _is_numeric_leaf(getattr(params, f.name)))
+    raise TypeError(f"parameters of type {type(params).__name__} are not a known pytree "
+                    "(use an eqx.Module, a NamedTuple or a dict of arrays).")
+
+
+def param_names(params) -> tuple[str, ...]:
+    """Names accepted by :func:`with_param` / :func:`get_param` for ``params``.
+
+    The numeric fields (for :class:`GearParams` the canonical names of MODEL.md §4 but
+    ``N``) plus the aliases of :data:`PARAM_ALIASES` whose fields all exist
+    (``"b"`` = ``b_sp`` and ``b_rp``, ``"kappa_amp"`` = ``kappa_sp_amp`` and
+    ``kappa_rp_amp``).
+    """
+    fields = _field_names(params)
+    aliases = tuple(a for a, targets in PARAM_ALIASES.items()
+                    if a not in fields and all(t in fields for t in targets))
+    return fields + aliases
+
+
+def _targets(params, name: str) -> tuple[str, ...]:
+    fields = _field_names(params)
+    if not isinstance(name, str):
+        raise ValueError(f"parameter name must be a string, got {name!r}.")
+    if name in fields:
+        return (name,)
+    if name in PARAM_ALIASES and all(t in fields for t in PARAM_ALIASES[name]):
+        return PARAM_ALIASES[name]
+    raise ValueError(f"unknown parameter {name!r} for {type(params).__name__}; valid names: "
+                     f"{', '.join(param_names(params))}.")
+
+
+def with_param(params, name: str, value):
+    """A copy of ``params`` with the parameter ``name`` set to ``value`` (traceable).
+
+    Works on any parameter pytree (:class:`GearParams`, an ``eqx.Module`` such as
+    :class:`~jaxgear.DuffingParams`, a NamedTuple or a dict). Per-planet fields of
+    :class:`GearParams` are set for all planets (a scalar is broadcast to the field's
+    shape); an alias of :data:`PARAM_ALIASES` sets all its fields. ``value`` may be a
+    JAX tracer (inside ``jit``/``vmap``/``jacfwd``: no recompilation per value); with
+    concrete values the result is validated again (e.g. ``b_sp >= 0``).
+
+    Raises:
+        ValueError: unknown name (the message lists the valid names), a value of the
+            wrong shape, or (concrete values) a value out of the parameter's range.
+    """
+    targets = _targets(params, name)
+    value = jnp.asarray(value, dtype=jnp.float64)
+    new_values = []
+    for t in targets:
+        old = params[t] if isinstance(params, Mapping) else getattr(params, t)
+        shape = jnp.shape(old)
+        try:
+            new_values.append(jnp.broadcast_to(value, shape) if value.ndim <= len(shape) else None)
+        except ValueError:
+            new_values.append(None)
+        if new_values[-1] is None:
+            raise ValueError(f"parameter {name}: a value of shape {value.shape} does not fit field {t} "
+                             f"of shape {shape} (give a scalar).")
+    if isinstance(params, Mapping):
+        out = dict(params)
+        out.update(zip(targets, new_values))
+        return out
+    if hasattr(params, "_replace"):
+        return params._replace(**dict(zip(targets, new_values)))
+    out = eqx.tree_at(lambda p: [getattr(p, t) for t in targets], params, new_values)
+    if _is_concrete(value):
+        check = getattr(type(out), "__check_init__", None)
+        if check is not None:
+            check(out)  # tree_at skips construction-time validation
+    return out
+
+
+def get_param(params, name: str) -> float:
+    """The value of parameter ``name`` in ``params`` as a float (concrete values).
+
+    Accepts the same names as :func:`with_param`. Per-planet fields must hold the same
+    value for every planet, and the fields of an alias must agree (else there is no
+    single value: name one field instead).
+
+    Raises:
+        ValueError: unknown name, or differing per-planet / aliased values.
+    """
+    targets = _targets(params, name)
+    vals = []
+    for t in targets:
+        a = np.asarray(params[t] if isinstance(params, Mapping) else getattr(params, t), dtype=float)
+        if a.size == 0 or not np.all(a == a.reshape(-1)[0]):
+            raise ValueError(f"parameter {t}={_fmt_value(a)} differs between planets: no single value "
+                             f"of {name!r}; set it with with_param first.")
+        vals.append(float(a.reshape(-1)[0]))
+    if any(v != vals[0] for v in vals):
+        raise ValueError(f"parameter {name!r} sets {', '.join(targets)}, which differ "
+                         f"({', '.join(f'{v:.6g}' for v in vals)}); name one of them.")
+    return vals[0]

@@ -12,3 +12,4 @@ from ._basins import (
     plot_shares as plot_shares,
 )
 from ._orbit import plot_orbit as plot_orbit
+from ._branch import plot_branch as plot_branch

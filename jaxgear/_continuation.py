@@ -1,0 +1,846 @@
+"""Continuation of a periodic orbit in one parameter, with Floquet multipliers and bifurcations.
+
+Issue 5, point 3; it extends the shooting of paper §4.1 along a parameter. A P-k orbit
+is a zero of
+
+    F(x, p) = P^k(x; p) - x,    F: R^dim x R -> R^dim,
+
+where ``P`` is the stroboscopic map (full state, MODEL.md §6) and ``p`` one scalar
+parameter (any field of the parameter pytree, see :func:`jaxgear._params.with_param`).
+The solutions form curves in ``(x, p)``; they are followed by **pseudo-arclength
+continuation** (Keller):
+
+- the tangent ``t`` (unit, ``dim + 1``) is the null vector of the augmented Jacobian
+  ``J = [D_x P^k - I, d_p P^k]``, which comes from ``jax.jacfwd`` through the
+  integrator with respect to ``x`` and ``p`` together;
+- predictor ``z + ds t``; corrector: Newton on the bordered system
+  ``F(z) = 0, t . (z - z_pred) = 0`` with Jacobian ``[J; t^T]``. Because the parameter
+  is an unknown, folds (where ``p`` turns around) are passed;
+- the step ``ds`` adapts: halved when the corrector fails (or the step turns the
+  tangent by more than ``max_angle`` or the corrector moves far from the predictor),
+  enlarged after fast convergence, kept in ``[ds_min, ds_max]``.
+
+Along the branch the Floquet multipliers are the eigenvalues of the monodromy
+``D_x P^k = J_x + I`` (already at hand) and sign changes of test functions between
+consecutive points reveal bifurcations:
+
+- period doubling ``PD``: ``det(D_x P^k + I)`` (a real multiplier through -1);
+- saddle-node / fold ``SN``: the parameter component ``t_p`` of the tangent (the
+  branch turns; ``det(D_x P^k - I)`` changes sign too);
+- branch point ``BP``: ``det(D_x P^k - I)`` changes sign while ``t_p`` does not
+  (a multiplier through +1 without a fold: pitchfork or transcritical);
+- Neimark-Sacker ``NS``: ``prod_{i<j} (lambda_i lambda_j - 1)`` (the bialternate
+  product; a complex pair through ``|lambda| = 1``); sign changes caused by a real
+  pair with ``lambda_i lambda_j = 1`` (a neutral saddle) are discarded.
+
+Each is located more precisely than the step by the Illinois (regula falsi) method on
+the test function along the segment, every trial point re-converged on the branch.
+At a period doubling :func:`switch_branch` starts the P-2k branch from the PD point
+displaced along the eigenvector of the multiplier -1.
+
+One compiled kernel (predictor + bordered Newton + tangent + multipliers + test
+functions, parameters as array leaves) serves every step of a branch; the loop over
+steps is Python (inherent: each step depends on the last) with a progress bar.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._integrate import RK4, Integrator
+from ._params import GearParams, format_table, get_param, with_param
+from ._shooting import SHOOT_CONVERGED, SHOOT_STATUS_NAMES, _check_period, _flow, _sorted_eigvals, periodic_orbit
+from ._system import ForcedSystem, check_state_shape, check_system
+
+__all__ = [
+    "Branch",
+    "BifurcationPoint",
+    "continue_orbit",
+    "switch_branch",
+    "load_branch",
+    "BIFURCATION_KINDS",
+    "BRANCH_STATUS",
+]
+
+BIFURCATION_KINDS = {
+    "PD": "period doubling (real multiplier through -1)",
+    "SN": "saddle-node / fold (real multiplier through +1, the parameter turns)",
+    "BP": "branch point (real multiplier through +1, no fold)",
+    "NS": "Neimark-Sacker (complex pair through |lambda| = 1)",
+}
+# Why a branch ended.
+BRANCH_STATUS = {
+    "stop": "reached the stop value of the parameter",
+    "bounds": "left the parameter bounds",
+    "max_steps": "took max_steps steps",
+    "diverged": "the orbit or the flow diverged (||x|| > max_norm or non-finite) at the smallest step",
+    "corrector_failed": "the corrector did not converge at the smallest step ds_min",
+}
+
+# Kernel status codes.
+_OK = 0
+_NOT_CONVERGED = 1
+_DIVERGED = 2
+_RUN = -1
+# Test-function columns.
+_T_PD, _T_TP, _T_DET, _T_NS = 0, 1, 2, 3
+
+
+# --------------------------------------------------------------------------- results
+@dataclasses.dataclass(frozen=True, eq=False)
+class BifurcationPoint:
+    """A bifurcation located on a branch.
+
+    Attributes:
+        kind: ``"PD"``, ``"SN"``, ``"BP"`` or ``"NS"`` (see :data:`BIFURCATION_KINDS`).
+        param_value: the parameter at the bifurcation (located to ``locate_tol`` in
+            arclength, typically 1e-10).
+        point: ``(dim,)`` the orbit's point at phase ``t0`` (fixed point of ``P^k``).
+        multipliers: ``(dim,)`` complex Floquet multipliers of ``P^k`` there, by
+            decreasing modulus.
+        index: the bifurcation lies between branch points ``index`` and ``index + 1``.
+        orbit: ``(k, dim)`` the orbit's ``k`` stroboscopic points there (``orbit[0] = point``).
+        test_value: the test function's value at the located point (about 0 for a
+            smooth crossing).
+        nonsmooth: True when the test function jumps across zero instead of crossing
+            it (the multiplier jumps over -1 / +1 / the unit circle at a kink of the
+            map, e.g. a contact starting or ending at a backlash boundary —
+            a discontinuity-induced bifurcation); ``param_value`` is then the jump's
+            location and ``multipliers`` those on one side of it.
+    """
+
+    kind: str
+    param_value: float
+    point: np.ndarray
+    multipliers: np.ndarray
+    index: int
+    orbit: np.ndarray | None = None
+    test_value: float = 0.0
+    nonsmooth: bool = False
+
+    def __repr__(self) -> str:
+        lam = ", ".join(_fmt_complex(z) for z in np.asarray(self.multipliers))
+        ns = ", nonsmooth" if self.nonsmooth else ""
+        return f"BifurcationPoint({self.kind} at {self.param_value:.10g}{ns}, multipliers [{lam}])"
+
+
+def _fmt_complex(z) -> str:
+    z = complex(z)
+    if abs(z.imag) <= 1e-12 * max(1.0, abs(z)):
+        return f"{z.real:.6g}"
+    return f"{z.real:.6g}{z.imag:+.6g}j"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Branch:
+    """A branch of P-k orbits followed in one parameter (:func:`continue_orbit`).
+
+    Attributes:
+        param: the parameter's name (as given, e.g. ``"Omega"`` or the alias ``"b"``).
+        values: ``(m,)`` parameter value at each point of the branch, in order of arclength.
+        points: ``(m, k, dim)`` the ``k`` stroboscopic points ``x*, P(x*), ..., P^{k-1}(x*)``
+            of each orbit (state at phases ``t0 + jT``).
+        multipliers: ``(m, dim)`` complex Floquet multipliers of ``P^k`` (by decreasing modulus).
+        stable: ``(m,)`` bool, all ``|multiplier| < 1``.
+        residuals: ``(m,)`` ``||P^k(x*) - x*||`` at each point.
+        tangents: ``(m, dim + 1)`` unit tangent ``(dx, dp)`` of the branch at each point.
+        arclength: ``(m,)`` cumulative arclength in ``(x, p)``.
+        status: why the branch ended (a key of :data:`BRANCH_STATUS`).
+        bifurcations: the located :class:`BifurcationPoint` s, in order along the branch.
+        period: ``k`` (forcing periods per return of the continued map).
+        system: the system's name; state_names: its coordinate names.
+        params: the parameter set at the start of the branch (dict of the pytree).
+        settings: step sizes, tolerances, integrator, ``t0``, origin (JSON-able).
+    """
+
+    param: str
+    values: np.ndarray
+    points: np.ndarray
+    multipliers: np.ndarray
+    stable: np.ndarray
+    residuals: np.ndarray
+    tangents: np.ndarray
+    arclength: np.ndarray
+    status: str
+    bifurcations: tuple[BifurcationPoint, ...]
+    period: int
+    system: str
+    state_names: tuple[str, ...]
+    params: dict
+    settings: dict
+    version: str = ""
+
+    # ----------------------------------------------------------------- views
+    def __len__(self) -> int:
+        return int(len(self.values))
+
+    @property
+    def max_multiplier(self) -> np.ndarray:
+        """``(m,)`` largest Floquet multiplier modulus at each point."""
+        return np.max(np.abs(self.multipliers), axis=-1)
+
+    def coordinate(self, name: str | int = 0) -> np.ndarray:
+        """``(m, k)`` one coordinate (name or index) of the stroboscopic points."""
+        return self.points[:, :, _coord_index(self.state_names, name)]
+
+    def amplitude(self) -> np.ndarray:
+        """``(m,)`` largest Euclidean norm of the stroboscopic points of each orbit."""
+        return np.max(np.linalg.norm(self.points, axis=-1), axis=-1)
+
+    def __repr__(self) -> str:
+        bifs = ", ".join(f"{b.kind}@{b.param_value:.6g}" for b in self.bifurcations) or "none"
+        rng = f"{self.values.min():.6g}..{self.values.max():.6g}" if len(self) else "empty"
+        return (f"Branch(P-{self.period} of {self.system}, {self.param} in {rng}, {len(self)} points, "
+                f"status={self.status}, bifurcations: {bifs})")
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able summary: range, counts, stability changes, bifurcations."""
+        return dict(
+            system=self.system, param=self.param, period=int(self.period), n_points=len(self),
+            param_start=float(self.values[0]) if len(self) else None,
+            param_end=float(self.values[-1]) if len(self) else None,
+            param_min=float(self.values.min()) if len(self) else None,
+            param_max=float(self.values.max()) if len(self) else None,
+            n_stable=int(np.sum(self.stable)), status=self.status, status_text=BRANCH_STATUS.get(self.status, ""),
+            max_residual=float(np.max(self.residuals)) if len(self) else None,
+            bifurcations=[dict(kind=b.kind, param_value=float(b.param_value), point=np.asarray(b.point).tolist(),
+                               multipliers=[[float(z.real), float(z.imag)] for z in np.asarray(b.multipliers)],
+                               index=int(b.index), nonsmooth=bool(b.nonsmooth)) for b in self.bifurcations],
+            settings=self.settings, params=self.params, version=self.version,
+        )
+
+    def table(self, max_rows: int = 30) -> str:
+        """Readable text: the branch (at most ``max_rows`` rows, evenly spread, plus the
+        rows around each bifurcation) and the list of bifurcations."""
+        m = len(self)
+        names = self.state_names
+        head = (f"P-{self.period} branch of {self.system} in {self.param}: {m} points, "
+                f"{self.param} {self.values.min():.6g} .. {self.values.max():.6g}, "
+                f"status: {self.status} ({BRANCH_STATUS.get(self.status, '')})") if m else "empty branch"
+        if m == 0:
+            return head
+        rows_idx = set(np.unique(np.linspace(0, m - 1, min(m, max(2, int(max_rows)))).round().astype(int)).tolist())
+        for b in self.bifurcations:
+            rows_idx.update({b.index, min(b.index + 1, m - 1)})
+        rows = []
+        marks = {}
+        for b in self.bifurcations:
+            marks.setdefault(b.index, []).append(b.kind)
+        for i in sorted(rows_idx):
+            rows.append([str(i), f"{self.values[i]:.8g}"] + [f"{v:.6g}" for v in self.points[i, 0]]
+                        + [f"{self.max_multiplier[i]:.6g}", "yes" if self.stable[i] else "no",
+                           f"{self.residuals[i]:.1e}", " ".join(f"{k}->" for k in marks.get(i, []))])
+        header = ["i", self.param] + list(names) + ["max|lambda|", "stable", "residual", "next"]
+        out = [head, format_table(rows, header)]
+        if self.bifurcations:
+            brows = [[b.kind + (" (nonsmooth)" if b.nonsmooth else ""), f"{b.param_value:.10g}"] + [f"{v:.6g}" for v in np.asarray(b.point)]
+                     + [", ".join(_fmt_complex(z) for z in np.asarray(b.multipliers))]
+                     for b in self.bifurcations]
+            out.append("bifurcations:")
+            out.append(format_table(brows, ["kind", self.param] + list(names) + ["multipliers"]))
+        else:
+            out.append("bifurcations: none detected")
+        return "\n".join(out)
+
+    # ----------------------------------------------------------------- I/O
+    def to_xarray(self):
+        """The branch as an ``xarray.Dataset`` (complex multipliers as real/imag parts)."""
+        import xarray as xr
+
+        from . import __version__
+
+        m, k, dim = self.points.shape
+        B = len(self.bifurcations)
+        coords = {"point": ("point", np.arange(m)), "iterate": ("iterate", np.arange(k)),
+                  "state": ("state", list(self.state_names)), "multiplier": ("multiplier", np.arange(dim)),
+                  "tangent_component": ("tangent_component", list(self.state_names) + [self.param]),
+                  "bifurcation": ("bifurcation", np.arange(B))}
+        data = {
+            "param_value": (("point",), self.values, {"long_name": f"continuation parameter {self.param}"}),
+            "points": (("point", "iterate", "state"), self.points,
+                       {"long_name": "stroboscopic points x*, P(x*), ..., P^{k-1}(x*)", "units": "state units"}),
+            "multipliers_real": (("point", "multiplier"), self.multipliers.real),
+            "multipliers_imag": (("point", "multiplier"), self.multipliers.imag),
+            "stable": (("point",), self.stable.astype(np.int8), {"long_name": "all |multiplier| < 1 (1/0)"}),
+            "residual": (("point",), self.residuals, {"long_name": "||P^k(x*) - x*||"}),
+            "tangent": (("point", "tangent_component"), self.tangents),
+            "arclength": (("point",), self.arclength),
+            "bif_kind": (("bifurcation",), np.array([b.kind for b in self.bifurcations], dtype=object)
+                         if B else np.zeros(0, dtype="S2")),
+            "bif_param": (("bifurcation",), np.array([b.param_value for b in self.bifurcations], dtype=float)),
+            "bif_point": (("bifurcation", "state"), np.array([b.point for b in self.bifurcations],
+                                                             dtype=float).reshape(B, dim)),
+            "bif_orbit": (("bifurcation", "iterate", "state"),
+                          np.array([_bif_orbit(b, k) for b in self.bifurcations], dtype=float).reshape(B, k, dim)),
+            "bif_multipliers_real": (("bifurcation", "multiplier"),
+                                     np.array([b.multipliers for b in self.bifurcations]).reshape(B, dim).real),
+            "bif_multipliers_imag": (("bifurcation", "multiplier"),
+                                     np.array([b.multipliers for b in self.bifurcations]).reshape(B, dim).imag),
+            "bif_index": (("bifurcation",), np.array([b.index for b in self.bifurcations], dtype=np.int64)),
+            "bif_test_value": (("bifurcation",), np.array([b.test_value for b in self.bifurcations], dtype=float)),
+            "bif_nonsmooth": (("bifurcation",), np.array([b.nonsmooth for b in self.bifurcations], dtype=np.int8)),
+        }
+        ds = xr.Dataset(data, coords=coords)
+        if self.param not in ds.variables and self.param not in ds.dims:
+            ds = ds.assign_coords({self.param: ("point", self.values)})
+        ds.attrs.update(
+            jaxgear_type="Branch", param=self.param, period=int(self.period), status=self.status,
+            system=self.system, state_names=json.dumps(list(self.state_names)), params=json.dumps(self.params),
+            settings=json.dumps(self.settings), version=self.version or __version__,
+            bifurcation_kinds=json.dumps([b.kind for b in self.bifurcations]),
+        )
+        return ds
+
+    def save(self, path: str | Path) -> Path:
+        """Write the branch to a netCDF file (h5netcdf, atomically); reload with :func:`load_branch`."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        self.to_xarray().to_netcdf(tmp, engine="h5netcdf")
+        tmp.replace(path)
+        return path
+
+
+def load_branch(path: str | Path) -> Branch:
+    """Load a :class:`Branch` saved with :meth:`Branch.save` (exact round trip)."""
+    import xarray as xr
+
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        ds = ds.load()
+    if ds.attrs.get("jaxgear_type") != "Branch":
+        raise ValueError(f"{path} does not hold a Branch (jaxgear_type={ds.attrs.get('jaxgear_type')!r}).")
+    kinds = json.loads(ds.attrs["bifurcation_kinds"])
+    dim = ds.sizes["state"]
+    bifs = []
+    for i, kind in enumerate(kinds):
+        bifs.append(BifurcationPoint(
+            kind=kind, param_value=float(ds["bif_param"].values[i]),
+            point=np.array(ds["bif_point"].values[i], dtype=float).reshape(dim),
+            multipliers=ds["bif_multipliers_real"].values[i] + 1j * ds["bif_multipliers_imag"].values[i],
+            index=int(ds["bif_index"].values[i]), orbit=np.array(ds["bif_orbit"].values[i], dtype=float),
+            test_value=float(ds["bif_test_value"].values[i]),
+            nonsmooth=bool(ds["bif_nonsmooth"].values[i])))
+    return Branch(
+        param=str(ds.attrs["param"]), values=np.asarray(ds["param_value"].values, dtype=float),
+        points=np.asarray(ds["points"].values, dtype=float),
+        multipliers=ds["multipliers_real"].values + 1j * ds["multipliers_imag"].values,
+        stable=np.asarray(ds["stable"].values).astype(bool), residuals=np.asarray(ds["residual"].values, dtype=float),
+        tangents=np.asarray(ds["tangent"].values, dtype=float), arclength=np.asarray(ds["arclength"].values, dtype=float),
+        status=str(ds.attrs["status"]), bifurcations=tuple(bifs), period=int(ds.attrs["period"]),
+        system=str(ds.attrs["system"]), state_names=tuple(json.loads(ds.attrs["state_names"])),
+        params=json.loads(ds.attrs["params"]), settings=json.loads(ds.attrs["settings"]),
+        version=str(ds.attrs["version"]),
+    )
+
+
+def _bif_orbit(b: BifurcationPoint, k: int) -> np.ndarray:
+    if b.orbit is not None:
+        return np.asarray(b.orbit, dtype=float)
+    return np.broadcast_to(np.asarray(b.point, dtype=float), (k, len(b.point)))
+
+
+def _coord_index(state_names, name) -> int:
+    if isinstance(name, (int, np.integer)):
+        if not 0 <= int(name) < len(state_names):
+            raise ValueError(f"coordinate index {name} outside 0..{len(state_names) - 1}.")
+        return int(name)
+    if name not in state_names:
+        raise ValueError(f"unknown coordinate {name!r}; the state is ({', '.join(state_names)}).")
+    return state_names.index(name)
+
+
+# --------------------------------------------------------------------------- kernel
+class _Step(NamedTuple):
+    z: jax.Array  # (dim + 1,) corrected (x, p)
+    status: jax.Array  # _OK / _NOT_CONVERGED / _DIVERGED
+    iterations: jax.Array
+    residual: jax.Array  # ||F|| at z
+    jac: jax.Array  # (dim, dim + 1) [D_x P^k - I, d_p P^k]
+    tangent: jax.Array  # (dim + 1,) unit, oriented with tref
+    multipliers: jax.Array  # (dim,) complex, by decreasing modulus
+    pts: jax.Array  # (k, dim)
+    tests: jax.Array  # (4,) PD, t_p, det(D_x F), NS
+
+
+def _map_and_jac(system, params, name, k, t0, integrator, z):
+    """``F(z) = P^k(x; p) - x``, its Jacobian ``(dim, dim + 1)`` and the ``k`` points."""
+
+    def G(zz):
+        x, p = zz[:-1], zz[-1]
+        prm = with_param(params, name, p)
+        T = system.period(prm)
+
+        def one(y, j):
+            return _flow(system, prm, y, t0 + j * T, 1, integrator), y
+
+        xk, pts = jax.lax.scan(one, x, jnp.arange(k))
+        r = xk - x
+        return r, (r, pts)
+
+    J, (F, pts) = jax.jacfwd(G, has_aux=True)(z)
+    return F, J, pts
+
+
+def _ns_test(lam):
+    """``Re prod_{i<j} (lambda_i lambda_j - 1)`` (zero when a pair has product 1)."""
+    n = lam.shape[0]
+    if n < 2:
+        return jnp.asarray(1.0)
+    i, j = np.triu_indices(n, 1)
+    return jnp.real(jnp.prod(lam[i] * lam[j] - 1.0))
+
+
+_TRACES = {"correct": 0}  # times the kernel was traced (compiled); read by the tests
+
+
+@eqx.filter_jit
+def _correct(system, params, name, k, integrator, t0, z_guess, anchor, w, tref, tol, max_iter, max_norm):
+    """Bordered Newton ``F(z) = 0, w . (z - anchor) = 0`` from ``z_guess``, then the
+    tangent, multipliers and test functions at the result (one compiled kernel)."""
+    _TRACES["correct"] += 1
+    n = z_guess.shape[0] - 1
+    eye = jnp.eye(n)
+    evaluate = lambda z: _map_and_jac(system, params, name, k, t0, integrator, z)
+
+    def cond(c):
+        return c[2] == _RUN
+
+    def body(c):
+        it, z, _, _, _, _, r0 = c
+        F, J, pts = evaluate(z)
+        cval = w @ (z - anchor)
+        rF = jnp.linalg.norm(F)
+        r = jnp.sqrt(rF**2 + cval**2)
+        finite = jnp.isfinite(r) & jnp.all(jnp.isfinite(J))
+        B = jnp.concatenate([J, w[None]], axis=0)
+        B = jnp.where(finite, B, jnp.eye(n + 1))
+        dz = jnp.linalg.solve(B, -jnp.where(finite, jnp.concatenate([F, cval[None]]), 0.0))
+        r0 = jnp.where(it == 0, r, r0)
+        conv = (rF <= tol) & (jnp.abs(cval) <= tol * (1.0 + jnp.linalg.norm(anchor)))
+        div = ~finite | (jnp.linalg.norm(z[:-1]) > max_norm)
+        fail = (it >= max_iter) | ((it >= 2) & (r > 1e2 * r0)) | ~jnp.all(jnp.isfinite(dz))
+        st = jnp.where(conv, _OK, jnp.where(div, _DIVERGED, jnp.where(fail, _NOT_CONVERGED, _RUN)))
+        z_new = jnp.where(st == _RUN, z + dz, z)
+        return it + (st == _RUN).astype(it.dtype), z_new, st, rF, J, pts, r0
+
+    dim = n
+    init = (jnp.asarray(0), z_guess, jnp.asarray(_RUN), jnp.asarray(jnp.inf), jnp.zeros((dim, dim + 1)),
+            jnp.zeros((k, dim)), jnp.asarray(jnp.inf))
+    it, z, st, rF, J, pts, _ = jax.lax.while_loop(cond, body, init)
+    ok = st == _OK
+    Js = jnp.where(ok, J, 0.0)
+    _, _, Vh = jnp.linalg.svd(Js, full_matrices=True)
+    t = Vh[-1]
+    sgn = jnp.sign(t @ tref)
+    t = t * jnp.where(sgn == 0, 1.0, sgn)
+    M = Js[:, :n] + eye
+    lam = _sorted_eigvals(M)
+    tests = jnp.stack([jnp.linalg.det(M + eye), t[-1], jnp.linalg.det(Js[:, :n]), _ns_test(lam)])
+    nan = jnp.nan
+    return _Step(z=z, status=st, iterations=it, residual=rF, jac=J, tangent=jnp.where(ok, t, nan),
+                 multipliers=jnp.where(ok, lam, nan), pts=pts, tests=jnp.where(ok, tests, nan))
+
+
+class _Ctx(NamedTuple):
+    """Everything fixed along one branch (the kernel's static configuration and tolerances)."""
+
+    system: ForcedSystem
+    params: Any
+    name: str
+    k: int
+    integrator: Integrator
+    t0: float
+    tol: float
+    max_iter: int
+    max_norm: float
+
+    def correct(self, z_guess, anchor, w, tref) -> _Step:
+        f64 = lambda a: jnp.asarray(a, jnp.float64)
+        out = _correct(self.system, self.params, self.name, self.k, self.integrator, f64(self.t0), f64(z_guess),
+                       f64(anchor), f64(w), f64(tref), self.tol, self.max_iter, self.max_norm)
+        return _Step(*[np.asarray(a) for a in jax.device_get(out)])
+
+
+def _e_p(n):
+    e = np.zeros(n + 1)
+    e[-1] = 1.0
+    return e
+
+
+# --------------------------------------------------------------------------- location
+def _locate(ctx: _Ctx, a: _Step, b: _Step, col: int, locate_tol: float, max_iter: int = 80):
+    """Zero of test function ``col`` between branch points ``a`` and ``b`` (Illinois).
+
+    Trial points are ``z_a + s t_a`` corrected on the hyperplane ``t_a . (z - z_a - s t_a) = 0``
+    (the same parametrisation as the predictor, so it passes folds); ``s`` in
+    ``[0, t_a . (z_b - z_a)]``. Returns ``(step, nonsmooth)`` (``step`` None when no
+    trial point converged); ``nonsmooth`` is True when the bracket shrank below
+    ``locate_tol`` while the test function stayed away from zero on both sides: it
+    jumps across zero (a discontinuity-induced bifurcation, e.g. grazing of a
+    backlash boundary) rather than crossing it smoothly.
+    """
+    za, ta = a.z, a.tangent
+    s_lo, s_hi = 0.0, float(ta @ (b.z - za))
+    f_lo, f_hi = float(a.tests[col]), float(b.tests[col])
+    if not (s_hi > 0) or not (f_lo * f_hi < 0):
+        return None, False
+    scale = max(abs(f_lo), abs(f_hi))
+    true_lo, true_hi = f_lo, f_hi  # actual values at the bracket ends (Illinois halves f_lo / f_hi)
+    best = None
+    side = 0
+    s_prev = None
+    for _ in range(max_iter):
+        s = (s_lo * f_hi - s_hi * f_lo) / (f_hi - f_lo)
+        if not (s_lo < s < s_hi):
+            s = 0.5 * (s_lo + s_hi)
+        zg = za + s * ta
+        out = ctx.correct(zg, zg, ta, ta)
+        if out.status != _OK:
+            s = 0.5 * (s_lo + s_hi)  # retry at the midpoint once
+            zg = za + s * ta
+            out = ctx.correct(zg, zg, ta, ta)
+            if out.status != _OK:
+                return best, False
+        f = float(out.tests[col])
+        if best is None or abs(f) <= abs(float(best.tests[col])):
+            best = out
+        if f == 0.0:
+            return best, False
+        if f * f_lo > 0:
+            s_lo, f_lo, true_lo = s, f, f
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+        else:
+            s_hi, f_hi, true_hi = s, f, f
+            if side == +1:
+                f_lo *= 0.5
+            side = +1
+        if (s_hi - s_lo) <= locate_tol:
+            break
+        if s_prev is not None and abs(s - s_prev) <= 0.1 * locate_tol and abs(f) <= 1e-6 * scale:
+            break
+        s_prev = s
+    nonsmooth = min(abs(true_lo), abs(true_hi)) > 1e-3 * scale
+    return best, nonsmooth
+
+
+def _detect(ctx: _Ctx, a: _Step, b: _Step, index: int, locate_tol: float) -> list[BifurcationPoint]:
+    """Bifurcations between consecutive branch points ``a``, ``b`` (sign changes of test functions)."""
+    found = []
+    ta, tb = a.tests, b.tests
+    changes = lambda c: bool(np.isfinite(ta[c]) and np.isfinite(tb[c]) and ta[c] * tb[c] < 0)
+    fold = changes(_T_TP)
+    candidates = []
+    if changes(_T_PD):
+        candidates.append(("PD", _T_PD))
+    if fold:
+        candidates.append(("SN", _T_TP))
+    elif changes(_T_DET):
+        candidates.append(("BP", _T_DET))
+    if changes(_T_NS):
+        candidates.append(("NS", _T_NS))
+    for kind, col in candidates:
+        p, nonsmooth = _locate(ctx, a, b, col, locate_tol)
+        if p is None:  # location failed: report the linear interpolation of the bracket
+            w = ta[col] / (ta[col] - tb[col])
+            z = a.z + w * (b.z - a.z)
+            near = a if abs(w) < 0.5 else b
+            lam, orbit = near.multipliers, a.pts + w * (b.pts - a.pts)
+            point, val, tv = z[:-1], z[-1], float("nan")
+        else:
+            lam, point, val, tv, orbit = p.multipliers, p.z[:-1], p.z[-1], float(p.tests[col]), p.pts
+        if kind == "NS":
+            # a complex pair on the unit circle, not a real pair with product 1 (neutral saddle)
+            near = np.abs(np.abs(lam) - 1.0) < 1e-3
+            cplx = np.abs(np.imag(lam)) > 1e-6 * np.maximum(1.0, np.abs(lam))
+            if not np.any(near & cplx):
+                continue
+        found.append(BifurcationPoint(kind=kind, param_value=float(val), point=np.array(point, dtype=float),
+                                      multipliers=np.array(lam, dtype=complex), index=int(index),
+                                      orbit=np.array(orbit, dtype=float), test_value=tv,
+                                      nonsmooth=bool(nonsmooth)))
+    return found
+
+
+# --------------------------------------------------------------------------- driver
+def _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max, tol, bounds):
+    k = _check_period(period)
+    p0 = get_param(params, param)  # ValueError for an unknown name
+    if stop is not None and not math.isfinite(float(stop)):
+        raise ValueError(f"stop={stop} must be a finite value of {param}.")
+    if not (ds > 0 and math.isfinite(ds)):
+        raise ValueError(f"ds={ds} must be a positive step (arclength in (x, {param})).")
+    if isinstance(max_steps, bool) or int(max_steps) < 1:
+        raise ValueError(f"max_steps={max_steps} must be an integer >= 1.")
+    ds_min = ds * 1e-4 if ds_min is None else float(ds_min)
+    ds_max = ds * 10.0 if ds_max is None else float(ds_max)
+    if not (0 < ds_min <= ds <= ds_max):
+        raise ValueError(f"need 0 < ds_min <= ds <= ds_max, got ds_min={ds_min}, ds={ds}, ds_max={ds_max}.")
+    if not (tol > 0):
+        raise ValueError(f"tol={tol} must be > 0.")
+    if bounds is not None:
+        lo, hi = (float(v) for v in bounds)
+        if not lo < hi:
+            raise ValueError(f"bounds={bounds} must be (low, high) with low < high.")
+        bounds = (lo, hi)
+    return k, p0, ds_min, ds_max, bounds
+
+
+def _params_dict(params) -> dict:
+    from ._cellmap import _pytree_dict
+
+    return params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
+
+
+def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds, max_angle, detect,
+         locate_tol, progress, desc, param, settings, params_start):
+    """The continuation loop from the converged point ``first`` (tangent oriented already)."""
+    from . import __version__
+    from ._cellmap import _progress
+
+    n = first.z.shape[0] - 1
+    steps = [first]
+    bifs: list[BifurcationPoint] = []
+    status = "max_steps"
+    cur = first
+    cos_max = math.cos(max_angle)
+    bar = _progress(int(max_steps), desc, progress, unit="step")
+    try:
+        while len(steps) <= max_steps:
+            z, t = cur.z, cur.tangent
+            zp = z + ds * t
+            out = ctx.correct(zp, zp, t, t)
+            ok = out.status == _OK
+            if ok:
+                turn = float(out.tangent @ t)
+                far = float(np.linalg.norm(out.z - zp))
+                ok = turn >= cos_max and far <= ds
+            if not ok:
+                if ds <= ds_min * (1 + 1e-12):
+                    status = "diverged" if out.status == _DIVERGED else "corrector_failed"
+                    break
+                ds = max(0.5 * ds, ds_min)
+                continue
+            final = False
+            p_old, p_new = float(z[-1]), float(out.z[-1])
+            target = None
+            if stop is not None and (p_old - stop) * (p_new - stop) <= 0 and p_new != p_old and p_old != stop:
+                target, reason = float(stop), "stop"
+            elif bounds is not None and not (bounds[0] <= p_new <= bounds[1]):
+                target, reason = (bounds[0] if p_new < bounds[0] else bounds[1]), "bounds"
+            if target is not None:
+                frac = (target - p_old) / (p_new - p_old)
+                zg = z + frac * (out.z - z)
+                zg[-1] = target
+                fin = ctx.correct(zg, zg, _e_p(n), t)
+                if fin.status == _OK:
+                    out = fin
+                status, final = reason, True
+            if detect:
+                bifs.extend(_detect(ctx, cur, out, len(steps) - 1, locate_tol))
+            steps.append(out)
+            cur = out
+            bar.update(1)
+            bar.set_postfix_str(f"{param}={float(out.z[-1]):.6g} ds={ds:.2g}", refresh=False)
+            if final:
+                break
+            if out.iterations <= 2:
+                ds = min(1.5 * ds, ds_max)
+            elif out.iterations >= 5:
+                ds = max(0.7 * ds, ds_min)
+    finally:
+        bar.close()
+    Z = np.array([s.z for s in steps])
+    m = len(steps)
+    pts = np.array([s.pts for s in steps])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(Z, axis=0), axis=1))])
+    lam = np.array([s.multipliers for s in steps])
+    return Branch(
+        param=param, values=Z[:, -1].copy(), points=pts.reshape(m, ctx.k, n), multipliers=lam,
+        stable=np.all(np.abs(lam) < 1.0, axis=1), residuals=np.array([float(s.residual) for s in steps]),
+        tangents=np.array([s.tangent for s in steps]), arclength=arc, status=status, bifurcations=tuple(bifs),
+        period=ctx.k, system=ctx.system.name, state_names=tuple(ctx.system.state_names),
+        params=params_start, settings=settings, version=__version__,
+    )
+
+
+def _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, **extra):
+    integ = ctx.integrator
+    desc = (f"RK4(steps_per_period={integ.steps_per_period})" if isinstance(integ, RK4) else repr(integ))
+    return dict(ds=float(ds), ds_min=float(ds_min), ds_max=float(ds_max), max_steps=int(max_steps),
+                stop=None if stop is None else float(stop), bounds=None if bounds is None else list(bounds),
+                max_angle=float(max_angle), tol=float(ctx.tol), max_iter=int(ctx.max_iter),
+                max_norm=float(ctx.max_norm), locate_tol=float(locate_tol), t0=float(ctx.t0), integrator=desc,
+                **extra)
+
+
+def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float, period: int = 1,
+                   ds: float = 0.01, max_steps: int = 500, integrator: Integrator = RK4(), progress: bool = True,
+                   t0: float = 0.0, ds_min: float | None = None, ds_max: float | None = None,
+                   tol: float = 1e-10, max_iter: int = 10, max_norm: float = 1e6,
+                   bounds: tuple[float, float] | None = None, max_angle: float = 0.5, detect: bool = True,
+                   locate_tol: float = 1e-10) -> Branch:
+    """Follow a P-k orbit in the parameter ``param`` by pseudo-arclength continuation.
+
+    Starts by converging the orbit at the parameter's current value in ``params`` with
+    :func:`~jaxgear.periodic_orbit` (damped Newton from ``x0``), then follows the curve
+    of fixed points of ``P^k`` in ``(x, p)`` until the parameter reaches ``stop`` (the
+    last point is placed at ``stop`` exactly), leaves ``bounds``, ``max_steps`` steps are
+    taken, or the corrector fails at the smallest step (see :data:`BRANCH_STATUS`).
+    Folds are passed (the parameter may turn around on the way to ``stop``). Floquet
+    multipliers are computed at every point and period doublings, saddle-nodes, branch
+    points and Neimark-Sacker points are detected and located (see the module docs).
+
+    Args:
+        system: any :class:`~jaxgear.ForcedSystem`.
+        params: its parameter pytree (``GearParams``, ``DuffingParams``, ...).
+        x0: ``(dim,)`` a point near the orbit at the starting parameter (phase ``t0``).
+        param: the parameter to vary: a field name (for ``GearParams`` a canonical name
+            of MODEL.md §4, e.g. ``"Omega"``, ``"b_sp"``), or ``"b"`` (``b_sp`` and
+            ``b_rp`` together) / ``"kappa_amp"`` (both stiffness amplitudes).
+            Per-planet fields are set for all planets.
+        stop: the parameter value at which to end; the initial direction is towards it.
+        period: ``k``, the orbit is a fixed point of ``P^k`` (forcing periods).
+        ds: initial arclength step in ``(x, p)`` (state units and parameter units mixed:
+            choose it for the faster-changing of the two).
+        max_steps: the most continuation steps (the branch has at most ``max_steps + 1`` points).
+        integrator: :class:`~jaxgear.RK4` (default) or :class:`~jaxgear.Adaptive`.
+        progress: show a progress bar.
+        t0: phase of the stroboscopic section.
+        ds_min, ds_max: step bounds (default ``ds / 1e4`` and ``10 ds``).
+        tol: corrector tolerance on ``||P^k(x) - x||``.
+        max_iter: corrector Newton iterations per step (a step needing more is retried
+            with half the step).
+        max_norm: a point with ``||x|| > max_norm`` counts as diverged.
+        bounds: optional ``(low, high)`` for the parameter; the branch ends on leaving it.
+        max_angle: largest turn of the tangent per step (rad); a step turning more is
+            retried with half the step (keeps the branch from jumping).
+        detect: detect and locate bifurcations.
+        locate_tol: arclength tolerance of the bifurcation location.
+    Returns:
+        :class:`Branch`.
+    Raises:
+        ValueError: bad arguments (unknown parameter, ``stop`` equal to the start,
+            wrong state shape, ...) or Newton did not converge from ``x0``.
+    """
+    k, p0, ds_min, ds_max, bounds = _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max,
+                                              tol, bounds)
+    if float(stop) == p0:
+        raise ValueError(f"stop={stop} equals the starting value of {param}: nothing to continue.")
+    x0 = np.asarray(x0, dtype=float)
+    check_state_shape(system, x0)
+    if x0.shape != (system.dim,):
+        raise ValueError(f"x0 must be one state of shape ({system.dim},), got {x0.shape}.")
+    check_system(system, params, x0)
+    res = periodic_orbit(system, params, x0, period=k, t0=t0, integrator=integrator, tol=tol,
+                         max_norm=max_norm)
+    if int(res.status) != SHOOT_CONVERGED:
+        raise ValueError(f"Newton from x0={x0.tolist()} did not converge to a P-{k} orbit at {param}={p0:.6g} "
+                         f"({SHOOT_STATUS_NAMES[int(res.status)]}, residual {float(res.residual):.2e}); "
+                         "give a point nearer the orbit.")
+    if int(res.min_period) < k:
+        warnings.warn(f"the orbit found from x0 has minimal period {int(res.min_period)} < {k}: continuing it as a "
+                      f"fixed point of P^{k} (its period doublings show up as branch points).", stacklevel=2)
+    ctx = _Ctx(system, params, param, k, integrator, float(t0), float(tol), int(max_iter), float(max_norm))
+    n = system.dim
+    z0 = np.concatenate([np.asarray(res.point, dtype=float), [p0]])
+    direction = np.sign(float(stop) - p0) * _e_p(n)
+    first = ctx.correct(z0, z0, _e_p(n), direction)
+    if first.status != _OK:
+        raise ValueError(f"the orbit found from x0 at {param}={p0:.6g} could not be refined by the corrector "
+                         f"(status {int(first.status)}); try a smaller tol or another integrator.")
+    settings = _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, origin="start")
+    return _run(ctx, first, stop=float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=int(max_steps),
+                bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol, progress=progress,
+                desc=f"P-{k} continuation in {param}", param=param, settings=settings,
+                params_start=_params_dict(with_param(params, param, p0)))
+
+
+def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: BifurcationPoint | int, *,
+                  stop: float | None = None, amplitude: float | None = None, ds: float | None = None,
+                  max_steps: int = 500, integrator: Integrator = RK4(), progress: bool = True,
+                  ds_min: float | None = None, ds_max: float | None = None, tol: float = 1e-10,
+                  max_iter: int = 10, max_norm: float = 1e6, bounds: tuple[float, float] | None = None,
+                  max_angle: float = 0.5, detect: bool = True, locate_tol: float = 1e-10) -> Branch:
+    """Follow the period-doubled branch born at a period-doubling point of ``branch``.
+
+    At a PD point of a P-k branch the P-2k orbits bifurcate in the direction of the
+    eigenvector ``v`` of the multiplier -1 (for ``P^{2k}`` the PD is a pitchfork whose
+    new branch is tangent to ``(v, 0)`` in ``(x, p)``). The first point is found by the
+    bordered Newton from ``x_PD + amplitude v`` on the hyperplane
+    ``v . (x - x_PD) = amplitude`` (the parameter free), then the P-2k branch is
+    continued away from the P-k orbit as in :func:`continue_orbit` (with ``period = 2k``).
+    The PD point itself is not part of the returned branch; ``settings["origin"]``
+    records it.
+
+    Args:
+        system, params: as given to :func:`continue_orbit` for ``branch`` (``params`` is
+            the base set; the parameter is set to the PD value).
+        branch: the P-k :class:`Branch`.
+        bifurcation: one of ``branch.bifurcations`` (kind ``"PD"``) or its index there.
+        stop: end of the new branch in the parameter (optional: without it the branch
+            runs until ``bounds`` or ``max_steps``; the doubled branch may go either way).
+        amplitude: size of the initial displacement along ``v`` (default ``ds``).
+        ds: arclength step (default ``branch.settings["ds"]``).
+        integrator: use the one of ``branch``.
+        Other arguments as in :func:`continue_orbit`.
+    Returns:
+        the P-2k :class:`Branch`.
+    """
+    if isinstance(bifurcation, (int, np.integer)):
+        if not 0 <= int(bifurcation) < len(branch.bifurcations):
+            raise ValueError(f"bifurcation index {bifurcation} outside 0..{len(branch.bifurcations) - 1}.")
+        bifurcation = branch.bifurcations[int(bifurcation)]
+    if bifurcation.kind != "PD":
+        raise ValueError(f"switch_branch starts the doubled branch at a period doubling (kind 'PD'), "
+                         f"got kind {bifurcation.kind!r}.")
+    ds = float(branch.settings.get("ds", 0.01)) if ds is None else float(ds)
+    param = branch.param
+    k2, p_pd, ds_min, ds_max, bounds = _validate(system, params, param, stop, 2 * branch.period, ds, max_steps,
+                                                 ds_min, ds_max, tol, bounds)
+    h = ds if amplitude is None else float(amplitude)
+    if not (h > 0):
+        raise ValueError(f"amplitude={amplitude} must be > 0.")
+    t0 = float(branch.settings.get("t0", 0.0))
+    p_pd = float(bifurcation.param_value)
+    n = system.dim
+    x_pd = np.asarray(bifurcation.point, dtype=float)
+    # eigenvector of the multiplier -1 of P^k at the PD point (re-converged there)
+    ctx_k = _Ctx(system, params, param, branch.period, integrator, t0, float(tol), int(max_iter), float(max_norm))
+    z_pd = np.concatenate([x_pd, [p_pd]])
+    at = ctx_k.correct(z_pd, z_pd, _e_p(n), _e_p(n))
+    if at.status != _OK:
+        raise ValueError(f"the P-{branch.period} orbit could not be re-converged at the PD point {param}={p_pd:.8g}.")
+    M = at.jac[:, :n] + np.eye(n)
+    lam, V = np.linalg.eig(M)
+    i = int(np.argmin(np.abs(lam + 1.0)))
+    v = np.real(V[:, i])
+    v /= np.linalg.norm(v)
+    if v[np.argmax(np.abs(v))] < 0:
+        v = -v
+    ctx = _Ctx(system, params, param, k2, integrator, t0, float(tol), int(max_iter), float(max_norm))
+    w = np.concatenate([v, [0.0]])
+    z_guess = at.z + h * w
+    first = ctx.correct(z_guess, z_guess, w, w)
+    if first.status != _OK:
+        raise ValueError(f"no P-{k2} orbit found at distance {h:g} from the PD point along its eigenvector "
+                         f"(corrector status {int(first.status)}); try a smaller amplitude.")
+    if np.linalg.norm(first.pts[branch.period] - first.pts[0]) <= 1e-3 * h:
+        raise ValueError("the corrector went back to the P-k orbit; try another amplitude.")
+    settings = _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol,
+                         origin=f"PD of the P-{branch.period} branch at {param}={p_pd!r}", amplitude=h)
+    return _run(ctx, first, stop=None if stop is None else float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max,
+                max_steps=int(max_steps), bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol,
+                progress=progress, desc=f"P-{k2} continuation in {param}", param=param, settings=settings,
+                params_start=_params_dict(with_param(params, param, float(first.z[-1]))))
