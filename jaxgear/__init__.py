@@ -86,7 +86,10 @@ from ._shooting import (  # noqa: E402
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
     OrbitCheck as OrbitCheck,
+    load_orbits as load_orbits,
 )
+
+from ._io import load as load  # noqa: E402
 
 
 def __getattr__(name):
