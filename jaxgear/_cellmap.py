@@ -136,6 +136,10 @@ def cell_images(system: ForcedSystem, params, grid: CellGrid, *, method: str = "
 def analyze_cell_map(images: np.ndarray, n_cells: int | None = None) -> dict[str, np.ndarray]:
     """Periodic groups and domains of a simple cell map, vectorised (pointer doubling).
 
+    Hsu's analysis of a simple cell map (paper §3; Hsu 1980): every cell's sequence ends
+    in a periodic group (a cycle of cells) or in the sink; the cells ending in a group
+    form its domain of attraction. Cells are integer indices (no units).
+
     Args:
         images: ``(n,)`` image of each regular cell; the value ``n`` is the sink, which
             maps to itself.
@@ -171,11 +175,12 @@ def analyze_cell_map(images: np.ndarray, n_cells: int | None = None) -> dict[str
 
 # --------------------------------------------------------------- period detection
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
-    """Minimal period of each stroboscopic sequence ``orbit (..., K, dim)``.
+    """Minimal period of each stroboscopic sequence ``orbit (..., K, dim)`` (the P-k of paper §4).
 
     The smallest ``k <= max_period`` with ``|x_j - x_(j-k)| <= tol (1 + |x_j|)`` for the
     last ``k + 1`` points ``j`` (so a whole cycle and one more step repeat); ``0`` if
     none, ``-1`` if the sequence is not finite. Needs ``K >= 2 max_period + 1``.
+    ``tol`` is relative (dimensionless); returns an int array of shape ``(...)``.
     """
     orbit = np.asarray(orbit)
     K = orbit.shape[-2]
@@ -664,9 +669,14 @@ def compare_with_direct(result: GlobalResult, system: ForcedSystem | None = None
     """Agreement report (``jaxgear analyze --compare``): run ``direct`` on a random sample
     of cells and compare with the labels of ``result``.
 
-    Direct attractors are matched to the result's attractors by period and distance of
-    their stroboscopic points. Returns ``{"n_samples", "agreement" (overall fraction),
-    "per_attractor": {id: {"cells", "agree", "fraction"}}, "direct_only": [...] }``.
+    Checks a cell-mapping result (paper §3-§4) against direct integration of the same
+    cell centres, the paper's verification by direct integration applied to domains.
+    ``n_samples`` cells are drawn without replacement (``seed``); ``system`` and
+    ``params`` default to the reduced gear model with ``result.params``. Direct
+    attractors are matched to the result's attractors by period and distance of their
+    stroboscopic points (within ``1e-2 (1 + |x|)``, state units). Returns
+    ``{"n_samples", "agreement" (overall fraction in [0, 1]), "per_attractor": {id:
+    {"cells", "agree", "fraction"}}, "direct_only": [{"period", "point" (dim,), "cells"}]}``.
     """
     from ._model import REDUCED
 

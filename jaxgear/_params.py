@@ -531,7 +531,11 @@ PRESETS = {"paper": paper_gear_set}
 
 
 def get_preset(name: str) -> GearSet:
-    """The named physical preset (see ``PRESETS``)."""
+    """The named physical preset (see ``PRESETS``) as a :class:`GearSet` in physical units.
+
+    ``"paper"`` is the gear set of paper §4.1 completed by MODEL.md §6-§7 (see
+    :func:`paper_gear_set`). Raises ``ValueError`` naming the available presets.
+    """
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; available: {', '.join(sorted(PRESETS))}")
     return PRESETS[name]()

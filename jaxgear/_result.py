@@ -29,7 +29,10 @@ UNRESOLVED = -2
 
 @dataclasses.dataclass(frozen=True)
 class Attractor:
-    """One attractor found by the global analysis.
+    """One attractor found by the global analysis (paper §4.2: a P-k motion and its domain).
+
+    Points are in state units (dimensionless ``b_c``, ``b_c omega_n`` for the gear
+    models, MODEL.md §3) at forcing phase 0.
 
     Attributes:
         id: its label in :attr:`GlobalResult.labels`.
@@ -201,7 +204,11 @@ class GlobalResult:
 
 
 def load_result(path: str | Path) -> GlobalResult:
-    """Load a :class:`GlobalResult` saved with :meth:`GlobalResult.save` (exact round trip).
+    """Load a :class:`GlobalResult` saved with :meth:`GlobalResult.save` (exact round trip:
+    labels and points bit-for-bit, grid, settings and parameters equal).
+
+    Raises ``FileNotFoundError`` without a file, ``ValueError`` when the file holds
+    another result type (use :func:`jaxgear.load` for any type).
 
     Also reads files written before ``attrs["jaxgear_type"]`` existed.
     """

@@ -237,7 +237,10 @@ def _damped_newton(evaluate, flow_k, x0, k, tol, max_iter, max_norm, max_backtra
 
 # --------------------------------------------------------------------------- results
 class ShootResult(NamedTuple):
-    """Per-seed result of :func:`periodic_orbit` (leading shape ``...`` = the seeds').
+    """Per-seed result of :func:`periodic_orbit` (leading shape ``...`` = the seeds'), paper §4.1.
+
+    States are in state units at time ``t0`` (system time unit), residuals in state
+    units, multipliers dimensionless.
 
     Lanes that did not converge hold NaN in ``point``, ``orbit``, ``monodromy`` and
     ``multipliers``; their ``status`` says why and ``last_iterate`` where Newton stopped.
@@ -417,7 +420,11 @@ def monodromy(system: ForcedSystem, params, x, *, period: int = 1, t0=0.0, integ
     """Jacobian ``D P^k(x)`` of the k-fold stroboscopic map, ``(..., dim, dim)``, by ``jax.jacfwd``.
 
     At a point of a P-k orbit this is the monodromy matrix; its eigenvalues are the
-    Floquet multipliers (see :func:`floquet_multipliers`).
+    Floquet multipliers (see :func:`floquet_multipliers`; paper §4.1 judges the
+    stability of the shooting results by them). ``x``: states ``(..., dim)`` at time
+    ``t0`` (system time unit); ``M[..., i, j] = d x_i(t0 + kT) / d x_j(t0)``
+    (dimensionless when all coordinates share a unit; otherwise in their ratio).
+    The derivative is through the integrator's discrete map (no finite differences).
     """
     k = _check_period(period)
     check_state_shape(system, x)
@@ -431,9 +438,11 @@ def floquet_multipliers(system: ForcedSystem, params, x, *, period: int = 1, t0=
                         integrator: Integrator = RK4()):
     """Floquet multipliers (eigenvalues of :func:`monodromy`), ``(..., dim)`` complex, by decreasing modulus.
 
-    ``x`` should be a point of a P-k orbit (e.g. ``x = 0`` for the trivial orbit of a
-    parametrically excited system); a periodic orbit is asymptotically stable when all
-    ``|lambda| < 1``.
+    ``x`` (shape ``(..., dim)``, at time ``t0``) should be a point of a P-k orbit (e.g.
+    ``x = 0`` for the trivial orbit of a parametrically excited system); a periodic
+    orbit is asymptotically stable when all ``|lambda| < 1`` (paper §4.1). Multipliers
+    are dimensionless; differentiable w.r.t. ``params`` (``jax.grad`` of a modulus gives
+    the sensitivity of the stability margin).
     """
     return _sorted_eigvals(monodromy(system, params, x, period=period, t0=t0, integrator=integrator))
 
@@ -445,7 +454,10 @@ def seeds_from_result(result) -> dict[int, np.ndarray]:
     ``result`` is any object with ``.attractors``, a sequence of objects with ``.points``
     (array ``(k, dim)`` of stroboscopic points) and ``.period`` (int ``k``). Every point
     of a P-k attractor becomes a seed for ``P^k`` (cell centres are approximate, so each
-    point is one more chance for Newton). Attractors of the same period are grouped.
+    point is one more chance for Newton). Attractors of the same period are grouped;
+    non-periodic attractors (period 0) and non-finite points are skipped. This is the
+    paper's sequence (§4): the global analysis locates the attractors, shooting
+    (§4.1) makes them exact. Points in state units at the result's phase (phase 0).
     """
     attractors = getattr(result, "attractors", None)
     if attractors is None:
@@ -470,7 +482,12 @@ def seeds_from_result(result) -> dict[int, np.ndarray]:
 
 
 def seeds_in_box(n: int, low, high, *, seed: int = 0) -> np.ndarray:
-    """``n`` seeds uniformly distributed in the box ``low <= x <= high``: ``(n, dim)``."""
+    """``n`` seeds uniformly distributed in the box ``low <= x <= high``: ``(n, dim)``.
+
+    ``low``, ``high``: ``(dim,)`` bounds in state units (e.g. the paper's region D,
+    eq. 10, extended by a range of ``x4``); ``seed`` fixes the random draw (JAX PRNG),
+    so the same call gives the same seeds. Seeds for :func:`find_periodic_orbits`.
+    """
     low = np.asarray(low, dtype=float)
     high = np.asarray(high, dtype=float)
     if low.shape != high.shape or low.ndim != 1:
@@ -941,7 +958,9 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
 
 # --------------------------------------------------------------------------- verification
 class OrbitCheck(NamedTuple):
-    """Result of :func:`verify_orbit` (the paper's check by direct integration).
+    """Result of :func:`verify_orbit` (the paper's check by direct integration, §4.1).
+
+    Distances and points in state units; periods counted in forcing periods.
 
     Attributes:
         kept: True when every perturbed start stayed within ``leave_tol`` of the orbit
@@ -975,8 +994,14 @@ def verify_orbit(system: ForcedSystem, params, orbit, *, periods: int = 300, per
 
     Args:
         orbit: a :class:`PeriodicOrbit`, or its points ``(m, dim)`` at phase ``t0``.
+        periods: forcing periods integrated per trial.
+        perturbation: relative size of the initial perturbation (dimensionless).
         leave_tol: distance (state units) above which the motion has left the orbit.
         n_final: number of final stroboscopic points returned per trial.
+        t0: phase of the orbit's points (system time unit).
+    Returns:
+        :class:`OrbitCheck` (``distance`` of shape ``(n_trials, periods)``,
+        ``final_points`` ``(n_trials, n_final, dim)``).
     """
     pts = np.asarray(getattr(orbit, "points", orbit), dtype=float)
     if pts.ndim == 1:
