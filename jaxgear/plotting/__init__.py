@@ -11,4 +11,6 @@ from ._basins import (
     plot_attractors as plot_attractors,
     plot_shares as plot_shares,
 )
-from ._orbit import plot_orbit as plot_orbit, plot_multipliers as plot_multipliers
+from ._orbit import plot_orbit as plot_orbit
+
+from ._orbit import plot_multipliers as plot_multipliers
