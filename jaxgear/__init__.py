@@ -88,6 +88,7 @@ from ._shooting import (  # noqa: E402
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
     OrbitCheck as OrbitCheck,
+    load_orbits as load_orbits,
 )
 
 from ._params import with_param as with_param, get_param as get_param, param_names as param_names  # noqa: E402
@@ -98,6 +99,7 @@ from ._continuation import (  # noqa: E402
     BifurcationPoint as BifurcationPoint,
     load_branch as load_branch,
 )
+from ._io import load as load  # noqa: E402
 
 
 def __getattr__(name):

@@ -39,6 +39,9 @@ __all__ = ["analyze_global", "cell_images", "analyze_cell_map", "detect_period",
 
 METHODS = ("poincare-like", "stroboscopic", "direct")
 
+_MIN_CELLS = 10
+"""Cell methods: an attractor resolved by fewer cells triggers a 'refine the grid' warning."""
+
 
 def _progress(total: int, desc: str, enabled: bool, unit: str = "cell"):
     """A tqdm bar (a widget in notebooks when ipywidgets is installed) with time left."""
@@ -133,6 +136,10 @@ def cell_images(system: ForcedSystem, params, grid: CellGrid, *, method: str = "
 def analyze_cell_map(images: np.ndarray, n_cells: int | None = None) -> dict[str, np.ndarray]:
     """Periodic groups and domains of a simple cell map, vectorised (pointer doubling).
 
+    Hsu's analysis of a simple cell map (paper §3; Hsu 1980): every cell's sequence ends
+    in a periodic group (a cycle of cells) or in the sink; the cells ending in a group
+    form its domain of attraction. Cells are integer indices (no units).
+
     Args:
         images: ``(n,)`` image of each regular cell; the value ``n`` is the sink, which
             maps to itself.
@@ -168,11 +175,12 @@ def analyze_cell_map(images: np.ndarray, n_cells: int | None = None) -> dict[str
 
 # --------------------------------------------------------------- period detection
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
-    """Minimal period of each stroboscopic sequence ``orbit (..., K, dim)``.
+    """Minimal period of each stroboscopic sequence ``orbit (..., K, dim)`` (the P-k of paper §4).
 
     The smallest ``k <= max_period`` with ``|x_j - x_(j-k)| <= tol (1 + |x_j|)`` for the
     last ``k + 1`` points ``j`` (so a whole cycle and one more step repeat); ``0`` if
     none, ``-1`` if the sequence is not finite. Needs ``K >= 2 max_period + 1``.
+    ``tol`` is relative (dimensionless); returns an int array of shape ``(...)``.
     """
     orbit = np.asarray(orbit)
     K = orbit.shape[-2]
@@ -281,8 +289,10 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
             as escaped (sink).
         progress: show progress bars (tqdm); ``False`` silences them.
     Returns:
-        :class:`GlobalResult`. Warnings are issued when many cells go to the sink,
-        when an attractor touches the region's edge, or when a period could not be read.
+        :class:`GlobalResult`. Warnings name what to change when the result looks
+        unreliable: many sink cells or an attractor on the region's edge (enlarge the
+        region), no period found or many unresolved cells (raise ``max_period`` /
+        ``max_periods``), an attractor resolved by few cells (refine the grid).
     """
     from . import __version__
     from ._model import REDUCED
@@ -630,18 +640,42 @@ def _direct_pool(system, params, X, integrator, chunk, R, max_periods, max_perio
 
 
 def _warn_if_unreliable(r: GlobalResult) -> None:
-    if r.n_sink > 0.2 * r.n_cells:
-        warnings.warn(f"{100 * r.n_sink / r.n_cells:.1f} % of the cells went to the sink: enlarge the region "
-                      "(--region) or check for unbounded motion.", stacklevel=3)
-    if r.n_unresolved > 0.01 * r.n_cells:
-        warnings.warn(f"{r.n_unresolved} cells were not resolved: raise max_periods or period_tol, or max_period.",
+    """Warn when a result looks unreliable, naming what the user can change.
+
+    - many sink cells (> 20 %): cell methods -> enlarge the region (the grid's bounds,
+      ``--region``); direct -> unbounded motion or a blow-up of the integration
+      (``steps_per_period``, ``escape_bound``);
+    - an attractor's points on or beyond the region's edge -> enlarge the region;
+    - period detection at its limit: an attractor with no period <= ``max_period``
+      -> raise ``max_period`` / ``settle_periods``; many unresolved cells (> 1 %, direct)
+      -> raise ``max_periods`` / ``max_period``;
+    - cell methods: an attractor resolved by fewer than ``_MIN_CELLS`` cells, or a P-k
+      whose k points share cells (stroboscopic) -> refine the grid (more cells).
+    """
+    s = r.settings
+    n = r.n_cells
+    cell_method = r.method in ("poincare-like", "stroboscopic")
+    if r.n_sink > 0.2 * n:
+        if cell_method:
+            warnings.warn(f"{100 * r.n_sink / n:.1f} % of the cells went to the sink (their images left the "
+                          f"region): enlarge the region (the CellGrid bounds, --region), or check for unbounded "
+                          f"motion.", stacklevel=3)
+        else:
+            warnings.warn(f"{100 * r.n_sink / n:.1f} % of the cells went to the sink (the motion blew up or "
+                          f"exceeded escape_bound={s.get('escape_bound')}): check for unbounded motion, raise "
+                          f"steps_per_period (now {s.get('steps_per_period')}) if the integration blew up, or raise "
+                          f"escape_bound.", stacklevel=3)
+    if r.n_unresolved > 0.01 * n:
+        warnings.warn(f"{r.n_unresolved} cells ({100 * r.n_unresolved / n:.1f} %) were not resolved within "
+                      f"max_periods={s.get('max_periods')} periods: raise max_periods (slow transients), or "
+                      f"max_period (now {s.get('max_period')}) if the motion has a longer period, or period_tol.",
                       stacklevel=3)
     g = r.grid
     for a in r.attractors:
         if a.period == 0:
-            warnings.warn(f"attractor {a.id} showed no period <= max_period={r.settings['max_period']}: it may be "
-                          "quasi-periodic, chaotic or a slow transient; raise max_period or settle_periods.",
-                          stacklevel=3)
+            warnings.warn(f"attractor {a.id} showed no period <= max_period={s.get('max_period')}: it may have a "
+                          "longer period, be quasi-periodic or chaotic, or be a slow transient; raise max_period or "
+                          "settle_periods.", stacklevel=3)
         pts = np.asarray(a.points)
         if len(pts):
             for j, ax in enumerate(g.axes):
@@ -649,8 +683,16 @@ def _warn_if_unreliable(r: GlobalResult) -> None:
                 h = 0.02 * (hi - lo)
                 if np.any(pts[:, ax] < lo + h) or np.any(pts[:, ax] > hi - h):
                     warnings.warn(f"attractor {a.id} ({a.label}) lies on or beyond the region's edge along "
-                                  f"{g.axis_names[j]}: enlarge the region (--region).", stacklevel=3)
+                                  f"{g.axis_names[j]} (region [{lo:g}, {hi:g}]): enlarge the region (the CellGrid "
+                                  f"bounds, --region).", stacklevel=3)
                     break
+        if cell_method and a.cell_count < _MIN_CELLS:
+            warnings.warn(f"attractor {a.id} ({a.label}) was resolved by only {a.cell_count} cell(s): its domain and "
+                          f"share are unreliable; refine the grid (more cells per axis, --grid).", stacklevel=3)
+        elif r.method == "stroboscopic" and 0 < len(a.periodic_cells) < a.period:
+            warnings.warn(f"the {a.period} points of attractor {a.id} ({a.label}) fall into only "
+                          f"{len(a.periodic_cells)} cell(s): the cells are too coarse to separate them; refine the "
+                          f"grid (more cells per axis, --grid).", stacklevel=3)
 
 
 def compare_with_direct(result: GlobalResult, system: ForcedSystem | None = None, params=None, *,
@@ -659,9 +701,14 @@ def compare_with_direct(result: GlobalResult, system: ForcedSystem | None = None
     """Agreement report (``jaxgear analyze --compare``): run ``direct`` on a random sample
     of cells and compare with the labels of ``result``.
 
-    Direct attractors are matched to the result's attractors by period and distance of
-    their stroboscopic points. Returns ``{"n_samples", "agreement" (overall fraction),
-    "per_attractor": {id: {"cells", "agree", "fraction"}}, "direct_only": [...] }``.
+    Checks a cell-mapping result (paper §3-§4) against direct integration of the same
+    cell centres, the paper's verification by direct integration applied to domains.
+    ``n_samples`` cells are drawn without replacement (``seed``); ``system`` and
+    ``params`` default to the reduced gear model with ``result.params``. Direct
+    attractors are matched to the result's attractors by period and distance of their
+    stroboscopic points (within ``1e-2 (1 + |x|)``, state units). Returns
+    ``{"n_samples", "agreement" (overall fraction in [0, 1]), "per_attractor": {id:
+    {"cells", "agree", "fraction"}}, "direct_only": [{"period", "point" (dim,), "cells"}]}``.
     """
     from ._model import REDUCED
 

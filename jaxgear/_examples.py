@@ -31,7 +31,15 @@ def _f64(x):
 
 
 class DuffingParams(eqx.Module):
-    """Forced Duffing parameters (all float64 arrays, so sweeps do not recompile)."""
+    """Forced Duffing parameters of ``x'' + delta x' + alpha x + beta x^3 = gamma cos(omega t)``.
+
+    A system of the form of paper eq. (6) with known answers (closed form for
+    ``beta = 0``), used to check the methods of paper §3-§4. Scalars in consistent
+    units of the user's choice (time ``t``, displacement ``x``): ``delta`` [1/time],
+    ``alpha`` [1/time²], ``beta`` [1/(time² x²)], ``gamma`` [x/time²], ``omega``
+    [rad/time]; the forcing period is ``2 pi / omega``. All fields are float64 arrays
+    (scalars, or a leading batch axis for sweeps), so a sweep does not recompile.
+    """
 
     delta: Any = eqx.field(converter=_f64, default=0.1)
     alpha: Any = eqx.field(converter=_f64, default=1.0)
@@ -55,8 +63,16 @@ DUFFING = ForcedSystem(
 
 
 class SpurPairParams(eqx.Module):
-    """Single spur-gear pair (dimensionless): damping ratio, stiffness amplitude,
-    half backlash, mean load, transmission-error amplitude, mesh frequency."""
+    """Single spur-gear pair with backlash (dimensionless; the one-mesh analogue of paper eq. 3-5).
+
+    ``x'' + 2 zeta x' + (1 + kappa sin(Omega t)) f(x, b) = f_m + e_amp Omega^2 sin(Omega t)``
+    with ``f`` the backlash function of paper eq. (3). Time in ``1/omega_n``
+    (``omega_n`` the natural frequency of the mean mesh stiffness), lengths in a
+    characteristic length ``b_c`` (as MODEL.md §3): ``zeta`` damping ratio, ``kappa``
+    relative stiffness amplitude, ``b`` half backlash, ``f_m`` mean load (static
+    deflection), ``e_amp`` transmission-error amplitude, ``Omega`` mesh frequency
+    (forcing period ``2 pi / Omega``). All fields are float64 arrays.
+    """
 
     zeta: Any = eqx.field(converter=_f64, default=0.05)
     kappa: Any = eqx.field(converter=_f64, default=0.2)

@@ -35,7 +35,8 @@ class RK4(Integrator):
 
     The gear model's vector field has kinks at ``|X| = b`` (backlash), where RK4
     converges at about second order; 200-400 steps per period give periodic points
-    to ~1e-4 (MODEL.md §8). Use :class:`Adaptive` for reference solutions.
+    to ~1e-4 (MODEL.md §8). Use :class:`Adaptive` for reference solutions. The step is
+    ``h = T / steps_per_period`` in the system's time unit.
     """
 
     steps_per_period: int = eqx.field(static=True, default=200)
@@ -48,8 +49,11 @@ class RK4(Integrator):
 class Adaptive(Integrator):
     """A diffrax solver with adaptive steps (default Tsit5, rtol=atol=1e-10).
 
-    ``max_steps`` bounds the steps over one call; a lane that exceeds it is returned as
-    non-finite (it ends in the sink of a cell map, never as a silent wrong value).
+    The reference integrator for the flow of paper eq. (6) (MODEL.md §8): ``rtol`` and
+    ``atol`` are the relative and absolute error tolerances per step (``atol`` in state
+    units: ``b_c`` and ``b_c omega_n`` for the gear models). ``max_steps`` bounds the
+    steps over one call; a lane that exceeds it is returned as non-finite (it ends in
+    the sink of a cell map, never as a silent wrong value).
     """
 
     solver: Any = eqx.field(static=True, default_factory=diffrax.Tsit5)
@@ -151,7 +155,12 @@ def advance_batch(system: ForcedSystem, params, Y, t0, periods: int, integrator:
 
 
 def advance(system: ForcedSystem, params, x0, t0, periods: int, integrator: Integrator = RK4()):
-    """Advance states ``x0`` of shape ``(..., dim)`` by ``periods`` forcing periods from ``t0``."""
+    """Advance states ``x0`` of shape ``(..., dim)`` by ``periods`` forcing periods from ``t0``.
+
+    The flow of paper eq. (6) over ``periods * T`` (``T = system.period(params)``;
+    ``t0`` in the system's time unit, dimensionless ``tau = omega_n t`` for the gear
+    models, MODEL.md §3). Returns states of shape ``(..., dim)`` (state units); a lane
+    that blew up is non-finite."""
     x0 = jnp.asarray(x0, dtype=jnp.float64)
     lead = x0.shape[:-1]
     Y = x0.reshape(-1, system.dim).T

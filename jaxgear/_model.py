@@ -75,6 +75,10 @@ def reduced_vector_field(t, x, p: GearParams):
     ``x1' = x2``, ``x2' = -(N + mu_p) g_sp + (mu_p - N mu_c) g_rp + mu_s f_D + mu_c f_L - e_sp''``,
     ``x3' = x4``, ``x4' = -N (mu_s + 2 mu_c) g_sp - 2 N mu_c g_rp + mu_s f_D + 2 mu_c f_L``,
     with the mesh forces ``g`` of paper eq. (3) and (5).
+
+    Dimensionless (MODEL.md §3): ``t`` is ``tau = omega_n t``, ``x1 = X_sp`` and
+    ``x3 = X_sc`` are relative displacements in ``b_c``, ``x2``, ``x4`` their rates;
+    ``x`` has shape ``(4,)``. Returns ``dx/dtau``, shape ``(4,)``.
     """
     x1, x2, x3, x4 = x[0], x[1], x[2], x[3]
     k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp = mesh_excitation(t, p)
@@ -132,8 +136,10 @@ REDUCED = ForcedSystem(
 def nplanet_system(N: int) -> ForcedSystem:
     """The general model with ``N`` planets (paper eq. 5) as a :class:`ForcedSystem`.
 
-    State names ``X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc``; the default section is
-    ``{V_sc = 0}``, the N-planet counterpart of Σ = {x4 = 0}.
+    State names ``X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc`` (shape ``(2N + 2,)``,
+    dimensionless: displacements in ``b_c``, time ``tau = omega_n t``, MODEL.md §3);
+    the default section is ``{V_sc = 0}``, the N-planet counterpart of Σ = {x4 = 0}.
+    Raises ``ValueError`` for ``N < 1``.
     """
     if int(N) < 1:
         raise ValueError(f"N={N}: the number of planets must be >= 1.")
@@ -148,7 +154,11 @@ def nplanet_system(N: int) -> ForcedSystem:
 
 
 def reduced_to_nplanet(x, N: int):
-    """Reduced state(s) ``(..., 4)`` -> N-planet state(s) ``(..., 2N+2)`` with identical planets."""
+    """Reduced state(s) ``(..., 4)`` -> N-planet state(s) ``(..., 2N+2)`` with identical planets.
+
+    Every planet gets ``(x1, x2)``; the carrier ``(x3, x4)`` (MODEL.md §4: the reduced
+    model is the N-planet model of paper eq. 5 on its symmetric subspace). Same units.
+    """
     x = jnp.asarray(x)
     planets = jnp.tile(x[..., 0:2], (1,) * (x.ndim - 1) + (N,))
     return jnp.concatenate([planets, x[..., 2:4]], axis=-1)

@@ -476,7 +476,7 @@ class GearSet:
 def format_table(rows, header) -> str:
     """Plain-text table with aligned columns."""
     rows = [tuple(str(c) for c in r) for r in rows]
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    widths = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(header)]
     line = lambda r: "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip()
     return "\n".join([line(header), line(tuple("-" * w for w in widths))] + [line(r) for r in rows])
 
@@ -535,7 +535,11 @@ PRESETS = {"paper": paper_gear_set}
 
 
 def get_preset(name: str) -> GearSet:
-    """The named physical preset (see ``PRESETS``)."""
+    """The named physical preset (see ``PRESETS``) as a :class:`GearSet` in physical units.
+
+    ``"paper"`` is the gear set of paper §4.1 completed by MODEL.md §6-§7 (see
+    :func:`paper_gear_set`). Raises ``ValueError`` naming the available presets.
+    """
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; available: {', '.join(sorted(PRESETS))}")
     return PRESETS[name]()

@@ -54,6 +54,10 @@ def stroboscopic_map(system: ForcedSystem, params, x0, *, periods: int = 1, t0=0
                      integrator: Integrator = RK4()):
     """Stroboscopic (exact) Poincaré map ``P^periods``: ``x(t0) -> x(t0 + periods*T)``.
 
+    The exact Poincaré map of a forced system (paper eq. 6; MODEL.md §6), the map whose
+    fixed points are the P-k motions of paper §4. Times in the system's unit
+    (dimensionless ``tau`` for the gear models), states in state units.
+
     Args:
         x0: states, shape ``(..., dim)``.
         periods: number of forcing periods (an int; sets the loop length).
@@ -82,7 +86,9 @@ def stroboscopic_orbit(system: ForcedSystem, params, x0, *, n_points: int, perio
                        t0=0.0, integrator: Integrator = RK4()):
     """The iterates ``P(x0), ..., P^n(x0)`` of the stroboscopic map: shape ``(..., n, dim)``.
 
-    ``P`` advances ``periods_between`` forcing periods.
+    ``P`` advances ``periods_between`` forcing periods (the exact Poincaré map of a
+    forced system, paper eq. 6; MODEL.md §6). ``x0``: states ``(..., dim)`` at time
+    ``t0`` (system time unit); ``n = n_points``. A lane that blew up is non-finite.
     """
     lead, Y = _to_batch(system, x0)
     Ys = _orbit_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), int(n_points), int(periods_between),
@@ -226,7 +232,13 @@ def _sample_kernel(system, params, x0, t0, periods, samples_per_period, integrat
 def sample_trajectory(system: ForcedSystem, params, x0, *, periods: int = 1, samples_per_period: int = 100,
                       t0=0.0, integrator: Integrator = RK4()):
     """Trajectory samples for figures: ``(times (m,), states (..., m, dim))``,
-    ``m = periods*samples_per_period + 1``, from ``t0`` to ``t0 + periods*T``."""
+    ``m = periods*samples_per_period + 1``, from ``t0`` to ``t0 + periods*T``.
+
+    The phase trajectories of paper Fig. 3-6. ``x0``: states ``(..., dim)`` at ``t0``
+    (system time unit; ``T = system.period(params)``). With :class:`RK4` each sample
+    interval is a whole number of steps (``steps_per_period`` rounded up to a multiple
+    of ``samples_per_period``).
+    """
     check_state_shape(system, x0)
     return _sample_kernel(system, params, jnp.asarray(x0, jnp.float64), jnp.asarray(t0, jnp.float64),
                           int(periods), int(samples_per_period), integrator)

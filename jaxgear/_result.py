@@ -29,7 +29,10 @@ UNRESOLVED = -2
 
 @dataclasses.dataclass(frozen=True)
 class Attractor:
-    """One attractor found by the global analysis.
+    """One attractor found by the global analysis (paper §4.2: a P-k motion and its domain).
+
+    Points are in state units (dimensionless ``b_c``, ``b_c omega_n`` for the gear
+    models, MODEL.md §3) at forcing phase 0.
 
     Attributes:
         id: its label in :attr:`GlobalResult.labels`.
@@ -174,7 +177,7 @@ class GlobalResult:
         }
         coords["state"] = ("state", list(self.state_names))
         attrs = dict(
-            title="jaxgear global analysis", method=self.method, system=self.system,
+            jaxgear_type="GlobalResult", title="jaxgear global analysis", method=self.method, system=self.system,
             grid=json.dumps(self.grid.to_dict()), settings=json.dumps(self.settings),
             params=json.dumps(self.params), n_sink=self.n_sink, n_unresolved=self.n_unresolved,
             runtime_s=self.runtime_s, mean_periods=self.mean_periods, version=self.version,
@@ -186,13 +189,11 @@ class GlobalResult:
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
     def save(self, path: str | Path) -> Path:
-        """Write the result to a netCDF file (``.nc``); reload with :func:`load_result`."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        self.to_xarray().to_netcdf(tmp, engine="h5netcdf")
-        tmp.replace(path)
-        return path
+        """Write the result to a netCDF file (``.nc``, atomically); reload with
+        :func:`load_result` or :func:`jaxgear.load`, open with ``xarray.open_dataset``."""
+        from ._io import _write_netcdf
+
+        return _write_netcdf(self.to_xarray(), path)
 
     def write_summary(self, path: str | Path) -> Path:
         """Write ``summary.json`` (everything but the per-cell labels)."""
@@ -203,11 +204,18 @@ class GlobalResult:
 
 
 def load_result(path: str | Path) -> GlobalResult:
-    """Load a :class:`GlobalResult` saved with :meth:`GlobalResult.save` (exact round trip)."""
-    import xarray as xr
+    """Load a :class:`GlobalResult` saved with :meth:`GlobalResult.save` (exact round trip:
+    labels and points bit-for-bit, grid, settings and parameters equal).
 
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        ds = ds.load()
+    Raises ``FileNotFoundError`` without a file, ``ValueError`` when the file holds
+    another result type (use :func:`jaxgear.load` for any type).
+
+    Also reads files written before ``attrs["jaxgear_type"]`` existed.
+    """
+    from ._io import _check_type, _read_netcdf
+
+    ds = _read_netcdf(path)
+    _check_type(ds, "GlobalResult", path)
     grid = CellGrid.from_dict(json.loads(ds.attrs["grid"]))
     attractors = []
     for i in range(ds.sizes.get("attractor", 0)):

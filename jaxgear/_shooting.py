@@ -33,6 +33,9 @@ Times are in the system's unit; states have shape ``(..., dim)``.
 from __future__ import annotations
 
 import dataclasses
+import json
+import time
+from pathlib import Path
 from typing import Any, Mapping, NamedTuple, Sequence
 
 import diffrax
@@ -42,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._integrate import RK4, Adaptive, Integrator, advance_batch
-from ._poincare import stroboscopic_orbit
+from ._poincare import sample_trajectory, stroboscopic_orbit
 from ._system import ForcedSystem, check_state_shape, check_system
 
 __all__ = [
@@ -52,6 +55,7 @@ __all__ = [
     "OrbitCheck",
     "periodic_orbit",
     "find_periodic_orbits",
+    "load_orbits",
     "monodromy",
     "floquet_multipliers",
     "classify_multipliers",
@@ -233,7 +237,10 @@ def _damped_newton(evaluate, flow_k, x0, k, tol, max_iter, max_norm, max_backtra
 
 # --------------------------------------------------------------------------- results
 class ShootResult(NamedTuple):
-    """Per-seed result of :func:`periodic_orbit` (leading shape ``...`` = the seeds').
+    """Per-seed result of :func:`periodic_orbit` (leading shape ``...`` = the seeds'), paper §4.1.
+
+    States are in state units at time ``t0`` (system time unit), residuals in state
+    units, multipliers dimensionless.
 
     Lanes that did not converge hold NaN in ``point``, ``orbit``, ``monodromy`` and
     ``multipliers``; their ``status`` says why and ``last_iterate`` where Newton stopped.
@@ -413,7 +420,11 @@ def monodromy(system: ForcedSystem, params, x, *, period: int = 1, t0=0.0, integ
     """Jacobian ``D P^k(x)`` of the k-fold stroboscopic map, ``(..., dim, dim)``, by ``jax.jacfwd``.
 
     At a point of a P-k orbit this is the monodromy matrix; its eigenvalues are the
-    Floquet multipliers (see :func:`floquet_multipliers`).
+    Floquet multipliers (see :func:`floquet_multipliers`; paper §4.1 judges the
+    stability of the shooting results by them). ``x``: states ``(..., dim)`` at time
+    ``t0`` (system time unit); ``M[..., i, j] = d x_i(t0 + kT) / d x_j(t0)``
+    (dimensionless when all coordinates share a unit; otherwise in their ratio).
+    The derivative is through the integrator's discrete map (no finite differences).
     """
     k = _check_period(period)
     check_state_shape(system, x)
@@ -427,9 +438,11 @@ def floquet_multipliers(system: ForcedSystem, params, x, *, period: int = 1, t0=
                         integrator: Integrator = RK4()):
     """Floquet multipliers (eigenvalues of :func:`monodromy`), ``(..., dim)`` complex, by decreasing modulus.
 
-    ``x`` should be a point of a P-k orbit (e.g. ``x = 0`` for the trivial orbit of a
-    parametrically excited system); a periodic orbit is asymptotically stable when all
-    ``|lambda| < 1``.
+    ``x`` (shape ``(..., dim)``, at time ``t0``) should be a point of a P-k orbit (e.g.
+    ``x = 0`` for the trivial orbit of a parametrically excited system); a periodic
+    orbit is asymptotically stable when all ``|lambda| < 1`` (paper §4.1). Multipliers
+    are dimensionless; differentiable w.r.t. ``params`` (``jax.grad`` of a modulus gives
+    the sensitivity of the stability margin).
     """
     return _sorted_eigvals(monodromy(system, params, x, period=period, t0=t0, integrator=integrator))
 
@@ -441,7 +454,10 @@ def seeds_from_result(result) -> dict[int, np.ndarray]:
     ``result`` is any object with ``.attractors``, a sequence of objects with ``.points``
     (array ``(k, dim)`` of stroboscopic points) and ``.period`` (int ``k``). Every point
     of a P-k attractor becomes a seed for ``P^k`` (cell centres are approximate, so each
-    point is one more chance for Newton). Attractors of the same period are grouped.
+    point is one more chance for Newton). Attractors of the same period are grouped;
+    non-periodic attractors (period 0) and non-finite points are skipped. This is the
+    paper's sequence (§4): the global analysis locates the attractors, shooting
+    (§4.1) makes them exact. Points in state units at the result's phase (phase 0).
     """
     attractors = getattr(result, "attractors", None)
     if attractors is None:
@@ -466,7 +482,12 @@ def seeds_from_result(result) -> dict[int, np.ndarray]:
 
 
 def seeds_in_box(n: int, low, high, *, seed: int = 0) -> np.ndarray:
-    """``n`` seeds uniformly distributed in the box ``low <= x <= high``: ``(n, dim)``."""
+    """``n`` seeds uniformly distributed in the box ``low <= x <= high``: ``(n, dim)``.
+
+    ``low``, ``high``: ``(dim,)`` bounds in state units (e.g. the paper's region D,
+    eq. 10, extended by a range of ``x4``); ``seed`` fixes the random draw (JAX PRNG),
+    so the same call gives the same seeds. Seeds for :func:`find_periodic_orbits`.
+    """
     low = np.asarray(low, dtype=float)
     high = np.asarray(high, dtype=float)
     if low.shape != high.shape or low.ndim != 1:
@@ -482,17 +503,22 @@ def seeds_in_box(n: int, low, high, *, seed: int = 0) -> np.ndarray:
 # --------------------------------------------------------------------------- search
 @dataclasses.dataclass(frozen=True)
 class PeriodicOrbit:
-    """One periodic orbit of the stroboscopic map (deduplicated).
+    """One periodic orbit of the stroboscopic map (deduplicated), paper §4.1.
 
     Attributes:
-        points: ``(m, dim)`` stroboscopic points ``x*, P(x*), ..., P^{m-1}(x*)``,
-            rotated so that the point with the smallest first coordinate comes first.
+        points: ``(m, dim)`` stroboscopic points ``x*, P(x*), ..., P^{m-1}(x*)`` (state
+            units) at times ``t0 + j T``, rotated so that the point with the smallest
+            first coordinate comes first.
         period: minimal period ``m`` (forcing periods).
-        multipliers: ``(dim,)`` complex Floquet multipliers of ``P^m``.
+        multipliers: ``(dim,)`` complex Floquet multipliers of ``P^m``, by decreasing modulus.
         stable: all ``|multiplier| < 1``.
         instability: ``"stable"``, ``"fold"``, ``"flip"`` or ``"neimark-sacker"``.
-        residual: ``||P^k(x*) - x*||`` of the best converged seed.
+        residual: ``||P^k(x*) - x*||`` of the best converged seed (state units).
         n_seeds: how many seeds converged to this orbit.
+        t0: phase of the stroboscopic section (time of ``points[0]``, system time unit).
+        trajectory: ``(m * s + 1, dim)`` the orbit sampled ``s`` times per forcing period
+            from ``points[0]`` at ``t0`` over its ``m`` periods (for figures drawn without
+            integrating, e.g. from a loaded result), or ``None``.
     """
 
     points: np.ndarray
@@ -502,35 +528,233 @@ class PeriodicOrbit:
     instability: str
     residual: float
     n_seeds: int
+    t0: float = 0.0
+    trajectory: np.ndarray | None = None
 
     @property
     def max_multiplier(self) -> float:
         """Largest Floquet multiplier modulus."""
         return float(np.max(np.abs(self.multipliers)))
 
+    @property
+    def samples_per_period(self) -> int:
+        """Samples per forcing period of :attr:`trajectory` (0 when there is none)."""
+        if self.trajectory is None:
+            return 0
+        return (len(self.trajectory) - 1) // int(self.period)
+
     def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (without the sampled trajectory)."""
         return {
             "period": int(self.period), "points": np.asarray(self.points).tolist(),
             "multipliers_abs": np.abs(self.multipliers).tolist(),
             "multipliers": [[float(z.real), float(z.imag)] for z in np.asarray(self.multipliers)],
             "stable": bool(self.stable), "instability": self.instability,
-            "residual": float(self.residual), "n_seeds": int(self.n_seeds),
+            "residual": float(self.residual), "n_seeds": int(self.n_seeds), "t0": float(self.t0),
         }
 
 
 @dataclasses.dataclass(frozen=True)
 class OrbitSearch:
-    """Result of :func:`find_periodic_orbits`.
+    """Result of :func:`find_periodic_orbits` (paper §4.1): the distinct orbits and every shot.
+
+    Saves to netCDF with :meth:`save` (reload with :func:`load_orbits` or
+    :func:`jaxgear.load`; open with ``xarray.open_dataset``).
 
     Attributes:
         orbits: distinct orbits found, sorted by period then first coordinate.
-        shots: ``{k: ShootResult}`` the per-seed results for each ``k`` tried.
+        shots: ``{k: ShootResult}`` the per-seed results for each ``k`` tried (numpy
+            arrays, leading dimension the seeds).
         status_counts: number of seeds per Newton status name, over all ``k``.
+        seeds: ``{k: (n_k, dim)}`` the seeds shot for each ``k``.
+        system: the system's name; state_names: its coordinate names;
+        section_index: its default section coordinate (or ``None``).
+        params: the full parameter set as a dict (canonical names for the gear models).
+        settings: the options of the search (tolerances, integrator, ``t0``, ...), JSON-able.
+        version: jaxgear version; runtime_s: wall time of the search (s).
     """
 
     orbits: tuple[PeriodicOrbit, ...]
     shots: dict[int, ShootResult]
     status_counts: dict[str, int]
+    seeds: dict[int, np.ndarray] = dataclasses.field(default_factory=dict)
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    section_index: int | None = None
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+    runtime_s: float = float("nan")
+
+    @property
+    def n_seeds(self) -> int:
+        """Seed runs over all ``k``."""
+        return int(sum(np.asarray(r.status).size for r in self.shots.values()))
+
+    def table(self) -> str:
+        """Printable table: one row per orbit (period, stability, max |multiplier|, first point)."""
+        from ._params import format_table
+
+        names = self.state_names or tuple(f"x{i + 1}" for i in range(self._dim()))
+        rows = [(i, f"P-{o.period}", "stable" if o.stable else f"unstable ({o.instability})",
+                 f"{o.max_multiplier:.4f}", "[" + ", ".join(f"{v:.4f}" for v in o.points[0]) + "]",
+                 f"{o.residual:.1e}", o.n_seeds) for i, o in enumerate(self.orbits)]
+        head = ("orbit", "period", "stability", "max |multiplier|", "point (" + ", ".join(names) + ")",
+                "residual", "seeds")
+        return format_table(rows, head)
+
+    def _dim(self) -> int:
+        for o in self.orbits:
+            return int(np.shape(o.points)[-1])
+        for X in self.seeds.values():
+            return int(np.shape(X)[-1])
+        return len(self.state_names)
+
+    def summary(self) -> dict[str, Any]:
+        """Everything but the per-seed arrays and trajectories, JSON-able."""
+        return dict(
+            jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
+            params=self.params, settings=self.settings, n_seeds=self.n_seeds,
+            status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
+            runtime_s=self.runtime_s, version=self.version,
+        )
+
+    # ---------------------------------------------------------------- I/O
+    def to_xarray(self):
+        """The search as an ``xarray.Dataset``.
+
+        Orbits along dimension ``orbit`` (``points (orbit, point, state)``, NaN-padded to
+        the longest period; ``multipliers_real/imag (orbit, multiplier)``; ``trajectory
+        (orbit, sample, state)``), the shots of each ``k`` as ``shot_k{k}_<field>`` over
+        ``seed_k{k}``; coordinate ``state`` holds the state names; parameters, settings
+        and status counts as JSON attributes, scalar parameters also as ``param_<name>``.
+        """
+        import xarray as xr
+
+        dim = self._dim()
+        names = list(self.state_names) or [f"x{i + 1}" for i in range(dim)]
+        O = self.orbits
+        mmax = max([len(o.points) for o in O] + [1])
+        smax = max([0 if o.trajectory is None else len(o.trajectory) for o in O] + [1])
+        pts = np.full((len(O), mmax, dim), np.nan)
+        traj = np.full((len(O), smax, dim), np.nan)
+        for i, o in enumerate(O):
+            pts[i, : len(o.points)] = o.points
+            if o.trajectory is not None:
+                traj[i, : len(o.trajectory)] = o.trajectory
+        lam = np.array([np.asarray(o.multipliers, dtype=complex) for o in O]).reshape(len(O), dim)
+        su = {"units": "state units (lengths in b_c, velocities in b_c omega_n for the gear models)"}
+        data = {
+            "period": ("orbit", np.array([o.period for o in O], dtype=np.int64),
+                       {"description": "minimal period m (forcing periods)"}),
+            "points": (("orbit", "point", "state"), pts,
+                       {"description": "stroboscopic points x*, P(x*), ..., P^(m-1)(x*) at t0 + jT", **su}),
+            "multipliers_real": (("orbit", "multiplier"), lam.real.copy(), {"description": "Floquet multipliers"}),
+            "multipliers_imag": (("orbit", "multiplier"), lam.imag.copy(), {"description": "Floquet multipliers"}),
+            "multipliers_abs": (("orbit", "multiplier"), np.abs(lam), {"description": "|Floquet multiplier|"}),
+            "stable": ("orbit", np.array([o.stable for o in O], dtype=bool)),
+            "instability": ("orbit", np.array([o.instability for o in O], dtype=object),
+                            {"description": "stable, fold, flip or neimark-sacker"}),
+            "residual": ("orbit", np.array([o.residual for o in O], dtype=float), {"description": "||P^k(x) - x||"}),
+            "n_seeds": ("orbit", np.array([o.n_seeds for o in O], dtype=np.int64)),
+            "t0": ("orbit", np.array([o.t0 for o in O], dtype=float), {"units": "system time unit"}),
+            "trajectory_length": ("orbit", np.array([0 if o.trajectory is None else len(o.trajectory) for o in O],
+                                                    dtype=np.int64)),
+            "trajectory": (("orbit", "sample", "state"), traj,
+                           {"description": "the orbit sampled over its m periods from points[0] at t0", **su}),
+        }
+        for k, res in sorted(self.shots.items()):
+            s, kd, hd = f"seed_k{k}", f"step_k{k}", f"newton_step_k{k}"
+            seeds = np.asarray(self.seeds.get(k, np.full((np.asarray(res.status).size, dim), np.nan)), dtype=float)
+            lamk = np.asarray(res.multipliers)
+            fields = {
+                "seeds": ((s, "state"), seeds), "point": ((s, "state"), res.point),
+                "orbit": ((s, kd, "state"), res.orbit), "min_period": (s, res.min_period),
+                "monodromy": ((s, "state", "state_from"), res.monodromy),
+                "multipliers_real": ((s, "multiplier"), lamk.real.copy()),
+                "multipliers_imag": ((s, "multiplier"), lamk.imag.copy()),
+                "stable": (s, res.stable), "instability": (s, res.instability), "residual": (s, res.residual),
+                "iterations": (s, res.iterations), "status": (s, res.status), "history": ((s, hd), res.history),
+                "last_iterate": ((s, "state"), res.last_iterate),
+            }
+            for f, (dims, arr) in fields.items():
+                data[f"shot_k{k}_{f}"] = (dims, np.asarray(arr))
+        coords = {"state": ("state", names), "state_from": ("state_from", names)}
+        attrs = dict(
+            jaxgear_type="OrbitSearch", title="jaxgear periodic orbits (shooting)", system=self.system,
+            state_names=json.dumps(list(self.state_names)), section_index=json.dumps(self.section_index),
+            params=json.dumps(self.params), settings=json.dumps(self.settings),
+            status_counts=json.dumps(self.status_counts), shot_periods=json.dumps(sorted(int(k) for k in self.shots)),
+            version=self.version, runtime_s=float(self.runtime_s),
+            status_codes=json.dumps({str(c): n for c, n in SHOOT_STATUS_NAMES.items()}),
+            instability_codes=json.dumps({str(c): n for c, n in INSTABILITY_NAMES.items()}),
+            units="state units of the system; time in the system's unit (dimensionless for the gear models, "
+                  "MODEL.md §3)",
+        )
+        for name, v in self.params.items():
+            if np.ndim(v) == 0:
+                attrs[f"param_{name}"] = v
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the search to a netCDF file (atomically); reload with :func:`load_orbits`."""
+        from ._io import _write_netcdf
+
+        return _write_netcdf(self.to_xarray(), path)
+
+    def write_summary(self, path: str | Path) -> Path:
+        """Write :meth:`summary` as JSON."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.summary(), indent=2))
+        return path
+
+
+def _complex(re: np.ndarray, im: np.ndarray) -> np.ndarray:
+    z = np.empty(re.shape, dtype=np.complex128)
+    z.real = re
+    z.imag = im
+    return z
+
+
+def load_orbits(path: str | Path) -> OrbitSearch:
+    """Load an :class:`OrbitSearch` saved with :meth:`OrbitSearch.save` (exact round trip:
+    arrays bit-for-bit with their dtypes, metadata equal)."""
+    from ._io import _check_type, _read_netcdf
+
+    ds = _read_netcdf(path)
+    _check_type(ds, "OrbitSearch", path)
+    if ds.attrs.get("jaxgear_type") != "OrbitSearch":
+        raise ValueError(f"{path} is not an OrbitSearch file (no attrs['jaxgear_type'] = 'OrbitSearch').")
+    v = lambda name: ds[name].values
+    orbits = []
+    for i in range(ds.sizes.get("orbit", 0)):
+        m = int(v("period")[i])
+        n_traj = int(v("trajectory_length")[i])
+        orbits.append(PeriodicOrbit(
+            points=v("points")[i, :m], period=m,
+            multipliers=_complex(v("multipliers_real")[i], v("multipliers_imag")[i]),
+            stable=bool(v("stable")[i]), instability=str(v("instability")[i]), residual=float(v("residual")[i]),
+            n_seeds=int(v("n_seeds")[i]), t0=float(v("t0")[i]),
+            trajectory=v("trajectory")[i, :n_traj] if n_traj else None,
+        ))
+    shots, seeds = {}, {}
+    for k in json.loads(ds.attrs["shot_periods"]):
+        g = lambda f: v(f"shot_k{k}_{f}")
+        shots[k] = ShootResult(
+            point=g("point"), orbit=g("orbit"), min_period=g("min_period"), monodromy=g("monodromy"),
+            multipliers=_complex(g("multipliers_real"), g("multipliers_imag")), stable=g("stable"),
+            instability=g("instability"), residual=g("residual"), iterations=g("iterations"), status=g("status"),
+            history=g("history"), last_iterate=g("last_iterate"),
+        )
+        seeds[k] = g("seeds")
+    return OrbitSearch(
+        orbits=tuple(orbits), shots=shots, status_counts=json.loads(ds.attrs["status_counts"]), seeds=seeds,
+        system=str(ds.attrs["system"]), state_names=tuple(json.loads(ds.attrs["state_names"])),
+        section_index=json.loads(ds.attrs["section_index"]), params=json.loads(ds.attrs["params"]),
+        settings=json.loads(ds.attrs["settings"]), version=str(ds.attrs["version"]),
+        runtime_s=float(ds.attrs["runtime_s"]),
+    )
 
 
 def _same_orbit(a: PeriodicOrbit, b: PeriodicOrbit, tol: float) -> bool:
@@ -540,7 +764,7 @@ def _same_orbit(a: PeriodicOrbit, b: PeriodicOrbit, tol: float) -> bool:
     return bool(np.min(d) <= tol * (1.0 + np.linalg.norm(a.points[0])))
 
 
-def _orbits_from_shots(res: ShootResult, dedup_tol: float) -> list[PeriodicOrbit]:
+def _orbits_from_shots(res: ShootResult, dedup_tol: float, t0: float = 0.0) -> list[PeriodicOrbit]:
     st = np.asarray(res.status).reshape(-1)
     conv = np.flatnonzero(st == SHOOT_CONVERGED)
     if conv.size == 0:
@@ -569,7 +793,7 @@ def _orbits_from_shots(res: ShootResult, dedup_tol: float) -> list[PeriodicOrbit
         pts = np.roll(pts, -int(np.argmin(pts[:, 0])), axis=0)
         out.append(PeriodicOrbit(points=pts, period=m, multipliers=lam[best],
                                  stable=bool(stab[best]), instability=INSTABILITY_NAMES[int(kind[best])],
-                                 residual=float(resid[best]), n_seeds=int(members.size)))
+                                 residual=float(resid[best]), n_seeds=int(members.size), t0=float(t0)))
     return out
 
 
@@ -587,24 +811,93 @@ def _merge_orbits(orbits: Sequence[PeriodicOrbit], dedup_tol: float) -> list[Per
     return merged
 
 
+def _with_trajectories(system, params, orbits: list[PeriodicOrbit], samples: int, integrator) -> list[PeriodicOrbit]:
+    """Attach to each orbit its trajectory over its ``m`` periods (one batched integration)."""
+    if not orbits or samples < 1:
+        return orbits
+    by_t0: dict[float, list[int]] = {}
+    for i, o in enumerate(orbits):
+        by_t0.setdefault(float(o.t0), []).append(i)
+    out = list(orbits)
+    for t0, idx in by_t0.items():
+        mmax = max(orbits[i].period for i in idx)
+        starts = np.stack([orbits[i].points[0] for i in idx])
+        _, states = sample_trajectory(system, params, starts, periods=mmax, samples_per_period=samples, t0=t0,
+                                      integrator=integrator)
+        states = np.asarray(states)
+        for j, i in enumerate(idx):
+            out[i] = dataclasses.replace(orbits[i], trajectory=states[j, : orbits[i].period * samples + 1])
+    return out
+
+
+def _check_newton_options(tol, max_iter, period_tol) -> None:
+    if not (tol > 0):
+        raise ValueError(f"tol={tol} must be > 0.")
+    if int(max_iter) < 1:
+        raise ValueError(f"max_iter={max_iter} must be >= 1.")
+    if not (period_tol > 0):
+        raise ValueError(f"period_tol={period_tol} must be > 0.")
+
+
+def _pad_rows(X: np.ndarray, size: int) -> np.ndarray:
+    """Pad a chunk of seeds to ``size`` rows (one compiled shape) by repeating its first row."""
+    if len(X) == size:
+        return X
+    return np.concatenate([X, np.repeat(X[:1], size - len(X), axis=0)], axis=0)
+
+
 def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | Sequence[int] = 1, t0=0.0,
                          integrator: Integrator = RK4(), tol: float = 1e-10, max_iter: int = 40,
-                         max_norm: float = 1e6, period_tol: float = 1e-6,
-                         dedup_tol: float = 1e-6) -> OrbitSearch:
-    """Shoot from many seeds and return the distinct periodic orbits (paper §4.1).
+                         max_norm: float = 1e6, period_tol: float = 1e-6, dedup_tol: float = 1e-6,
+                         chunk_size: int = 256, progress: bool = True,
+                         trajectory_samples: int = 200) -> OrbitSearch:
+    """Shoot from many seeds and return the distinct periodic orbits (paper §4.1, ref. [15]).
+
+    For every ``k`` and every seed, damped Newton on ``G(x) = P^k(x) - x = 0`` (the
+    k-fold stroboscopic map of paper eq. 6, full state) with the Jacobian from
+    ``jax.jacfwd`` (see :func:`periodic_orbit`); then the Floquet multipliers of each
+    converged orbit (its minimal period ``m``), and the converged seeds deduplicated
+    into distinct orbits. Seeds are processed in chunks of ``chunk_size`` (one compiled
+    shape per ``k``, ``vmap`` over the chunk): memory is bounded by the chunk, and the
+    result does not depend on ``chunk_size``. The system and parameters are checked
+    once on entry (:func:`~jaxgear.check_system`).
 
     Args:
-        seeds: ``(n, dim)`` array (shot for every ``k`` in ``period``), or a mapping
-            ``{k: (n_k, dim)}`` such as :func:`seeds_from_result` returns.
-        period: ``k`` or a sequence of ``k`` (ignored when ``seeds`` is a mapping).
+        system: a :class:`~jaxgear.ForcedSystem` of state dimension ``dim``.
+        params: its parameter pytree (not batched), e.g. :func:`jaxgear.paper_params`.
+        seeds: ``(n, dim)`` array of states at phase ``t0`` (state units; shot for
+            every ``k`` in ``period``), or a mapping ``{k: (n_k, dim)}`` such as
+            :func:`seeds_from_result` returns.
+        period: ``k`` or a sequence of ``k`` (forcing periods; ignored when ``seeds``
+            is a mapping).
+        t0: phase of the stroboscopic section (system time unit; the gear models use
+            dimensionless time ``omega_n t``).
+        integrator: :class:`~jaxgear.RK4` (default 200 steps per period) or
+            :class:`~jaxgear.Adaptive`.
+        tol: convergence on ``||P^k(x) - x||`` (Euclidean, state units).
+        max_iter, max_norm, period_tol: as in :func:`periodic_orbit`.
         dedup_tol: two converged seeds give the same orbit when a point of one lies
             within ``dedup_tol * (1 + ||x||)`` of a point of the other (any cyclic
             shift); an orbit found with several multiples of its period is reported
             once, with its minimal period.
-        Other arguments as in :func:`periodic_orbit`.
+        chunk_size: seeds per batch (>= 1).
+        progress: show a progress bar (tqdm, with time left); ``False`` silences it.
+        trajectory_samples: samples per forcing period of each orbit's stored
+            trajectory (:attr:`PeriodicOrbit.trajectory`, used by
+            :func:`jaxgear.plotting.plot_orbit` without integrating); 0 stores none.
     Returns:
-        :class:`OrbitSearch`.
+        :class:`OrbitSearch`: ``orbits`` (distinct, sorted by period), ``shots``
+        ``{k: ShootResult}`` with leading shape ``(n_k,)``, ``status_counts``, the
+        seeds, the parameter set and the settings.
+    Raises:
+        ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
+            options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
     """
+    from . import __version__
+    from ._cellmap import _chunks, _progress, _pytree_dict
+    from ._params import GearParams
+
+    start = time.perf_counter()
     if isinstance(seeds, Mapping):
         groups = {_check_period(k): np.asarray(v, dtype=float) for k, v in seeds.items()}
     else:
@@ -612,25 +905,62 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
         if not ks:
             raise ValueError("period must name at least one k >= 1.")
         groups = {_check_period(k): np.asarray(seeds, dtype=float) for k in ks}
+    if not groups:
+        raise ValueError("no seeds: give an (n, dim) array or a non-empty mapping {k: (n_k, dim)}.")
+    for k, X in groups.items():
+        if X.ndim != 2 or X.shape[1] != system.dim or len(X) == 0:
+            raise ValueError(f"seeds for period {k} must have shape (n, {system.dim}) with n >= 1 "
+                             f"({', '.join(system.state_names)}), got {X.shape}.")
+        check_state_shape(system, X)
+    _check_newton_options(tol, max_iter, period_tol)
+    if int(chunk_size) < 1:
+        raise ValueError(f"chunk_size={chunk_size} must be >= 1.")
+    if int(trajectory_samples) < 0:
+        raise ValueError(f"trajectory_samples={trajectory_samples} must be >= 0.")
+    first = next(iter(groups.values()))[0]
+    check_system(system, params, first)
+
+    t0_arr = jnp.asarray(t0, jnp.float64)
     shots: dict[int, ShootResult] = {}
     found: list[PeriodicOrbit] = []
     counts = {name: 0 for name in SHOOT_STATUS_NAMES.values()}
-    for k, X in sorted(groups.items()):  # one jit per distinct k
-        if X.ndim != 2:
-            raise ValueError(f"seeds for period {k} must have shape (n, {system.dim}), got {X.shape}.")
-        res = periodic_orbit(system, params, X, period=k, t0=t0, integrator=integrator, tol=tol,
-                             max_iter=max_iter, max_norm=max_norm, period_tol=period_tol)
-        shots[k] = res
-        st = np.asarray(res.status)
-        for code, name in SHOOT_STATUS_NAMES.items():
-            counts[name] += int(np.sum(st == code))
-        found.extend(_orbits_from_shots(res, dedup_tol))
-    return OrbitSearch(orbits=tuple(_merge_orbits(found, dedup_tol)), shots=shots, status_counts=counts)
+    bar = _progress(sum(len(X) for X in groups.values()), "shooting", progress, unit="seed")
+    try:
+        for k, X in sorted(groups.items()):  # one jit per distinct k (and chunk shape)
+            size = min(int(chunk_size), len(X))
+            parts = []
+            for a, b in _chunks(len(X), size):
+                res = _shoot_kernel(system, params, jnp.asarray(_pad_rows(X[a:b], size)), t0_arr, k, integrator,
+                                    float(tol), int(max_iter), float(max_norm), float(period_tol))
+                parts.append([np.asarray(f)[: b - a] for f in res])
+                bar.update(b - a)
+            res = ShootResult(*[np.concatenate(f, axis=0) for f in zip(*parts)])
+            shots[k] = res
+            for code, name in SHOOT_STATUS_NAMES.items():
+                counts[name] += int(np.sum(res.status == code))
+            found.extend(_orbits_from_shots(res, dedup_tol, float(t0)))
+    finally:
+        bar.close()
+    orbits = _with_trajectories(system, params, _merge_orbits(found, dedup_tol), int(trajectory_samples), integrator)
+    settings: dict[str, Any] = dict(
+        periods=sorted(groups), t0=float(t0), integrator=type(integrator).__name__,
+        steps_per_period=getattr(integrator, "steps_per_period", None), rtol=getattr(integrator, "rtol", None),
+        atol=getattr(integrator, "atol", None), tol=float(tol), max_iter=int(max_iter), max_norm=float(max_norm),
+        period_tol=float(period_tol), dedup_tol=float(dedup_tol), chunk_size=int(chunk_size),
+        trajectory_samples=int(trajectory_samples),
+    )
+    params_dict = params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
+    return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
+                       state_names=tuple(system.state_names), section_index=system.section_index,
+                       params=params_dict, settings=settings, version=__version__,
+                       runtime_s=time.perf_counter() - start)
 
 
 # --------------------------------------------------------------------------- verification
 class OrbitCheck(NamedTuple):
-    """Result of :func:`verify_orbit` (the paper's check by direct integration).
+    """Result of :func:`verify_orbit` (the paper's check by direct integration, §4.1).
+
+    Distances and points in state units; periods counted in forcing periods.
 
     Attributes:
         kept: True when every perturbed start stayed within ``leave_tol`` of the orbit
@@ -664,8 +994,14 @@ def verify_orbit(system: ForcedSystem, params, orbit, *, periods: int = 300, per
 
     Args:
         orbit: a :class:`PeriodicOrbit`, or its points ``(m, dim)`` at phase ``t0``.
+        periods: forcing periods integrated per trial.
+        perturbation: relative size of the initial perturbation (dimensionless).
         leave_tol: distance (state units) above which the motion has left the orbit.
         n_final: number of final stroboscopic points returned per trial.
+        t0: phase of the orbit's points (system time unit).
+    Returns:
+        :class:`OrbitCheck` (``distance`` of shape ``(n_trials, periods)``,
+        ``final_points`` ``(n_trials, n_final, dim)``).
     """
     pts = np.asarray(getattr(orbit, "points", orbit), dtype=float)
     if pts.ndim == 1:

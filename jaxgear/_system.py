@@ -28,8 +28,9 @@ class ForcedSystem(eqx.Module):
         section_index: coordinate ``i`` of the default hyperplane section
             ``{x_i = 0}`` (the paper's Σ = {x4 = 0} is index 3), or ``None``.
         name: a short label used in results and figures.
-        param_names: names of the scalar parameters for tables and saved results
-            (optional; gear parameters provide their own).
+
+    Times and states are in the user's units (the gear models are dimensionless:
+    time ``tau = omega_n t``, lengths in ``b_c``, MODEL.md §3).
     """
 
     vector_field: Callable[[Any, Any, Any], Any] = eqx.field(static=True)
@@ -58,11 +59,18 @@ class ForcedSystem(eqx.Module):
 
 
 def check_system(system: ForcedSystem, params: Any, x0: Any | None = None) -> None:
-    """Check a system and its parameters once, outside any ``jit``, with clear errors.
+    """Check a system (paper eq. 6) and its parameters once, outside any ``jit``, with clear errors.
 
-    Raises ``ValueError`` when the period is not a positive finite number, when the
-    vector field returns the wrong shape, or a non-finite value at ``x0`` (default: the
-    origin) at ``t = 0``.
+    Args:
+        system: the :class:`ForcedSystem`.
+        params: its parameter pytree (scalars; batched parameters only have their
+            periods checked).
+        x0: a state of shape ``(dim,)`` (or ``(..., dim)``: its first row) at which the
+            vector field is evaluated at ``t = 0``; default the origin.
+    Raises:
+        ValueError: the period ``T`` (system time unit) is not a positive finite number,
+            the vector field returns a shape other than ``(dim,)``, or a non-finite
+            value at ``x0``.
     """
     T = np.asarray(system.period(params), dtype=float)
     if T.ndim == 0:

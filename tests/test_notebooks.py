@@ -3,6 +3,7 @@
 Key numbers are asserted inside the notebooks; a failing assert fails the test.
 """
 
+import os
 from pathlib import Path
 
 import nbformat
@@ -13,10 +14,13 @@ NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_runs(path, tmp_path):
+def test_notebook_runs(path, tmp_path, monkeypatch):
     nb = nbformat.read(path, as_version=4)
     assert not any(c.get("outputs") for c in nb.cells if c.cell_type == "code"), "store notebooks without outputs"
     assert any("FULL = False" in c.source for c in nb.cells), "a FULL switch at the top selects the full size"
+    # the kernel imports jaxgear from this source tree (not whichever copy is installed)
+    root = str(Path(__file__).parent.parent)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
     client = NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}})
     client.execute()
 

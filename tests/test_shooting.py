@@ -286,3 +286,74 @@ def test_plot_orbit_figure():
     assert fig3.axes[0].name == "3d"
     with pytest.raises(ValueError):
         plot_orbit(jg.DUFFING, p, o, coords=(0, 5))
+
+
+# --------------------------------------------------------------------------- batches, files
+def test_find_periodic_orbits_independent_of_chunk_size():
+    p = duffing()
+    seeds = np.concatenate([jg.seeds_in_box(7, [-1.5, -1.5], [1.5, 1.5], seed=3), [[40.0, -40.0], [1.0, 1.1]]])
+    runs = [jg.find_periodic_orbits(jg.DUFFING, p, seeds, period=1, chunk_size=c, max_iter=15, progress=False,
+                                    trajectory_samples=0) for c in (2, 4, 64)]
+    ref = runs[0]
+    assert len(ref.orbits) >= 2 and 5 <= ref.status_counts["converged"] < 9  # some lanes fail
+    for other in runs[1:]:
+        assert other.status_counts == ref.status_counts
+        for k in (1,):
+            a, b = ref.shots[k], other.shots[k]
+            for name in ("status", "iterations", "min_period", "stable", "instability"):
+                np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+            conv = a.status == SHOOT_CONVERGED
+            for name in ("point", "orbit", "monodromy", "multipliers", "residual", "last_iterate"):
+                # the same lanes to round-off (XLA may order a batched sum differently for another
+                # batch size; a lane that wanders without converging amplifies that, so converged lanes)
+                np.testing.assert_allclose(getattr(a, name)[conv], getattr(b, name)[conv], rtol=1e-12, atol=1e-12,
+                                           err_msg=name)
+        assert [(o.period, o.stable, o.n_seeds) for o in other.orbits] == [(o.period, o.stable, o.n_seeds)
+                                                                          for o in ref.orbits]
+        for o, q in zip(ref.orbits, other.orbits):
+            np.testing.assert_allclose(q.points, o.points, rtol=0, atol=1e-12)
+
+
+def test_find_periodic_orbits_checks_input_on_entry():
+    with pytest.raises(ValueError, match="period must be positive"):  # check_system: T = 2 pi / omega
+        jg.find_periodic_orbits(jg.DUFFING, duffing(omega=0.0), np.zeros((2, 2)), progress=False)
+    with pytest.raises(ValueError, match="chunk_size"):
+        jg.find_periodic_orbits(jg.DUFFING, duffing(), np.zeros((2, 2)), chunk_size=0, progress=False)
+    with pytest.raises(ValueError, match="shape"):
+        jg.find_periodic_orbits(jg.DUFFING, duffing(), np.zeros((0, 2)), progress=False)
+    with pytest.raises(ValueError):
+        jg.find_periodic_orbits(jg.DUFFING, duffing(), np.array([[np.inf, 0.0]]), progress=False)
+
+
+def test_find_periodic_orbits_stores_settings_and_trajectories():
+    p = duffing()
+    s = jg.find_periodic_orbits(jg.DUFFING, p, np.array([[1.0, 1.1]]), progress=False, trajectory_samples=40)
+    o = s.orbits[0]
+    assert s.params == {"delta": 0.1, "alpha": 1.0, "beta": 1.0, "gamma": 0.3, "omega": 1.4}
+    assert s.system == "duffing" and s.state_names == ("x", "v") and s.settings["tol"] == 1e-10
+    assert o.trajectory.shape == (41, 2) and o.samples_per_period == 40
+    # the stored trajectory is the flow: it starts at the orbit point and closes after one period
+    # (40 samples of 5 RK4 steps: the 200 steps of the map the orbit is a fixed point of)
+    np.testing.assert_array_equal(o.trajectory[0], o.points[0])
+    assert np.linalg.norm(o.trajectory[-1] - o.points[0]) < 1e-10
+    ts, xs = jg.sample_trajectory(jg.DUFFING, p, o.points[0], periods=1, samples_per_period=40)
+    np.testing.assert_allclose(o.trajectory, np.asarray(xs), rtol=0, atol=1e-13)
+
+
+def test_cli_shoot_out_writes_orbits_json_and_figures(tmp_path):
+    from jaxgear.cli import main
+
+    x = ",".join(repr(v) for v in [5.5791, -0.6199, 10.6749, -0.2539])  # near the paper's unstable P-1
+    with redirect_stdout(io.StringIO()) as buf:
+        assert main(["shoot", "--from", x, "--period", "1", "--out", str(tmp_path / "a"), "--quiet"]) == 0
+    assert "wrote orbits.nc, orbits.json, orbit_1_P-1.png, multipliers.png" in buf.getvalue()
+    s = jg.load(tmp_path / "a" / "orbits.nc")
+    assert isinstance(s, jg.OrbitSearch) and [o.instability for o in s.orbits] == ["flip"]
+    js = json.loads((tmp_path / "a" / "orbits.json").read_text())
+    assert js["params"] == jg.paper_params().to_dict() and js["orbits"][0]["period"] == 1
+    np.testing.assert_array_equal(js["orbits"][0]["points"], s.orbits[0].points)
+    assert (tmp_path / "a" / "orbit_1_P-1.png").stat().st_size > 1000
+    with redirect_stdout(io.StringIO()):
+        assert main(["shoot", "--from", x, "--period", "1", "--out", str(tmp_path / "b"), "--no-figures",
+                     "--quiet"]) == 0
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["orbits.json", "orbits.nc"]

@@ -5,7 +5,9 @@ stroboscopic map of the reduced 2-DOF model, from user points (``--from``), from
 cell-mapping result (``--seeds-from``) or from random points of a box (``--random``).
 Prints each distinct orbit: its points, minimal period, Floquet multipliers,
 stability and kind of instability; ``--verify`` adds the paper's check by direct
-integration; ``--json`` prints one JSON object (with the full parameter set).
+integration; ``--json`` prints one JSON object (with the full parameter set);
+``--out DIR`` writes ``orbits.nc`` (open with ``jaxgear.load`` or xarray),
+``orbits.json`` (the ``--json`` object) and figures (``orbit_N.png``, ``multipliers.png``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ from __future__ import annotations
 import json
 
 import numpy as np
+
+from pathlib import Path
 
 from .common import add_param_options
 
@@ -68,6 +72,11 @@ def add_parser(sub) -> None:
     p.add_argument("--verify", type=int, default=0, metavar="PERIODS",
                    help="check each orbit by direct integration over PERIODS periods from a perturbed start")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--out", metavar="DIR", default=None,
+                   help="also write DIR/orbits.nc (every orbit and every shot; open with jaxgear.load or "
+                   "xarray.open_dataset), DIR/orbits.json (the --json object) and PNG figures")
+    p.add_argument("--no-figures", action="store_true", help="with --out: skip the PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
@@ -141,13 +150,13 @@ def run(args) -> int:
     params = params.uniform()
     integ = RK4(steps_per_period=args.steps_per_period)
     search = find_periodic_orbits(REDUCED, params, seeds, period=periods or [1], integrator=integ,
-                                  tol=args.tol, max_iter=args.max_iter)
-    n_seeds = sum(np.asarray(r.status).size for r in search.shots.values())
+                                  tol=args.tol, max_iter=args.max_iter, progress=not (args.quiet or args.json))
+    n_seeds = search.n_seeds
     checks = []
     if args.verify > 0:
         checks = [verify_orbit(REDUCED, params, o, periods=args.verify, integrator=integ) for o in search.orbits]
 
-    if args.json:
+    if args.json or args.out:
         orbits = []
         for i, o in enumerate(search.orbits):
             d = o.to_dict()
@@ -164,9 +173,12 @@ def run(args) -> int:
                          "steps_per_period": args.steps_per_period, "tol": args.tol, "max_iter": args.max_iter,
                          "t0": 0.0, "seeds_from": args.seeds_from, "random": args.random, "seed": args.seed},
             "status_counts": search.status_counts,
-            "orbits": orbits,
+            "orbits": orbits, "version": search.version,
         }
-        print(json.dumps(out))
+        if args.json:
+            print(json.dumps(out))
+    written = _write_outputs(search, out, args) if args.out else []
+    if args.json:
         return 0
 
     names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
@@ -196,4 +208,25 @@ def run(args) -> int:
                 print(f"  direct integration ({args.verify} periods): leaves the orbit after {first} period(s); "
                       f"ends at " + "; ".join("diverged" if not np.all(np.isfinite(e)) else
                                                "[" + ", ".join(f"{v:.4f}" for v in e) + "]" for e in ends))
+    if written:
+        print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0
+
+
+def _write_outputs(search, summary: dict, args) -> list[str]:
+    """``orbits.nc``, ``orbits.json`` and (unless ``--no-figures``) PNG figures in ``--out``."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    search.save(out / "orbits.nc")
+    (out / "orbits.json").write_text(json.dumps(summary, indent=2))
+    written = ["orbits.nc", "orbits.json"]
+    if not args.no_figures and search.orbits:
+        from ..plotting import plot_multipliers, plot_orbit
+
+        figs = {f"orbit_{i + 1}_P-{o.period}.png": plot_orbit(search, i, coords=(0, 1, 2))
+                for i, o in enumerate(search.orbits)}
+        figs["multipliers.png"] = plot_multipliers(search)
+        for name, fig in figs.items():
+            fig.savefig(out / name, dpi=110)
+        written += list(figs)
+    return written

@@ -95,7 +95,15 @@ def plot_domains(result: GlobalResult, axis: int | str = -1, values=None, n_slic
 
 def plot_domains_3d(result: GlobalResult, attractors=None, *, max_cells: int = 20000, seed: int = 0):
     """3-D view of domains of attraction: the cells of each chosen attractor's domain as
-    points over the first three grid axes (paper Fig. 7-8), its periodic cells as squares."""
+    points over the first three grid axes (paper Fig. 7-8), its periodic cells as squares.
+
+    Args:
+        result: a :class:`~jaxgear.GlobalResult` (also one loaded from disk: nothing is
+            recomputed) with a grid of at least 3 axes; axes in state units.
+        attractors: ids to draw (default all).
+        max_cells: at most this many cells per domain are drawn (a random subset, ``seed``).
+    Returns a Figure with one 3-D axes: one point set per domain (+ one per set of periodic cells).
+    """
     g = result.grid
     if len(g.axes) < 3:
         raise ValueError("plot_domains_3d needs a grid of at least 3 axes.")
@@ -130,7 +138,12 @@ def plot_domains_3d(result: GlobalResult, attractors=None, *, max_cells: int = 2
 
 def plot_attractors(result: GlobalResult, coords=(0, 1, 2), *, section: bool = True):
     """The attractors' points: section crossings (``section=True``) or stroboscopic points,
-    projected on two or three state coordinates (paper Fig. 3-6 markers)."""
+    projected on two or three state coordinates (paper Fig. 3-6 markers).
+
+    ``coords``: 2 or 3 state indices (e.g. ``(0, 1, 2)`` for x1, x2, x3; state units).
+    Reads only the result (works on a loaded one). Returns a Figure with one axes
+    (3-D for three coordinates) and one marker set per attractor.
+    """
     coords = tuple(coords)
     if len(coords) not in (2, 3):
         raise ValueError("coords must name 2 or 3 state coordinates.")
@@ -153,7 +166,12 @@ def plot_attractors(result: GlobalResult, coords=(0, 1, 2), *, section: bool = T
 
 
 def plot_shares(result: GlobalResult):
-    """Bar chart of the share of each attractor's domain (and the sink)."""
+    """Bar chart of the share of each attractor's domain (and the sink), in % of the cells.
+
+    The paper's measure of global stability (§4.2: P-4 93.9 %, P-8 6.1 % of region D).
+    Reads only the result (works on a loaded one). Returns a Figure with one axes and
+    ``len(result.attractors) + 1`` bars.
+    """
     fig = new_figure(figsize=(5.5, 3.5), layout="constrained")
     ax = fig.add_subplot()
     labels = [f"{a.id}: {a.label}" for a in result.attractors] + ["sink"]
