@@ -303,12 +303,9 @@ class Branch:
 
     def save(self, path: str | Path) -> Path:
         """Write the branch to a netCDF file (h5netcdf, atomically); reload with :func:`load_branch`."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        self.to_xarray().to_netcdf(tmp, engine="h5netcdf")
-        tmp.replace(path)
-        return path
+        from ._io import _write_netcdf
+
+        return _write_netcdf(self.to_xarray(), path)
 
 
 def load_branch(path: str | Path) -> Branch:
