@@ -88,6 +88,23 @@ from ._shooting import (  # noqa: E402
     OrbitCheck as OrbitCheck,
 )
 
+from ._design import (  # noqa: E402
+    design as design,
+    DesignResult as DesignResult,
+    load_design as load_design,
+    OrbitSamples as OrbitSamples,
+    sample_orbit as sample_orbit,
+    MeshForces as MeshForces,
+    mesh_forces as mesh_forces,
+    transmission_error as transmission_error,
+    peak_to_peak as peak_to_peak,
+    rms as rms,
+    max_multiplier as max_multiplier,
+    mesh_force_ptp as mesh_force_ptp,
+    mesh_force_rms as mesh_force_rms,
+    transmission_error_rms as transmission_error_rms,
+)
+
 
 def __getattr__(name):
     # ``jaxgear.plotting`` is imported on first use (keeps matplotlib out of import time).
