@@ -383,8 +383,8 @@ class DesignResult:
 
     @property
     def improvement(self) -> float:
-        """Relative decrease of the objective, ``1 - final / initial``."""
-        return 1.0 - self.objective / self.initial_objective
+        """Relative decrease of the objective, ``(initial - final) / |initial|``."""
+        return (self.initial_objective - self.objective) / abs(self.initial_objective)
 
     @property
     def n_steps(self) -> int:
@@ -552,7 +552,7 @@ def _default_optimizer(steps: int):
 
 def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamples], Any], *,
            free: Mapping[str, tuple[float, float]], period: int = 1, t0=0.0, optimizer=None, steps: int = 100,
-           tol: float = 1e-6, require_stable: bool = False, max_shrink: int = 6,
+           tol: float = 1e-6, require_stable: bool = False, max_shrink: int = 6, max_jump: float | None = 0.1,
            integrator: Integrator = RK4(), samples_per_period: int | None = None, shoot_tol: float = 1e-10,
            max_iter: int = 40, max_norm: float = 1e6, progress: bool = True) -> DesignResult:
     """Minimise a scalar of a periodic orbit over chosen parameters (gradient-based design).
@@ -571,10 +571,13 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
     ends exactly on its bound. Convergence is measured by the projected gradient
     ``||u - clip(u - dJ/du)||``, which vanishes at a constrained stationary point.
 
-    When Newton fails at a proposed step (or, with ``require_stable``, the new orbit has
-    a multiplier ``|lambda| >= 1``, or its minimal period changed), the step is halved
-    toward the last good iterate, up to ``max_shrink`` times; if that does not help the
-    design stops and returns the last good iterate with ``status`` saying why.
+    When Newton fails at a proposed step, or converges to another orbit (its minimal
+    period changed, or its point moved by more than ``max_jump * (1 + ||x||)``: past a
+    fold the tracked orbit no longer exists and Newton may land on a coexisting one), or
+    with ``require_stable`` the new orbit has a multiplier ``|lambda| >= 1``, the step is
+    halved toward the last good iterate, up to ``max_shrink`` times; if that does not
+    help the design stops and returns the last good iterate with ``status`` saying why
+    (the tracked orbit ends near its fold or its stability boundary).
 
     Args:
         system: any :class:`~jaxgear.ForcedSystem`.
@@ -595,6 +598,8 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
         require_stable: keep the tracked orbit asymptotically stable (shrink steps that
             would destabilise it; the initial orbit must be stable).
         max_shrink: halvings of a rejected step before the design stops.
+        max_jump: largest accepted move of the orbit's point in one step, relative to
+            ``1 + ||x||`` (``None``: no limit).
         integrator, shoot_tol, max_iter, max_norm: as in :func:`~jaxgear.periodic_orbit`.
         samples_per_period: samples of the orbit per period for the objective (default
             the integrator's steps per period).
@@ -631,12 +636,19 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
             raise ValueError(f"the start value {n}={float(v):.6g} is outside its bounds [{lo:.6g}, {hi:.6g}].")
         lows.append(lo)
         highs.append(hi)
+    try:
+        _set_params(params, names, [jnp.asarray(0.5 * (a + b)) for a, b in zip(lows, highs)])
+    except (TypeError, ValueError):
+        raise ValueError(f"the free parameters {list(names)} must be array leaves of the parameter pytree "
+                         "(a static field such as the number of planets N cannot be free).") from None
     if int(steps) < 0:
         raise ValueError(f"steps={steps} must be >= 0.")
     if not tol >= 0:
         raise ValueError(f"tol={tol} must be >= 0.")
     if int(max_shrink) < 0:
         raise ValueError(f"max_shrink={max_shrink} must be >= 0.")
+    if max_jump is not None and not max_jump > 0:
+        raise ValueError(f"max_jump={max_jump} must be > 0 (or None for no limit).")
     x0 = np.asarray(x0, dtype=float)
     check_state_shape(system, x0)
     if x0.shape != (system.dim,):
@@ -705,8 +717,10 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
             finite = np.isfinite(float(ev_new.value)) and np.all(np.isfinite(np.asarray(ev_new.grad)))
             if st != SHOOT_CONVERGED or not finite:
                 why = "newton failed"
-            elif int(ev_new.min_period) != period0:
-                why = "newton failed"  # jumped to another orbit (or the orbit changed period)
+            elif int(ev_new.min_period) != period0 or (
+                    max_jump is not None and np.linalg.norm(np.asarray(ev_new.point) - np.asarray(ev.point))
+                    > max_jump * (1.0 + np.linalg.norm(np.asarray(ev.point)))):
+                why = "newton failed"  # it converged to another orbit: the tracked one is gone
             elif require_stable and not np.max(np.abs(np.asarray(ev_new.multipliers))) < 1.0:
                 why = "lost stability"
             else:
@@ -715,7 +729,8 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
             scale *= 0.5
         if not accepted:
             status = why
-            message = (f"no converged P-{period0} orbit near the last iterate even after {int(max_shrink)} step halvings"
+            message = (f"no converged P-{period0} orbit near the last iterate even after {int(max_shrink)} step halvings "
+                       "(Newton failed or reached another orbit): the tracked orbit ends near a fold"
                        if why == "newton failed" else
                        f"every step toward lower objective (down to 1/{2 ** int(max_shrink)} of the proposed one) "
                        "made the orbit unstable: the optimum lies on the stability boundary")
@@ -731,7 +746,7 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
     vals = lows_a + u * (highs_a - lows_a)
     final = _set_params(params, names, [vals[i] for i in range(len(names))])
     settings = dict(period=k, t0=float(t0), steps=int(steps), tol=float(tol), require_stable=bool(require_stable),
-                    max_shrink=int(max_shrink), integrator=type(integrator).__name__,
+                    max_shrink=int(max_shrink), max_jump=max_jump, integrator=type(integrator).__name__,
                     steps_per_period=getattr(integrator, "steps_per_period", None), samples_per_period=samples,
                     shoot_tol=float(shoot_tol), optimizer="adam, lr 0.05 cosine decay" if default_opt else "user")
     return DesignResult(
