@@ -90,6 +90,7 @@ from ._shooting import (  # noqa: E402
 
 from ._design import (  # noqa: E402
     design as design,
+    replace_params as replace_params,
     DesignResult as DesignResult,
     load_design as load_design,
     OrbitSamples as OrbitSamples,

@@ -74,6 +74,7 @@ __all__ = [
     "mesh_force_ptp",
     "mesh_force_rms",
     "transmission_error_rms",
+    "replace_params",
     "design",
     "DesignResult",
     "load_design",
@@ -300,6 +301,24 @@ def _set_params(params, names, values):
             out[n] = v
         return type(params)(out) if not isinstance(params, dict) else out
     return eqx.tree_at(lambda p: [getattr(p, n) for n in names], params, list(values))
+
+
+def replace_params(params, **changes):
+    """``params`` with some scalar fields replaced, safe inside ``jax.grad``/``jit``.
+
+    Unlike :meth:`GearParams.replace` (which validates concrete values and rebuilds the
+    object) this swaps the leaves with ``eqx.tree_at``, so the new values may be tracers:
+    ``jax.grad(lambda c: scalar(replace_params(p, c_sp=c)))(0.08)``. Works for
+    eqx.Module, NamedTuple and dict parameters.
+    """
+    if not changes:
+        return params
+    names = list(changes)
+    try:
+        return _set_params(params, names, [jnp.asarray(v, jnp.float64) for v in changes.values()])
+    except (TypeError, ValueError, AttributeError, KeyError):
+        raise ValueError(f"cannot replace {names}: each must be an array leaf of {type(params).__name__} "
+                         "(static fields such as N cannot change).") from None
 
 
 def _params_dict(params) -> dict:
