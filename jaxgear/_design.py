@@ -360,7 +360,8 @@ class DesignResult:
     Attributes:
         params: the final parameters (same pytree type as the input).
         orbit: the final tracked orbit (:class:`~jaxgear.PeriodicOrbit`: points at phase
-            ``t0``, minimal period, Floquet multipliers, stability).
+            ``t0`` starting with the tracked point ``x*``, minimal period, Floquet
+            multipliers, stability).
         initial_orbit: the orbit at the initial parameters.
         history: dict of arrays over the accepted iterates ``0..n`` (0 = the start):
             ``"objective"``, one entry per free parameter name (its value),
@@ -465,6 +466,8 @@ class DesignResult:
             status=self.status, message=self.message, free=json.dumps({n: list(b) for n, b in self.free.items()}),
             settings=json.dumps(self.settings), orbits=json.dumps(orbit_meta),
             history_keys=json.dumps(list(h)),
+            units=("parameters and objective dimensionless (MODEL.md §4)" if self.system.startswith("planetary")
+                   else "the system's own units"),
         )
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
@@ -540,7 +543,7 @@ def _evaluate(u, x_guess, params, lows, highs, names, system, objective, k, t0, 
     """
 
     def f(u):
-        vals = lows + u * (highs - lows)
+        vals = _values(u, lows, highs)
         p = _set_params(params, names, [vals[i] for i in range(len(names))])
         res = periodic_orbit(system, p, x_guess, period=k, t0=t0, integrator=integrator, tol=tol,
                              max_iter=max_iter, max_norm=max_norm)
@@ -553,6 +556,14 @@ def _evaluate(u, x_guess, params, lows, highs, names, system, objective, k, t0, 
     (J, res), g = jax.value_and_grad(f, has_aux=True)(u)
     return _Eval(J, g, jax.lax.stop_gradient(res.point), res.orbit, res.status, res.residual, res.iterations,
                  res.multipliers, res.min_period)
+
+
+def _values(u, lows, highs):
+    """Parameter values of the scaled ``u in [0, 1]``: ``low + u (high - low)``, with the
+    upper bound hit exactly at ``u = 1`` (a value-only correction; the derivative stays
+    ``high - low`` so the gradient can move a parameter off its bound)."""
+    v = lows + u * (highs - lows)
+    return v + jax.lax.stop_gradient(jnp.where(u >= 1.0, highs - v, 0.0))
 
 
 def _orbit_of(ev: _Eval, k: int) -> PeriodicOrbit:
@@ -704,7 +715,7 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
                              "newton_iterations": [], "residual": [], "step_scale": []}
 
     def record(ev, u, scale):
-        vals = np.asarray(lows_a + u * (highs_a - lows_a))
+        vals = np.asarray(_values(u, lows_a, highs_a))
         g = np.asarray(ev.grad)
         un = np.asarray(u)
         pg = un - np.clip(un - g, 0.0, 1.0)
@@ -762,7 +773,7 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
         if pg <= tol:
             status, message = "converged", f"projected gradient {pg:.2e} <= tol={tol:g}."
     bar.close()
-    vals = lows_a + u * (highs_a - lows_a)
+    vals = _values(u, lows_a, highs_a)
     final = _set_params(params, names, [vals[i] for i in range(len(names))])
     settings = dict(period=k, t0=float(t0), steps=int(steps), tol=float(tol), require_stable=bool(require_stable),
                     max_shrink=int(max_shrink), max_jump=max_jump, integrator=type(integrator).__name__,

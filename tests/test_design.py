@@ -223,3 +223,18 @@ def test_design_input_errors(paper_p4):
     with pytest.raises(ValueError, match="mesh forces"):
         q = jg.DuffingParams()
         jg.mesh_forces(q, (jnp.zeros(3), jnp.zeros((3, 2))))
+
+
+def test_design_upper_bound_is_exact_and_can_be_left():
+    # the 2-DOF chain's response falls with damping here: c ends exactly on its upper bound;
+    # started on that bound with the phase far from psi*, psi still moves to psi*
+    H = _closed_form(0.3)
+    psi_star = float(np.angle(-H[0, 0] * A1 / (H[0, 1] * 0.7)))
+    obj = lambda q, o: jg.rms(o.states[:, 0])
+    r = jg.design(TWO_SOURCE, TwoSource(psi=0.0, a2=0.7, c=0.3), np.zeros(4), obj,
+                  free={"psi": (-np.pi, np.pi), "c": (0.05, 0.3)}, steps=300, progress=False)
+    assert float(r.params.c) == 0.3 and abs(float(r.params.psi) - psi_star) < 1e-4
+    # the objective pulls c off a lower bound it started on
+    r = jg.design(TWO_SOURCE, TwoSource(psi=psi_star, a2=0.7, c=0.05), np.zeros(4), obj,
+                  free={"c": (0.05, 0.3)}, steps=5, progress=False)
+    assert np.all(np.diff(r.history["c"]) > 0)
