@@ -100,6 +100,23 @@ from ._continuation import (  # noqa: E402
     load_branch as load_branch,
 )
 from ._io import load as load  # noqa: E402
+from ._design import (  # noqa: E402
+    design as design,
+    replace_params as replace_params,
+    DesignResult as DesignResult,
+    load_design as load_design,
+    OrbitSamples as OrbitSamples,
+    sample_orbit as sample_orbit,
+    MeshForces as MeshForces,
+    mesh_forces as mesh_forces,
+    transmission_error as transmission_error,
+    peak_to_peak as peak_to_peak,
+    rms as rms,
+    max_multiplier as max_multiplier,
+    mesh_force_ptp as mesh_force_ptp,
+    mesh_force_rms as mesh_force_rms,
+    transmission_error_rms as transmission_error_rms,
+)
 
 
 def __getattr__(name):

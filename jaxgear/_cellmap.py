@@ -251,6 +251,46 @@ def _refine_orbit(system, params, x: np.ndarray, k: int, integrator, settle: int
     return np.roll(pts, -start, axis=0), res
 
 
+def _minimal_periods(labels: np.ndarray, att_points: list, cycles: list, tol: float, merge_tol: float):
+    """Reduce each attractor to the minimal period of its refined points and merge duplicates.
+
+    A slowly spiralling transient (complex multipliers whose rotation is close to 2 pi / k)
+    can pass the recurrence test at ``k`` times the true period before it passes at the true
+    one; after refinement its ``k`` points then repeat with a smaller period ``j`` (a P-1
+    spur-gear orbit with multipliers 0.84 e^(+-2.1i) was reported as P-3). Returns
+    ``(labels, att_points, cycles)`` with periods reduced and equal attractors merged.
+    """
+    reduced = []
+    for pts, k, res in att_points:
+        pts = np.asarray(pts)
+        if k > 1 and len(pts) == k and np.all(np.isfinite(pts)):
+            scale = tol * (1.0 + np.abs(pts).max())
+            for j in (d for d in range(1, k) if k % d == 0):
+                if np.max(np.linalg.norm(pts - np.roll(pts, -j, axis=0), axis=1)) <= scale:
+                    pts, k = pts[:j], j
+                    break
+        reduced.append([pts, k, res])
+    target = list(range(len(reduced)))
+    for i in range(len(reduced)):
+        for j in range(i):
+            if target[j] != j:
+                continue
+            (pi, ki, _), (pj, kj, _) = reduced[i], reduced[j]
+            if ki == kj and ki > 0 and _set_distance(pi, pj) <= merge_tol * (1 + np.abs(pj).max()):
+                target[i] = j
+                break
+    if target == list(range(len(reduced))):
+        return labels, [tuple(r) for r in reduced], cycles
+    keep = sorted(set(target))
+    new_id = {old: keep.index(target[old]) for old in range(len(reduced))}
+    out = labels.copy()
+    for old, new in new_id.items():
+        out[labels == old] = new
+    merged_cycles = [np.unique(np.concatenate([np.asarray(cycles[o], np.int64) for o in range(len(reduced))
+                                               if target[o] == t])) for t in keep]
+    return out, [tuple(reduced[t]) for t in keep], merged_cycles
+
+
 # --------------------------------------------------------------- main entry
 def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGrid | None = None, *,
                    method: str = "poincare-like", mapping_steps: int | None = None,
@@ -330,7 +370,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
             raise ValueError(f"{name}={v} must be >= {lo}.")
     if not (capture_radius == "auto" or (isinstance(capture_radius, (int, float)) and capture_radius >= 0)):
         raise ValueError(f"capture_radius={capture_radius!r} must be 'auto' or a number >= 0.")
-    check_system(system, params, grid.centres(np.array([0]))[0])
+    check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
     sec_idx = system.section_index if section_index is None else section_index
     n = grid.n_cells
     settings: dict[str, Any] = dict(
@@ -356,6 +396,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
                                                       max_period, period_tol, merge_tol, chunk_size)
         mean_periods = float(mapping_steps)
 
+    labels, att_points, cycles = _minimal_periods(labels, att_points, cycles, period_tol, merge_tol)
     # Assemble attractors, sorted by decreasing share, ids renumbered 0..A-1.
     counts = np.array([(labels == i).sum() for i in range(len(att_points))], dtype=np.int64)
     order = np.argsort(-counts, kind="stable")
@@ -714,9 +755,14 @@ def compare_with_direct(result: GlobalResult, system: ForcedSystem | None = None
 
     system = REDUCED if system is None else system
     if params is None:
+        if system is not REDUCED:
+            raise ValueError("compare_with_direct: pass the parameters of your system (params=...).")
         from ._params import GearParams
 
         params = GearParams.from_dict(result.params)
+    if result.grid.dim != system.dim:
+        raise ValueError(f"compare_with_direct: the result's grid has {result.grid.dim} coordinates, "
+                         f"the system {system.dim}.")
     s = result.settings
     integrator = integrator or RK4(int(s.get("steps_per_period") or 200))
     rng = np.random.default_rng(seed)

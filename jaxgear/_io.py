@@ -33,6 +33,7 @@ LOADERS: dict[str, str] = {
     "BasinSweep": "jaxgear._sweep:load_basin_sweep",
     "ParameterMap": "jaxgear._sweep:load_parameter_map",
     "Branch": "jaxgear._continuation:load_branch",
+    "DesignResult": "jaxgear._design:load_design",
 }
 """Result type (``attrs["jaxgear_type"]``) -> ``"module:function"`` that loads it."""
 

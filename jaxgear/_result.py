@@ -181,7 +181,8 @@ class GlobalResult:
             grid=json.dumps(self.grid.to_dict()), settings=json.dumps(self.settings),
             params=json.dumps(self.params), n_sink=self.n_sink, n_unresolved=self.n_unresolved,
             runtime_s=self.runtime_s, mean_periods=self.mean_periods, version=self.version,
-            units="dimensionless: lengths in b_c, time in 1/omega_n (MODEL.md §3)",
+            units=("dimensionless: lengths in b_c, time in 1/omega_n (MODEL.md §3)"
+                   if self.system.startswith("planetary") else "the system's own units"),
         )
         for k, v in self.params.items():
             if np.ndim(v) == 0:

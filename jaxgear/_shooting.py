@@ -401,7 +401,7 @@ def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
     if not (period_tol > 0):
         raise ValueError(f"period_tol={period_tol} must be > 0.")
     if _params_concrete(params):
-        check_system(system, params)
+        check_system(system, params, np.asarray(x0, dtype=float).reshape(-1, system.dim)[0], batched=False)
     x0 = jnp.asarray(x0, dtype=jnp.float64)
     lead = x0.shape[:-1]
     X = x0.reshape(-1, system.dim)

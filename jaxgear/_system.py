@@ -58,42 +58,64 @@ class ForcedSystem(eqx.Module):
         return len(self.state_names)
 
 
-def check_system(system: ForcedSystem, params: Any, x0: Any | None = None) -> None:
-    """Check a system (paper eq. 6) and its parameters once, outside any ``jit``, with clear errors.
+def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, batched: bool | None = None) -> None:
+    """Check a user system (paper eq. 6) and its parameters once, outside any ``jit``, with clear errors.
+
+    Raises ``ValueError`` when
+
+    - ``system.period(params)`` fails, is not a positive finite number, or is not a
+      scalar although the parameters are not batched (a period that depends on the
+      parameters in a non-scalar way);
+    - ``system.vector_field(0, x, params)`` fails, returns something other than an
+      array of shape ``(dim,)`` for a state of shape ``(dim,)``, or a non-finite value
+      at ``x0`` (default: the origin; the first state if ``x0`` is a batch).
 
     Args:
-        system: the :class:`ForcedSystem`.
-        params: its parameter pytree (scalars; batched parameters only have their
-            periods checked).
-        x0: a state of shape ``(dim,)`` (or ``(..., dim)``: its first row) at which the
-            vector field is evaluated at ``t = 0``; default the origin.
-    Raises:
-        ValueError: the period ``T`` (system time unit) is not a positive finite number,
-            the vector field returns a shape other than ``(dim,)``, or a non-finite
-            value at ``x0``.
+        batched: ``False``: the parameters are one set (the period must be a scalar);
+            ``True``: batched parameters for a sweep (a period of any shape, all
+            positive; the per-lane field check is the caller's); ``None`` (default):
+            batched only if some parameter leaf is an array and the period is one.
     """
-    T = np.asarray(system.period(params), dtype=float)
-    if T.ndim == 0:
-        if not np.isfinite(T) or T <= 0:
-            raise ValueError(f"{system.name}: the forcing period must be positive and finite, got {float(T)}.")
-    elif not (np.all(np.isfinite(T)) and np.all(T > 0)):
-        raise ValueError(f"{system.name}: the forcing period must be positive and finite, got {T}.")
+    name = getattr(system, "name", "system")
+    try:
+        T = np.asarray(system.period(params), dtype=float)
+    except Exception as e:  # a user function failing on these parameters
+        raise ValueError(f"{name}: period(params) failed on these parameters: {type(e).__name__}: {e}") from e
+    if T.ndim:
+        leaves_nd = [np.ndim(l) for l in jax.tree_util.tree_leaves(params)]
+        if batched is None:
+            batched = any(d > 0 for d in leaves_nd)
+        if not batched:
+            raise ValueError(
+                f"{name}: period(params) must return a scalar (the forcing period T); it returned shape "
+                f"{T.shape}. Write it as a scalar function of the parameters, e.g. 2*pi/params.omega."
+            )
+    if not (np.all(np.isfinite(T)) and np.all(T > 0)):
+        got = float(T) if T.ndim == 0 else T
+        raise ValueError(f"{name}: the forcing period must be positive and finite, got period(params) = {got}.")
     if T.ndim:
         return  # batched parameters: the per-lane field check happens in the caller
     x = jnp.zeros(system.dim) if x0 is None else jnp.asarray(x0, dtype=float)
     check_state_shape(system, x)
     if x.ndim > 1:
         x = x.reshape(-1, system.dim)[0]
-    dx = jax.eval_shape(lambda xx: system.vector_field(0.0, xx, params), x)
+    try:
+        dx = jax.eval_shape(lambda xx: system.vector_field(0.0, xx, params), x)
+    except Exception as e:
+        raise ValueError(f"{name}: vector_field(t, x, params) failed for a state of shape ({system.dim},): "
+                         f"{type(e).__name__}: {e}") from e
+    if not isinstance(dx, jax.ShapeDtypeStruct):
+        raise ValueError(f"{name}: the vector field must return one array of shape ({system.dim},) "
+                         f"(use jnp.stack([...])); it returned {type(dx).__name__}.")
     if dx.shape != (system.dim,):
         raise ValueError(
-            f"{system.name}: the vector field must return shape ({system.dim},) for a state "
-            f"of shape ({system.dim},); it returned {dx.shape}."
+            f"{name}: the vector field must return shape ({system.dim},) for a state "
+            f"of shape ({system.dim},) ({', '.join(system.state_names)}); it returned {dx.shape}."
         )
     val = np.asarray(system.vector_field(0.0, x, params))
     if not np.all(np.isfinite(val)):
         raise ValueError(
-            f"{system.name}: the vector field is not finite at t=0, x={np.asarray(x).tolist()}: "
+            f"{name}: the vector field is not finite at t=0, x={np.asarray(x).tolist()}: "
             f"{val.tolist()}. Check the parameters."
         )
 
