@@ -206,14 +206,18 @@ def test_load_errors_name_the_problem(duffing_results, duffing_search, tmp_path,
         jg.load_orbits(tmp_path / "r.nc")
 
 
-def test_registry_matches_the_convention():
+def test_registry_resolves_to_loaders_of_each_type():
+    """Every registered type names a loader that exists and is exported from jaxgear."""
+    import importlib
+
     from jaxgear._io import LOADERS
 
-    assert LOADERS == {
-        "GlobalResult": "jaxgear._result:load_result", "OrbitSearch": "jaxgear._shooting:load_orbits",
-        "BifurcationDiagram": "jaxgear._sweep:load_bifurcation", "BasinSweep": "jaxgear._sweep:load_basin_sweep",
-        "ParameterMap": "jaxgear._sweep:load_parameter_map", "Branch": "jaxgear._continuation:load_branch",
-    }
+    for typ, target in LOADERS.items():
+        module, func = target.split(":")
+        loader = getattr(importlib.import_module(module), func)
+        assert callable(loader), typ
+        assert getattr(jg, func) is loader, f"{func} is not exported from jaxgear"
+        assert hasattr(jg, typ), f"{typ} is not exported from jaxgear"
 
 
 # ---------------------------------------------------------------- plotting from disk
