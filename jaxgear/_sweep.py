@@ -20,9 +20,10 @@ amplitude, frequency, damping, load, error amplitude, ...) changes:
 
 Parameters are named by a field of the parameter pytree (for :class:`GearParams` any
 canonical name of MODEL.md §4 but ``N``) or by an alias that moves several fields
-together (:data:`SWEEP_ALIASES`: ``b`` = ``b_sp`` and ``b_rp``, ``kappa_amp`` =
-``kappa_sp_amp`` and ``kappa_rp_amp``, ``e_amp`` = ``e_sp_amp`` and ``e_rp_amp``);
-per-planet fields are set for every planet. Values enter the compiled kernels as array
+together (``PARAM_ALIASES`` of :mod:`jaxgear._params`: ``b`` = ``b_sp`` and ``b_rp``,
+``kappa_amp`` = ``kappa_sp_amp`` and ``kappa_rp_amp``, ``e_amp`` = ``e_sp_amp`` and
+``e_rp_amp``), set with :func:`jaxgear.with_param`; per-planet fields are set for
+every planet. Values enter the compiled kernels as array
 leaves, so nothing is recompiled per value. When ``Omega`` (the forcing frequency) is
 swept, every value has its own period ``T = 2 pi / Omega``; the RK4 step is
 ``h = T / steps_per_period`` per value, so the stroboscopic sampling stays exact.
@@ -53,12 +54,10 @@ import numpy as np
 
 from ._cellmap import _progress, _pytree_dict, detect_period
 from ._integrate import RK4, Adaptive, Integrator, advance_batch
+from ._params import _targets, with_param
 from ._system import ForcedSystem, check_state_shape, check_system
 
 __all__ = [
-    "SWEEP_ALIASES",
-    "sweep_param_names",
-    "set_param",
     "BifurcationDiagram",
     "BasinSweep",
     "ParameterMap",
@@ -79,84 +78,11 @@ APERIODIC = 0
 """Period code when no period <= ``max_period`` recurs (quasi-periodic, chaotic or a slow transient)."""
 DIRECTIONS = ("independent", "up", "down", "both")
 
-SWEEP_ALIASES: dict[str, tuple[str, ...]] = {
-    "b": ("b_sp", "b_rp"),
-    "kappa_amp": ("kappa_sp_amp", "kappa_rp_amp"),
-    "e_amp": ("e_sp_amp", "e_rp_amp"),
-}
-"""Names that set several fields of the parameter pytree to the same value: ``b`` (both
-half backlashes), ``kappa_amp`` (both stiffness amplitudes), ``e_amp`` (both
-transmission-error amplitudes). An alias is offered only when the pytree has all its
-fields (for :class:`GearParams` always)."""
-
-
 # =============================================================================== parameters
-def _is_numeric(v) -> bool:
-    return not isinstance(v, bool) and (eqx.is_array(v) or isinstance(v, (float, int, np.number)))
-
-
-def _fields(params) -> tuple[str, ...]:
-    from ._params import PARAM_NAMES, GearParams
-
-    if isinstance(params, GearParams):
-        return PARAM_NAMES[1:]
-    if isinstance(params, Mapping):
-        return tuple(k for k, v in params.items() if isinstance(k, str) and _is_numeric(v))
-    if hasattr(params, "_fields"):
-        return tuple(f for f in params._fields if _is_numeric(getattr(params, f)))
-    if dataclasses.is_dataclass(params):
-        return tuple(f.name for f in dataclasses.fields(params)
-                     if not f.metadata.get("static", False) and _is_numeric(getattr(params, f.name)))
-    raise TypeError(f"parameters of type {type(params).__name__} are not a known pytree "
-                    "(use an eqx.Module, a NamedTuple or a dict of arrays).")
-
-
-def sweep_param_names(params) -> tuple[str, ...]:
-    """Names a sweep accepts for ``params``: its numeric fields, then the applicable
-    aliases of :data:`SWEEP_ALIASES`."""
-    f = _fields(params)
-    return f + tuple(a for a, t in SWEEP_ALIASES.items() if a not in f and all(x in f for x in t))
-
-
-def _targets(params, name: str) -> tuple[str, ...]:
-    if not isinstance(name, str):
-        raise ValueError(f"a parameter name must be a string, got {name!r}.")
-    f = _fields(params)
-    if name in f:
-        return (name,)
-    if name in SWEEP_ALIASES and all(x in f for x in SWEEP_ALIASES[name]):
-        return SWEEP_ALIASES[name]
-    raise ValueError(f"unknown parameter {name!r} for {type(params).__name__}; valid names: "
-                     f"{', '.join(sweep_param_names(params))}.")
-
-
-def _get(params, field):
-    return params[field] if isinstance(params, Mapping) else getattr(params, field)
-
-
-def set_param(params, name: str, value):
-    """``params`` with parameter ``name`` (a field or an alias) set to ``value``.
-
-    Traceable (``value`` may be a tracer inside ``jit``/``vmap``); a scalar is broadcast
-    to the field's shape, so per-planet fields are set for all planets. No validation:
-    sweeps validate concrete values once, before the kernels run.
-    """
-    targets = _targets(params, name)
-    v = jnp.asarray(value, dtype=jnp.float64)
-    new = [jnp.broadcast_to(v, jnp.shape(_get(params, t))) for t in targets]
-    if isinstance(params, Mapping):
-        out = dict(params)
-        out.update(zip(targets, new))
-        return out
-    if hasattr(params, "_replace"):
-        return params._replace(**dict(zip(targets, new)))
-    return eqx.tree_at(lambda p: [getattr(p, t) for t in targets], params, new)
-
-
 def _apply(params, names: tuple[str, ...], v):
     """Set parameters ``names`` to the entries of ``v`` (shape ``(len(names),)``)."""
     for j, n in enumerate(names):
-        params = set_param(params, n, v[j])
+        params = with_param(params, n, v[j])
     return params
 
 
@@ -166,16 +92,12 @@ def _check_values(system: ForcedSystem, params, names: tuple[str, ...], V: np.nd
     Returns whether all combinations share one forcing period (then the kernels use one
     clock for the whole batch).
     """
-    from ._params import GearParams
-
-    if isinstance(params, GearParams):
-        for v in np.unique(V, axis=0):
-            p = _apply(params, names, v)
-            try:
-                GearParams.from_dict(p.to_dict())
-            except ValueError as exc:
-                what = ", ".join(f"{n}={x:.6g}" for n, x in zip(names, v))
-                raise ValueError(f"sweep value {what}: {exc}") from None
+    for v in np.unique(V, axis=0):
+        try:
+            _apply(params, names, v)  # concrete values: with_param validates (e.g. b_sp >= 0)
+        except ValueError as exc:
+            what = ", ".join(f"{n}={x:.6g}" for n, x in zip(names, v))
+            raise ValueError(f"sweep value {what}: {exc}") from None
     T = np.asarray(jax.vmap(lambda v: system.period(_apply(params, names, v)))(jnp.asarray(V)))
     bad = ~(np.isfinite(T) & (T > 0))
     if bad.any():
@@ -680,7 +602,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
             reduced gear model and the ``paper`` preset).
         param: a field of ``params`` (for :class:`GearParams` any canonical name but
             ``N``: ``b_sp``, ``kappa_sp_amp``, ``Omega``, ``c_sp``, ``f_D``, ``e_sp_amp``...)
-            or an alias of :data:`SWEEP_ALIASES` (``b``, ``kappa_amp``, ``e_amp``);
+            or an alias (``b``, ``kappa_amp``, ``e_amp``: both meshes together);
             per-planet fields are set for all planets.
         values: the parameter values (sorted increasing, distinct).
         x0s: initial states ``(S, dim)`` (or one ``(dim,)``).
@@ -709,7 +631,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     _targets(params, param)
     vals = _values(values, param)
     X0 = _starts(system, x0s)
-    check_system(system, set_param(params, param, vals[0]), X0[0])
+    check_system(system, with_param(params, param, vals[0]), X0[0])
     shared = _check_values(system, params, (param,), vals[:, None])
     S, V = len(X0), len(vals)
     dirs = ("independent",) if direction == "independent" else (
@@ -1256,7 +1178,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid=No
         if ck.has(part):
             r = load_result(ck.path(part))
         else:
-            r = _analyze_value(system, set_param(params, param, v), grid, method, dict(kw, progress=False))
+            r = _analyze_value(system, with_param(params, param, v), grid, method, dict(kw, progress=False))
             if ck.dir is not None:
                 r.save(ck.path(part))
         results.append(r)
