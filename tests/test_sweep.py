@@ -467,3 +467,31 @@ def test_cli_basins(tmp_path, capsys):
     assert "sink" in text and "present" in text
     s = load_basin_sweep(out / "basins.nc")
     assert s.labels.shape == (2, 3, 2, 3) and s.fields == ("kappa_sp_amp", "kappa_rp_amp")
+
+
+@pytest.mark.slow
+def test_cli_sweep_killed_and_restarted(tmp_path):
+    """A real kill (SIGKILL) in the middle of `jaxgear sweep`, then the same command again:
+    the file equals that of an uninterrupted run and the finished blocks are kept."""
+    import os
+    import signal
+    import time
+
+    def cmd(out):
+        return [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", "3:7:24", "--starts", "4",
+                "--transient", "300", "--record", "33", "--out", str(out), "--quiet", "--no-figures"]
+
+    assert subprocess.run(cmd(tmp_path / "full"), cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    run = tmp_path / "run"
+    proc = subprocess.Popen(cmd(run), cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while time.time() - t0 < 300 and proc.poll() is None and not list((run / "parts").glob("*.npz")):
+        time.sleep(0.005)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    kept = sorted(p.name for p in (run / "parts").glob("*.npz"))
+    assert proc.returncode == -signal.SIGKILL and 0 < len(kept) < 8, kept  # 24 values in blocks of 3
+    stamps = {n: (run / "parts" / n).stat().st_mtime_ns for n in kept}
+    assert subprocess.run(cmd(run), cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    assert all((run / "parts" / n).stat().st_mtime_ns == t for n, t in stamps.items())  # not recomputed
+    _assert_same_file(tmp_path / "full" / "bifurcation.nc", run / "bifurcation.nc")
