@@ -76,7 +76,7 @@ ESCAPED = -1
 """Period code of a (value, start) whose motion left ``escape_bound`` or became non-finite."""
 APERIODIC = 0
 """Period code when no period <= ``max_period`` recurs (quasi-periodic, chaotic or a slow transient)."""
-DIRECTIONS = ("independent", "up", "down", "both")
+DIRECTIONS = ("independent", "up", "down", "both", "all")
 
 # =============================================================================== parameters
 def _apply(params, names: tuple[str, ...], v):
@@ -407,8 +407,8 @@ class BifurcationDiagram:
     Attributes:
         param: the swept name as given (a field or an alias); fields: the fields it sets.
         values: ``(V,)`` parameter values, increasing.
-        directions: which sweeps: ``("independent",)``, ``("up",)``, ``("down",)`` or
-            ``("up", "down")``.
+        directions: which sweeps: ``("independent",)``, ``("up",)``, ``("down",)``,
+            ``("up", "down")`` or ``("independent", "up", "down")``.
         starts: ``(S, dim)`` initial states.
         points: ``(D, V, S, R, dim)`` recorded stroboscopic points (state at forcing phase
             0 of R successive periods after the transient), per direction, value, start.
@@ -473,6 +473,39 @@ class BifurcationDiagram:
                             "from": list(sets[i]), "to": list(sets[j])})
         return out
 
+    def _attractor_sets(self, d: int, i: int) -> list[tuple[int, np.ndarray]]:
+        ids, per, pts = self.attractor[d, i], self.period[d, i], self.points[d, i]
+        out = []
+        for a in range(int(ids.max(initial=-1)) + 1):
+            s = int(np.argmax(ids == a))
+            k = int(per[s])
+            out.append((k, pts[s, -k:] if k > 0 else pts[s, -1:]))
+        if np.any(ids < 0):
+            out.append((ESCAPED, np.zeros((0, pts.shape[-1]))))
+        return out
+
+    def differs(self, a: str = "up", b: str = "down") -> np.ndarray:
+        """``(V,)`` bool: the sweeps ``a`` and ``b`` end on different sets of attractors at
+        each value (same periods and point sets within ``merge_tol`` count as equal);
+        for ``"up"`` and ``"down"`` this marks the hysteresis."""
+        da, db = self._d(a), self._d(b)
+        tol = float(self.settings.get("merge_tol", 1e-3))
+        out = np.zeros(len(self.values), dtype=bool)
+        for i in range(len(self.values)):
+            A, B = self._attractor_sets(da, i), self._attractor_sets(db, i)
+
+            def same(x, y):
+                if x[0] != y[0]:
+                    return False
+                if x[0] <= 0:
+                    return True  # aperiodic sets, escape
+                scale = 1.0 + max(np.abs(x[1]).max(), np.abs(y[1]).max())
+                d = np.linalg.norm(x[1][:, None] - y[1][None], axis=-1)
+                return max(d.min(axis=0).max(), d.min(axis=1).max()) <= tol * scale
+
+            out[i] = not (all(any(same(x, y) for y in B) for x in A) and all(any(same(y, x) for x in A) for y in B))
+        return out
+
     def table(self, full: bool = False) -> str:
         """Printable table: runs of values with the same attractors (``full``: every value),
         each attractor with its share of the starts."""
@@ -509,6 +542,8 @@ class BifurcationDiagram:
             directions=list(self.directions), n_starts=int(len(self.starts)), system=self.system,
             state_names=list(self.state_names), params=self.params, settings=self.settings, version=self.version,
             transitions={d: self.transitions(d) for d in self.directions},
+            hysteresis=(self.values[self.differs()].tolist()
+                        if "up" in self.directions and "down" in self.directions else None),
             attractors={d: [self.attractors_at(i, d) for i in range(len(self.values))] for d in self.directions},
         )
 
@@ -610,8 +645,9 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
             ``"up"`` — values in increasing order, each value starting from the state the
             previous value ended in (the first from ``x0s``), so a branch is followed
             until it vanishes; ``"down"`` — the same in decreasing order from ``x0s``;
-            ``"both"`` — the up and the down sweep, each from ``x0s`` (run together). A
-            lane that escapes restarts from its ``x0`` at the next value.
+            ``"both"`` — the up and the down sweep, each from ``x0s`` (run together);
+            ``"all"`` — independent, up and down. A lane of a sweep that escapes
+            restarts from its ``x0`` at the next value.
         integrator: :class:`RK4` (steps per period fixed, step ``h = T/steps`` per value)
             or :class:`Adaptive`.
         max_period, tol: period detection; merge_tol: relative distance under which two
@@ -634,44 +670,51 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     check_system(system, with_param(params, param, vals[0]), X0[0])
     shared = _check_values(system, params, (param,), vals[:, None])
     S, V = len(X0), len(vals)
-    dirs = ("independent",) if direction == "independent" else (
-        ("up", "down") if direction == "both" else (direction,))
-    nd = len(dirs)
-    if direction == "independent":
-        B = max(1, min(V, int(chunk_size) // S))
-    else:  # sequential: the block only sets how often the sweep is saved
-        B = max(1, min(V, int(chunk_size) // (S * nd), -(-V // 8)))
+    # passes: (name of its parts, directions it computes together)
+    passes = {"independent": [("independent", ("independent",))], "up": [("up", ("up",))],
+              "down": [("down", ("down",))], "both": [("both", ("up", "down"))],
+              "all": [("independent", ("independent",)), ("both", ("up", "down"))]}[direction]
+    dirs = tuple(d for _, ds in passes for d in ds)
+    blocks = {}
+    for name, ds in passes:
+        if name == "independent":
+            blocks[name] = max(1, min(V, int(chunk_size) // S))
+        else:  # sequential: the block only sets how often the sweep is saved
+            blocks[name] = max(1, min(V, int(chunk_size) // (S * len(ds)), -(-V // 8)))
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
                     starts=X0.tolist(), params=_params_dict(params), transient=int(transient), record=int(record),
                     direction=direction, integrator=_integrator_dict(integrator), max_period=int(max_period),
                     tol=float(tol), merge_tol=float(merge_tol), escape_bound=float(escape_bound),
-                    block_values=int(B), version=__version__)
+                    block_values=blocks, version=__version__)
     ck = _Checkpoint(out, "bifurcation", settings, restart)
     names = (param,)
     R = int(record)
-    points = np.empty((nd, V, S, R, system.dim))
-    orders = [np.arange(V)[::-1] if d == "down" else np.arange(V) for d in dirs]
-    bar = _progress(nd * V, f"sweep {param}", progress, unit="value")
+    points = np.empty((len(dirs), V, S, R, system.dim))
+    bar = _progress(len(dirs) * V, f"sweep {param}", progress, unit="value")
     jX0 = jnp.asarray(X0)
-    carry = np.broadcast_to(X0, (nd, S, system.dim)).copy()
-    for bi, a in enumerate(range(0, V, B)):
-        b = min(a + B, V)
-        part = f"{direction}_{bi:05d}.npz"
-        if ck.has(part):
-            z = ck.load(part)
-            pts, carry = z["points"], z["carry"]
-        else:
-            if direction == "independent":
-                pts = _compute_independent(system, params, names, vals[a:b, None], B, jX0, int(transient), R,
-                                           integrator, shared)[:, None]
+    for name, ds in passes:
+        B, nd = blocks[name], len(ds)
+        rows = [dirs.index(d) for d in ds]
+        orders = [np.arange(V)[::-1] if d == "down" else np.arange(V) for d in ds]
+        carry = np.broadcast_to(X0, (nd, S, system.dim)).copy()
+        for bi, a in enumerate(range(0, V, B)):
+            b = min(a + B, V)
+            part = f"{name}_{bi:05d}.npz"
+            if ck.has(part):
+                z = ck.load(part)
+                pts, carry = z["points"], z["carry"]
             else:
-                seq = np.stack([vals[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
-                pts, carry = _compute_scan(system, params, names, seq, B, jX0, carry, int(transient), R,
-                                           integrator, float(escape_bound), shared)
-            ck.save(part, points=pts, carry=carry)
-        for d in range(nd):
-            points[d, orders[d][a:b]] = pts[:, d]
-        bar.update(nd * (b - a))
+                if name == "independent":
+                    pts = _compute_independent(system, params, names, vals[a:b, None], B, jX0, int(transient), R,
+                                               integrator, shared)[:, None]
+                else:
+                    seq = np.stack([vals[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
+                    pts, carry = _compute_scan(system, params, names, seq, B, jX0, carry, int(transient), R,
+                                               integrator, float(escape_bound), shared)
+                ck.save(part, points=pts, carry=carry)
+            for j in range(nd):
+                points[rows[j], orders[j][a:b]] = pts[:, j]
+            bar.update(nd * (b - a))
     bar.close()
     period = _classify(points, int(max_period), float(tol), float(escape_bound))
     M = int(max_period)
@@ -1035,9 +1078,12 @@ class BasinSweep:
         """Shares (percent) of every global attractor and the sink at every value."""
         from ._params import format_table
 
-        head = (self.param,) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors)) + ("sink",)
+        unres = bool(np.any(self.unresolved_share > 0))
+        head = ((self.param,) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors))
+                + ("sink",) + (("unresolved",) if unres else ()))
         rows = [(f"{v:.5g}",) + tuple(f"{100 * s:.1f}" if self.present[i, g] else "-"
                                       for g, s in enumerate(self.shares[i])) + (f"{100 * self.sink_share[i]:.1f}",)
+                + ((f"{100 * self.unresolved_share[i]:.1f}",) if unres else ())
                 for i, v in enumerate(self.values)]
         return format_table(rows, head)
 

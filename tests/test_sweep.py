@@ -127,6 +127,8 @@ def test_hysteresis_of_the_hardening_duffing_oscillator():
     assert inside.sum() >= 8 and outside.sum() >= 15
     assert np.all(gap[inside] > 0.3), gap[inside]
     assert np.all(gap[outside] < 1e-6), gap[outside]
+    diff = d.differs("up", "down")
+    assert diff[inside].all() and not diff[outside].any()
     # the up sweep rides the upper branch, the down sweep the lower one (amplitude of the harmonic)
     for i in np.nonzero(inside)[0]:
         roots = duffing_hb(**DUFF, w=values[i])
@@ -263,7 +265,7 @@ def test_kill_and_resume_bifurcation(tmp_path, monkeypatch, direction):
         with pytest.raises(_Kill):
             bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
     assert len(list((tmp_path / "run" / "parts").glob("*.npz"))) == 2
-    B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_values"]
+    B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_values"][direction]
     assert 1 < B < 6  # several blocks of several values
     computed = []
     _counting(monkeypatch, "_compute_independent" if direction == "independent" else "_compute_scan", computed)

@@ -86,12 +86,13 @@ def add_parser(sub) -> None:
     p.add_argument("--values", required=True, metavar="START:STOP:COUNT",
                    help="COUNT evenly spaced values from START to STOP (COUNT >= 2)")
     p.add_argument("--kind", default="bifurcation", choices=KINDS, help="what to compute (default bifurcation)")
-    p.add_argument("--direction", default="both", choices=("independent", "up", "down", "both"),
-                   help="bifurcation: independent (every value from the starts), up/down (state carried from "
-                   "value to value), both (default: up and down, hysteresis shows where they differ)")
+    p.add_argument("--direction", default="all", choices=("independent", "up", "down", "both", "all"),
+                   help="bifurcation: independent (every value from the starts: all coexisting attractors the "
+                   "starts reach), up/down (state carried from value to value: a branch is followed until it "
+                   "vanishes), both (up and down: hysteresis shows where they differ), all (default: the three)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--starts", type=int, default=None, metavar="N",
-                     help="bifurcation: N random starts in the paper's region D on x4 = 0 (default 16)")
+                     help="bifurcation: N random starts in the paper's region D on x4 = 0 (jaxgear.seeds_in_box over x1, x2, x3 with --seed; default 16)")
     src.add_argument("--from", dest="points", type=_point, action="append", metavar="x1,x2,x3,x4",
                      help="a start (repeatable; continuation: the point on or near the orbit to follow)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --starts (default 0)")
@@ -118,7 +119,7 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from .. import REDUCED, RK4, CellGrid, PAPER_REGION
+    from .. import REDUCED, RK4, CellGrid, PAPER_REGION, seeds_in_box
     from .._params import resolve_params
     from .._sweep import _check_values, _targets, basin_sweep, bifurcation_diagram
 
@@ -155,9 +156,8 @@ def run(args) -> int:
             region = np.asarray(args.region or PAPER_REGION, dtype=float)
             if region.shape != (3, 2):
                 raise ValueError("--region for the starts needs three LO:HI ranges (x1, x2, x3; x4 = 0).")
-            rng = np.random.default_rng(args.seed)
-            X0 = np.zeros((n, 4))
-            X0[:, :3] = region[:, 0] + (region[:, 1] - region[:, 0]) * rng.random((n, 3))
+            X0 = np.zeros((n, 4))  # on the section x4 = 0, like the paper's cells
+            X0[:, :3] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
         print(head + f", {len(X0)} starts, direction {args.direction}")
         result = bifurcation_diagram(REDUCED, params, args.param, values, X0, transient=args.transient,
                                      record=args.record, direction=args.direction, integrator=integ,
@@ -165,10 +165,10 @@ def run(args) -> int:
                                      restart=args.restart)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         print(result.table())
-        for d in result.directions:
-            for tr in result.transitions(d):
-                print(f"  {d}: {tr['before']:.5g} -> {tr['after']:.5g}: {', '.join(tr['from'])} -> "
-                      f"{', '.join(tr['to'])}")
+        if "up" in result.directions and "down" in result.directions:
+            diff = result.values[result.differs("up", "down")]
+            print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
+                  + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
         files = ["bifurcation.nc", "summary.json"]
         figs = {}
         if not args.no_figures:

@@ -1,8 +1,8 @@
 """Figures of parameter sweeps: bifurcation diagrams, basin shares, two-parameter maps.
 
 Periods have fixed colours in every sweep figure (:func:`period_color`: P-1 blue, P-2
-red, P-3 green, P-4 orange, ... from the attractor palette of ``_style``; aperiodic
-dark grey; escaped the sink's light grey); global attractors of a basin sweep use
+red, P-3 green, P-4 orange, P-8 cyan, P-12 pink, ... from the attractor palette of
+``_style``; aperiodic dark grey; escaped the sink's light grey); global attractors of a basin sweep use
 ``attractor_color(id)`` like the domain figures.
 """
 
@@ -17,11 +17,17 @@ from ._style import _PALETTE, SINK_COLOR, UNRESOLVED_COLOR, attractor_color, new
 APERIODIC_COLOR = "#404040"
 
 
+# P-1..P-6 and P-8 take the attractor palette's first colours; P-12 and P-16 get their own.
+_PERIOD_COLORS = {1: _PALETTE[0], 2: _PALETTE[1], 3: _PALETTE[2], 4: _PALETTE[3], 5: _PALETTE[4], 6: _PALETTE[5],
+                  7: "#bcbd22", 8: _PALETTE[7], 12: _PALETTE[6], 16: "#393b79"}
+_OTHER_PERIODS = ["#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94"]
+
+
 def period_color(k: int) -> str:
     """Colour of period code ``k`` (P-k for k >= 1; 0 aperiodic; -1 escaped)."""
     k = int(k)
     if k >= 1:
-        return _PALETTE[(k - 1) % len(_PALETTE)]
+        return _PERIOD_COLORS.get(k, _OTHER_PERIODS[k % len(_OTHER_PERIODS)])
     return APERIODIC_COLOR if k == 0 else SINK_COLOR
 
 
@@ -40,10 +46,10 @@ def _coord_index(names, coordinate) -> int:
     return j
 
 
-_DIR_STYLE = {
-    "independent": dict(marker="o", s=4.0, facecolors=None, label="independent starts"),
-    "up": dict(marker="o", s=4.0, facecolors=None, label="sweep up (filled)"),
-    "down": dict(marker="o", s=22.0, facecolors="none", label="sweep down (open)"),
+_DIR_STYLE = {  # marker, size, legend label, horizontal offset (in units of the dodge)
+    "up": ("^", 9.0, "sweep up (state carried)", -1.0),
+    "independent": ("o", 5.0, "independent starts", 0.0),
+    "down": ("v", 9.0, "sweep down (state carried)", 1.0),
 }
 
 
@@ -51,9 +57,10 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
     """Bifurcation diagram: a state coordinate of the stroboscopic points against the parameter.
 
     Points are coloured by the period of the (value, start) they belong to; a P-k lane
-    contributes its k points, an aperiodic lane all its recorded points. Up sweeps are
-    drawn as small filled dots, down sweeps as open circles (where they differ, the
-    sweeps took different branches: hysteresis). Escaped lanes are marked with grey
+    contributes its k points, an aperiodic lane all its recorded points. With several
+    sweeps each value's column is split: up sweep (``^``, left), independent starts
+    (``o``, middle), down sweep (``v``, right); where up and down differ the sweeps
+    followed different attractors (hysteresis). Escaped lanes are marked with grey
     crosses along the top edge.
 
     Args:
@@ -67,9 +74,11 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
     for d in dirs:
         if d not in diagram.directions:
             raise ValueError(f"direction {d!r} is not in this diagram ({diagram.directions}).")
-    fig = new_figure(figsize=(7.5, 4.6), layout="constrained")
+    fig = new_figure(figsize=(8.0, 4.8), layout="constrained")
     ax = fig.add_subplot()
     vals = np.asarray(diagram.values)
+    step = float(np.min(np.diff(vals))) if len(vals) > 1 else 1.0
+    dodge = 0.22 * step if len(dirs) > 1 else 0.0
     R = diagram.points.shape[-2]
     periods_seen = set()
     n_escaped = 0
@@ -77,37 +86,30 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
         d = diagram.directions.index(name)
         per = diagram.period[d]  # (V, S)
         pts = diagram.points[d][..., j]  # (V, S, R)
-        style = dict(_DIR_STYLE[name])
-        style.pop("label")
-        fc = style.pop("facecolors")
-        for k in np.unique(per).tolist():
-            if k == -1:
-                n_escaped += int((per == -1).sum())
-                continue
+        marker, size, _, off = _DIR_STYLE[name]
+        codes = [k for k in np.unique(per).tolist() if k != -1]
+        codes.sort(key=lambda k: -int((per == k).sum()))  # rare periods drawn last, on top
+        for k in codes:
             vi, si = np.nonzero(per == k)
             take = R if k == 0 else k
-            y = pts[vi, si, R - take:]
-            x = np.repeat(vals[vi], take)
-            col = period_color(k)
-            if fc == "none":
-                ax.scatter(x, y.reshape(-1), facecolors="none", edgecolors=col, linewidths=0.8, **style)
-            else:
-                ax.scatter(x, y.reshape(-1), color=col, linewidths=0, **style)
+            y = pts[vi, si, R - take:].reshape(-1)
+            x = np.repeat(vals[vi] + off * dodge, take)
+            ax.scatter(x, y, s=size, marker=marker, color=period_color(k), linewidths=0)
             periods_seen.add(k)
+        n_escaped += int((per == -1).sum())
         esc = np.nonzero((per == -1).any(axis=1))[0]
         if len(esc):
-            ax.plot(vals[esc], np.full(len(esc), 0.98), "x", color="#999999", ms=5,
+            ax.plot(vals[esc] + off * dodge, np.full(len(esc), 0.98), "x", color="#999999", ms=5,
                     transform=ax.get_xaxis_transform())
-    handles = [Patch(color=period_color(k), label=_period_label(k)) for k in sorted(periods_seen, key=lambda k: (k <= 0, k))]
+    handles = [Patch(color=period_color(k), label=_period_label(k))
+               for k in sorted(periods_seen, key=lambda k: (k <= 0, k))]
     if n_escaped:
         handles.append(Line2D([], [], marker="x", ls="none", color="#999999", label=f"escaped ({n_escaped} runs)"))
     if len(dirs) > 1 or dirs[0] != "independent":
-        for name in dirs:
-            st = _DIR_STYLE[name]
-            handles.append(Line2D([], [], marker="o", ls="none", color="k",
-                                  mfc="none" if st["facecolors"] == "none" else "k",
-                                  ms=6 if st["facecolors"] == "none" else 3, label=st["label"]))
-    ax.legend(handles=handles, fontsize="small", loc="best", framealpha=0.8)
+        for name in sorted(dirs, key=lambda n: _DIR_STYLE[n][3]):
+            marker, _, label, _ = _DIR_STYLE[name]
+            handles.append(Line2D([], [], marker=marker, ls="none", color="k", ms=5, label=label))
+    ax.legend(handles=handles, fontsize="small", loc="center left", bbox_to_anchor=(1.01, 0.5))
     ax.set_xlabel(diagram.param + ("" if diagram.fields == (diagram.param,) else f"  ({', '.join(diagram.fields)})"))
     ax.set_ylabel(f"{diagram.state_names[j]} at forcing phase 0")
     ax.set_title(title or f"Bifurcation diagram of {diagram.system} ({len(diagram.starts)} starts per value)")
