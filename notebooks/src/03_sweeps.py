@@ -186,12 +186,14 @@ plotting.plot_basin_shares(bs_k)
 
 # %% [markdown]
 # Each band is one attractor followed across the values; its label lists the periods it
-# has along the way. The dominant attractor is a P-16 at 0.33, a P-8 at 0.34 and the P-4
-# from 0.35 on — read from right to left, a period-doubling cascade towards the aperiodic
-# motion found below 0.33 in section 3. The minority attractor (the preset's P-8 near
-# 0.36) shrinks and is gone at 0.38, where the P-4 is alone. Near bifurcations the direct
-# method needs long integrations (slowly converging orbits); a label like P-16 there is
-# worth confirming with more periods or with `jaxgear shoot`.
+# has along the way. The dominant attractor is the P-4 from about 0.35 on; towards smaller
+# `kappa_amp` it doubles its period — read from right to left, a period-doubling cascade
+# into the aperiodic motion found below 0.33 in section 3 (a finer sweep with 3000
+# transient periods gives P-4 at 0.34, P-8 at 0.335, P-16 at 0.33, aperiodic at 0.325).
+# The minority attractor (the preset's P-8 near 0.36) shrinks and is gone at 0.38, where
+# the P-4 is alone. Near such bifurcations orbits converge slowly and the periods found
+# on a coarse grid can differ from grid to grid; confirm them with more periods or with
+# `jaxgear shoot`.
 
 # %%
 i36 = int(np.argmin(np.abs(bs_k.values - 0.36)))
