@@ -9,7 +9,7 @@ amplitude, frequency, damping, load, error amplitude, ...) changes:
   ``max_period``: quasi-periodic or chaotic) or escaped. Values and starts are batched
   with ``vmap`` (``direction="independent"``), or the state is carried from one value
   to the next (``"up"``/``"down"``/``"both"``: a ``lax.scan`` over values, ``vmap``
-  over starts), so hysteresis shows.
+  over starts), so hysteresis shows; ``"all"`` does both kinds.
 - :func:`basin_sweep` — the global analysis (:func:`~jaxgear.analyze_global`) at every
   value, attractors matched from one value to the next by the distance of their
   stroboscopic point sets (global continuation of attractors), so each keeps a global
@@ -23,10 +23,11 @@ canonical name of MODEL.md §4 but ``N``) or by an alias that moves several fiel
 together (``PARAM_ALIASES`` of :mod:`jaxgear._params`: ``b`` = ``b_sp`` and ``b_rp``,
 ``kappa_amp`` = ``kappa_sp_amp`` and ``kappa_rp_amp``, ``e_amp`` = ``e_sp_amp`` and
 ``e_rp_amp``), set with :func:`jaxgear.with_param`; per-planet fields are set for
-every planet. Values enter the compiled kernels as array
-leaves, so nothing is recompiled per value. When ``Omega`` (the forcing frequency) is
-swept, every value has its own period ``T = 2 pi / Omega``; the RK4 step is
-``h = T / steps_per_period`` per value, so the stroboscopic sampling stays exact.
+every planet. Values enter the compiled kernels as array leaves, so nothing is
+recompiled per value. When ``Omega`` (the forcing frequency) is swept, every value has
+its own period ``T = 2 pi / Omega``; the RK4 step is ``h = T / steps_per_period`` per
+value, so the stroboscopic sampling stays exact. Otherwise all values share one clock
+and the time-only terms of the vector field are computed once per stage for the batch.
 
 Long sweeps survive interruption: with ``out=DIR`` each block of values is written to
 ``DIR/parts`` as soon as it is done, with a manifest holding a hash of every setting;
@@ -137,15 +138,6 @@ def _integrator_dict(integ: Integrator) -> dict:
         return {"type": "Adaptive", "solver": type(integ.solver).__name__, "rtol": integ.rtol,
                 "atol": integ.atol, "max_steps": int(integ.max_steps)}
     raise TypeError(f"unknown integrator {integ!r}; use jaxgear.RK4 or jaxgear.Adaptive.")
-
-
-def _integrator_from(d: Mapping) -> Integrator:
-    if d.get("type") == "RK4":
-        return RK4(int(d["steps_per_period"]))
-    import diffrax
-
-    return Adaptive(solver=getattr(diffrax, d["solver"])(), rtol=d["rtol"], atol=d["atol"],
-                    max_steps=int(d["max_steps"]))
 
 
 def _params_dict(params) -> dict:
@@ -550,8 +542,6 @@ class BifurcationDiagram:
     def to_xarray(self):
         """The diagram as an ``xarray.Dataset`` (coordinate named after the parameter)."""
         import xarray as xr
-
-        from . import __version__  # noqa: F401
 
         c = _coord_name(self.param, list(self.state_names) + ["direction", "start", "record", "state"])
         dims5 = ("direction", c, "start", "record", "state")
