@@ -299,23 +299,22 @@ def _atomic_write(path: Path, write) -> None:
 
 
 def _save_dataset(ds, path) -> Path:
-    path = Path(path)
-    enc = {k: {"zlib": True, "complevel": 4} for k in ds.data_vars if ds[k].size > 4096}
-    _atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf", encoding=enc))
-    return path
+    """The shared atomic netCDF writer (:mod:`jaxgear._io`), large arrays compressed."""
+    from ._io import _write_netcdf
+
+    for k in ds.data_vars:
+        if ds[k].size > 4096:
+            ds[k].encoding.update(zlib=True, complevel=4)
+    return _write_netcdf(ds, path)
 
 
 def _read_dataset(path, expected: str):
-    import xarray as xr
+    from ._io import _check_type, _read_netcdf
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no result file at {path}")
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        ds = ds.load()
-    kind = ds.attrs.get("jaxgear_type")
-    if kind != expected:
-        raise ValueError(f"{path} holds a {kind or 'file without jaxgear_type'}, not a {expected}.")
+    ds = _read_netcdf(path)
+    _check_type(ds, expected, path)
+    if ds.attrs.get("jaxgear_type") != expected:
+        raise ValueError(f"{path} is not a {expected} (it has no jaxgear_type {expected!r}).")
     return ds
 
 

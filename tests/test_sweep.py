@@ -400,6 +400,8 @@ def test_save_load_round_trip(small_results):
             assert "omega" in ds.coords and "state" in ds.coords
     with pytest.raises(ValueError, match="not a BasinSweep"):
         load_basin_sweep(small_results["paths"]["bif"])
+    for key, kind in (("bif", jg.BifurcationDiagram), ("bas", jg.BasinSweep), ("pm", jg.ParameterMap)):
+        assert type(jg.load(small_results["paths"][key])) is kind  # the generic loader dispatches here
     bif = load_bifurcation(small_results["paths"]["bif"])
     assert bif.points.flags.writeable is False  # immutable results
     assert "omega" in bif.table() and json.dumps(bif.summary())

@@ -13,6 +13,7 @@ from ._basins import (
 )
 from ._orbit import plot_orbit as plot_orbit
 from ._branch import plot_branch as plot_branch
+
 from ._orbit import plot_multipliers as plot_multipliers
 
 from ._sweep import (
