@@ -213,6 +213,7 @@ def test_registry_matches_the_convention():
         "GlobalResult": "jaxgear._result:load_result", "OrbitSearch": "jaxgear._shooting:load_orbits",
         "BifurcationDiagram": "jaxgear._sweep:load_bifurcation", "BasinSweep": "jaxgear._sweep:load_basin_sweep",
         "ParameterMap": "jaxgear._sweep:load_parameter_map", "Branch": "jaxgear._continuation:load_branch",
+        "DesignResult": "jaxgear._design:load_design",
     }
 
 
