@@ -118,6 +118,18 @@ from ._design import (  # noqa: E402
     transmission_error_rms as transmission_error_rms,
 )
 
+from ._sweep import (  # noqa: E402
+    bifurcation_diagram as bifurcation_diagram,
+    basin_sweep as basin_sweep,
+    parameter_map as parameter_map,
+    BifurcationDiagram as BifurcationDiagram,
+    BasinSweep as BasinSweep,
+    ParameterMap as ParameterMap,
+    load_bifurcation as load_bifurcation,
+    load_basin_sweep as load_basin_sweep,
+    load_parameter_map as load_parameter_map,
+)
+
 
 def __getattr__(name):
     # ``jaxgear.plotting`` is imported on first use (keeps matplotlib out of import time).

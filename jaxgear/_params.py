@@ -608,6 +608,7 @@ _DIMLESS_PREFERRED = {"b_sp", "b_rp", "e_sp_amp", "e_rp_amp", "phi_sp", "phi_rp"
 PARAM_ALIASES = {
     "b": ("b_sp", "b_rp"),
     "kappa_amp": ("kappa_sp_amp", "kappa_rp_amp"),
+    "e_amp": ("e_sp_amp", "e_rp_amp"),
 }
 
 
@@ -638,7 +639,7 @@ def param_names(params) -> tuple[str, ...]:
     The numeric fields (for :class:`GearParams` the canonical names of MODEL.md §4 but
     ``N``) plus the aliases of :data:`PARAM_ALIASES` whose fields all exist
     (``"b"`` = ``b_sp`` and ``b_rp``, ``"kappa_amp"`` = ``kappa_sp_amp`` and
-    ``kappa_rp_amp``).
+    ``kappa_rp_amp``, ``"e_amp"`` = ``e_sp_amp`` and ``e_rp_amp``).
     """
     fields = _field_names(params)
     aliases = tuple(a for a, targets in PARAM_ALIASES.items()

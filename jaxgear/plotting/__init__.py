@@ -15,3 +15,10 @@ from ._orbit import plot_orbit as plot_orbit
 from ._branch import plot_branch as plot_branch
 
 from ._orbit import plot_multipliers as plot_multipliers
+
+from ._sweep import (
+    plot_bifurcation as plot_bifurcation,
+    plot_basin_shares as plot_basin_shares,
+    plot_parameter_map as plot_parameter_map,
+    period_color as period_color,
+)

@@ -1,0 +1,254 @@
+"""``jaxgear sweep``: how the motion changes with one parameter of the gear model.
+
+``--kind bifurcation`` (default): stroboscopic points of several starts per value,
+classified by period, swept up and down (hysteresis); ``--kind basins``: the global
+analysis at every value with attractors matched across values (basin shares);
+``--kind continuation``: one periodic orbit followed by pseudo-arclength continuation
+with its Floquet multipliers. Writes the result file, ``summary.json`` and PNG figures
+into ``--out``; an interrupted bifurcation or basin sweep started again with the same
+command resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from .common import add_param_options
+
+KINDS = ("bifurcation", "basins", "continuation")
+
+
+def _values(text: str):
+    """``START:STOP:COUNT`` -> ``COUNT`` evenly spaced values (``ValueError`` with the reason)."""
+    import numpy as np
+
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise ValueError(f"--values expects START:STOP:COUNT (e.g. 3:7:41), got {text!r}.")
+    try:
+        start, stop = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise ValueError(f"--values expects numbers in START:STOP:COUNT, got {text!r}.") from None
+    try:
+        count = int(parts[2])
+    except ValueError:
+        raise ValueError(f"--values: COUNT must be an integer, got {parts[2]!r} in {text!r}.") from None
+    if not (np.isfinite(start) and np.isfinite(stop)):
+        raise ValueError(f"--values: START and STOP must be finite, got {text!r}.")
+    if count < 2:
+        raise ValueError(f"--values: COUNT must be >= 2 (got {count}); a sweep needs at least two values.")
+    if start == stop:
+        raise ValueError(f"--values: the range {start:g}:{stop:g} is empty (START = STOP).")
+    return start, stop, count, np.linspace(start, stop, count)
+
+
+def _point(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(t) for t in text.split(","))
+    except ValueError as exc:
+        raise ValueError(f"--from expects comma-separated numbers like 5.4,-0.2,8.3,-0.8, got {text!r}") from exc
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    try:
+        vals = tuple(int(t) for t in text.replace("x", ",").split(",") if t.strip())
+    except ValueError as exc:
+        raise ValueError(f"--grid expects counts like 20,12,24, got {text!r}") from exc
+    if len(vals) != 3 or min(vals) < 1:
+        raise ValueError(f"--grid expects three positive counts (x1, x2, x3 on x4 = 0) like 20,12,24, got {text!r}")
+    return vals
+
+
+def _ranges(text: str):
+    out = []
+    for part in text.split(","):
+        lo, sep, hi = part.partition(":")
+        if not sep:
+            raise ValueError(f"--region expects LO:HI per axis, comma-separated (e.g. -25:25,-10:20,-10:50), "
+                             f"got {text!r}")
+        out.append((float(lo), float(hi)))
+    return tuple(out)
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "sweep", help="parameter sweeps: bifurcation diagrams, basin shares, orbit continuation",
+        description="Sweep one parameter of the reduced gear model (any canonical name: b_sp, kappa_sp_amp, "
+        "Omega, c_sp, f_D, e_sp_amp, ...; or b = b_sp and b_rp, kappa_amp = both stiffness amplitudes, "
+        "e_amp = both error amplitudes). Writes the result (bifurcation.nc, basins.nc or branch.nc), "
+        "summary.json and figures into --out. Run the same command again after an interruption to resume.",
+    )
+    add_param_options(p)
+    p.add_argument("--param", required=True, metavar="NAME", help="the parameter to sweep")
+    p.add_argument("--values", required=True, metavar="START:STOP:COUNT",
+                   help="COUNT evenly spaced values from START to STOP (COUNT >= 2)")
+    p.add_argument("--kind", default="bifurcation", choices=KINDS, help="what to compute (default bifurcation)")
+    p.add_argument("--direction", default="all", choices=("independent", "up", "down", "both", "all"),
+                   help="bifurcation: independent (every value from the starts: all coexisting attractors the "
+                   "starts reach), up/down (state carried from value to value: a branch is followed until it "
+                   "vanishes), both (up and down: hysteresis shows where they differ), all (default: the three)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--starts", type=int, default=None, metavar="N",
+                     help="bifurcation: N random starts in the paper's region D on x4 = 0 (jaxgear.seeds_in_box over x1, x2, x3 with --seed; default 16)")
+    src.add_argument("--from", dest="points", type=_point, action="append", metavar="x1,x2,x3,x4",
+                     help="a start (repeatable; continuation: the point on or near the orbit to follow)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of --starts (default 0)")
+    p.add_argument("--grid", type=_ints, default=(20, 12, 24), metavar="N1,N2,N3",
+                   help="basins: cells over x1, x2, x3 on x4 = 0 (default 20,12,24)")
+    p.add_argument("--region", type=_ranges, default=None, metavar="LO:HI,...",
+                   help="basins: box over x1, x2, x3 (default the paper's D: -25:25,-10:20,-10:50); "
+                   "bifurcation: the box of the random starts")
+    p.add_argument("--method", default="direct", choices=("direct", "poincare-like", "stroboscopic"),
+                   help="basins: the global-analysis method (default direct)")
+    p.add_argument("--period", type=int, default=1, metavar="K", help="continuation: period of the orbit (default 1)")
+    p.add_argument("--max-steps", type=int, default=500, help="continuation: step limit (default 500)")
+    p.add_argument("--transient", type=int, default=400, help="bifurcation: periods dropped per value (default 400)")
+    p.add_argument("--record", type=int, default=64, help="bifurcation: stroboscopic points kept (default 64)")
+    p.add_argument("--steps-per-period", type=int, default=200, help="RK4 steps per forcing period (default 200)")
+    p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (also holds the resume parts)")
+    p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from .. import REDUCED, RK4, CellGrid, PAPER_REGION, seeds_in_box
+    from .._params import resolve_params
+    from .._sweep import _check_values, _targets, basin_sweep, bifurcation_diagram
+
+    start, stop, count, values = _values(args.values)
+    _, params = resolve_params(args.preset, args.overrides)
+    if not params.is_uniform:
+        raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
+                         "the given parameters differ per planet.")
+    params = params.uniform()
+    _targets(params, args.param)  # unknown name -> the list of valid ones
+    for name, v in (("--steps-per-period", args.steps_per_period), ("--max-period", args.max_period),
+                    ("--period", args.period), ("--max-steps", args.max_steps)):
+        if v < 1:
+            raise ValueError(f"{name} must be >= 1, got {v}.")
+    integ = RK4(args.steps_per_period)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    head = (f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values), "
+            f"preset {args.preset}, {REDUCED.name} model")
+
+    if args.kind == "continuation":
+        return _continuation(args, params, start, stop, count, integ, out, head)
+
+    if args.kind == "bifurcation":
+        if args.points:
+            X0 = np.asarray(args.points, dtype=float)
+            if X0.shape[1] != REDUCED.dim:
+                raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {X0.shape[1]}.")
+        else:
+            n = 16 if args.starts is None else args.starts
+            if n < 1:
+                raise ValueError(f"--starts N needs N >= 1, got {n}.")
+            region = np.asarray(args.region or PAPER_REGION, dtype=float)
+            if region.shape != (3, 2):
+                raise ValueError("--region for the starts needs three LO:HI ranges (x1, x2, x3; x4 = 0).")
+            X0 = np.zeros((n, 4))  # on the section x4 = 0, like the paper's cells
+            X0[:, :3] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
+        print(head + f", {len(X0)} starts, direction {args.direction}")
+        result = bifurcation_diagram(REDUCED, params, args.param, values, X0, transient=args.transient,
+                                     record=args.record, direction=args.direction, integrator=integ,
+                                     max_period=args.max_period, progress=not args.quiet, out=out,
+                                     restart=args.restart)
+        print(f"done in {time.perf_counter() - t0:.1f} s\n")
+        print(result.table())
+        if "up" in result.directions and "down" in result.directions:
+            diff = result.values[result.differs("up", "down")]
+            print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
+                  + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
+        files = ["bifurcation.nc", "summary.json"]
+        figs = {}
+        if not args.no_figures:
+            from .. import plotting
+
+            figs = {"bifurcation.png": plotting.plot_bifurcation(result, "x1"),
+                    "bifurcation_x3.png": plotting.plot_bifurcation(result, "x3")}
+    else:  # basins
+        region = args.region or PAPER_REGION
+        if len(region) != 3:
+            raise ValueError("--region for basins needs three LO:HI ranges (x1, x2, x3 on x4 = 0).")
+        grid = CellGrid.box(region, args.grid, axes=(0, 1, 2), base=(0.0,) * 4, names=REDUCED.state_names)
+        _check_values(REDUCED, params, (args.param,), values[:, None])
+        print(head + f", {args.method} on {grid.n_cells} cells per value")
+        result = basin_sweep(REDUCED, params, args.param, values, grid, method=args.method, integrator=integ,
+                             max_period=args.max_period, progress=not args.quiet, out=out, restart=args.restart)
+        print(f"done in {time.perf_counter() - t0:.1f} s\n")
+        print(result.shares_table())
+        print()
+        print(result.table())
+        files = ["basins.nc", "summary.json"]
+        figs = {}
+        if not args.no_figures:
+            from .. import plotting
+
+            figs = {"shares.png": plotting.plot_basin_shares(result)}
+    summary = result.summary()
+    summary["runtime_s"] = time.perf_counter() - t0  # in summary.json only, never in the result file
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    for name, fig in figs.items():
+        fig.savefig(out / name, dpi=120)
+    print(f"\nwrote {', '.join(files + list(figs))} to {out}/")
+    return 0
+
+
+def _continuation(args, params, start, stop, count, integ, out, head) -> int:
+    import numpy as np
+
+    from .. import REDUCED
+    from .._params import with_param
+    from .._sweep import _check_values
+
+    try:
+        from .._continuation import continue_orbit
+    except ModuleNotFoundError as exc:
+        if exc.name != "jaxgear._continuation":
+            raise
+        print("jaxgear sweep: error: --kind continuation needs orbit continuation (jaxgear._continuation), "
+              "which this build of jaxgear does not include; use --kind bifurcation or basins.", file=sys.stderr)
+        return 1
+    if not args.points or len(args.points) != 1:
+        raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
+                         "at the start value (e.g. from jaxgear shoot).")
+    x0 = np.asarray(args.points[0], dtype=float)
+    if x0.shape != (REDUCED.dim,):
+        raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {x0.size}.")
+    _check_values(REDUCED, params, (args.param,), np.array([[start], [stop]]))
+    p0 = with_param(params, args.param, start)
+    ds = abs(stop - start) / (count - 1)
+    print(head + f", P-{args.period} orbit from {x0.tolist()}, step {ds:g}")
+    t0 = time.perf_counter()
+    branch = continue_orbit(REDUCED, p0, x0, param=args.param, stop=stop, period=args.period, ds=ds,
+                            max_steps=args.max_steps, integrator=integ, progress=not args.quiet)
+    print(f"done in {time.perf_counter() - t0:.1f} s\n")
+    table = branch.table()
+    print(table)
+    branch.save(out / "branch.nc")
+    summary = dict(kind="continuation", param=args.param, start=start, stop=stop, ds=ds, period=args.period,
+                   seed_point=x0.tolist(), params=params.to_dict(), table=table,
+                   runtime_s=time.perf_counter() - t0)
+    if hasattr(branch, "summary"):
+        summary["branch"] = branch.summary()
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
+    files = ["branch.nc", "summary.json"]
+    if not args.no_figures:
+        from .. import plotting
+
+        plot_branch = getattr(plotting, "plot_branch", None)
+        if plot_branch is not None:
+            plot_branch(branch).savefig(out / "branch.png", dpi=120)
+            files.append("branch.png")
+    print(f"\nwrote {', '.join(files)} to {out}/")
+    return 0

@@ -1,0 +1,212 @@
+"""Figures of parameter sweeps: bifurcation diagrams, basin shares, two-parameter maps.
+
+Periods have fixed colours in every sweep figure (:func:`period_color`: P-1 blue, P-2
+red, P-3 green, P-4 orange, P-8 cyan, P-12 pink, ... from the attractor palette of
+``_style``; aperiodic dark grey; escaped the sink's light grey); global attractors of a basin sweep use
+``attractor_color(id)`` like the domain figures.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from ._style import _PALETTE, SINK_COLOR, UNRESOLVED_COLOR, attractor_color, new_figure
+
+APERIODIC_COLOR = "#404040"
+
+
+# P-1..P-6 and P-8 take the attractor palette's first colours; P-12 and P-16 get their own.
+_PERIOD_COLORS = {1: _PALETTE[0], 2: _PALETTE[1], 3: _PALETTE[2], 4: _PALETTE[3], 5: _PALETTE[4], 6: _PALETTE[5],
+                  7: "#bcbd22", 8: _PALETTE[7], 12: _PALETTE[6], 16: "#393b79"}
+_OTHER_PERIODS = ["#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94"]
+
+
+def period_color(k: int) -> str:
+    """Colour of period code ``k`` (P-k for k >= 1; 0 aperiodic; -1 escaped)."""
+    k = int(k)
+    if k >= 1:
+        return _PERIOD_COLORS.get(k, _OTHER_PERIODS[k % len(_OTHER_PERIODS)])
+    return APERIODIC_COLOR if k == 0 else SINK_COLOR
+
+
+def _period_label(k: int) -> str:
+    return f"P-{k}" if k > 0 else ("aperiodic" if k == 0 else "escaped")
+
+
+def _coord_index(names, coordinate) -> int:
+    if isinstance(coordinate, str):
+        if coordinate not in names:
+            raise ValueError(f"unknown coordinate {coordinate!r}; the state has {', '.join(names)}.")
+        return list(names).index(coordinate)
+    j = int(coordinate)
+    if not 0 <= j < len(names):
+        raise ValueError(f"coordinate index {j} is outside 0..{len(names) - 1}.")
+    return j
+
+
+_DIR_STYLE = {  # marker, size, legend label, horizontal offset (in units of the dodge)
+    "up": ("^", 9.0, "sweep up (state carried)", -1.0),
+    "independent": ("o", 5.0, "independent starts", 0.0),
+    "down": ("v", 9.0, "sweep down (state carried)", 1.0),
+}
+
+
+def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | None = None):
+    """Bifurcation diagram: a state coordinate of the stroboscopic points against the parameter.
+
+    Points are coloured by the period of the (value, start) they belong to; a P-k lane
+    contributes its k points, an aperiodic lane all its recorded points. With several
+    sweeps each value's column is split: up sweep (``^``, left), independent starts
+    (``o``, middle), down sweep (``v``, right); where up and down differ the sweeps
+    followed different attractors (hysteresis). Escaped lanes are marked with grey
+    crosses along the top edge.
+
+    Args:
+        diagram: a :class:`~jaxgear.BifurcationDiagram` (computed or loaded).
+        coordinate: state name (``"x1"``) or index.
+        directions: subset of ``diagram.directions`` to draw (default all).
+    Returns a :class:`matplotlib.figure.Figure`.
+    """
+    j = _coord_index(diagram.state_names, coordinate)
+    dirs = list(diagram.directions if directions is None else directions)
+    for d in dirs:
+        if d not in diagram.directions:
+            raise ValueError(f"direction {d!r} is not in this diagram ({diagram.directions}).")
+    fig = new_figure(figsize=(8.0, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    vals = np.asarray(diagram.values)
+    step = float(np.min(np.diff(vals))) if len(vals) > 1 else 1.0
+    dodge = 0.22 * step if len(dirs) > 1 else 0.0
+    R = diagram.points.shape[-2]
+    periods_seen = set()
+    n_escaped = 0
+    for name in dirs:
+        d = diagram.directions.index(name)
+        per = diagram.period[d]  # (V, S)
+        pts = diagram.points[d][..., j]  # (V, S, R)
+        marker, size, _, off = _DIR_STYLE[name]
+        codes = [k for k in np.unique(per).tolist() if k != -1]
+        codes.sort(key=lambda k: -int((per == k).sum()))  # rare periods drawn last, on top
+        for k in codes:
+            vi, si = np.nonzero(per == k)
+            take = R if k == 0 else k
+            y = pts[vi, si, R - take:].reshape(-1)
+            x = np.repeat(vals[vi] + off * dodge, take)
+            ax.scatter(x, y, s=size, marker=marker, color=period_color(k), linewidths=0)
+            periods_seen.add(k)
+        n_escaped += int((per == -1).sum())
+        esc = np.nonzero((per == -1).any(axis=1))[0]
+        if len(esc):
+            ax.plot(vals[esc] + off * dodge, np.full(len(esc), 0.98), "x", color="#999999", ms=5,
+                    transform=ax.get_xaxis_transform())
+    handles = [Patch(color=period_color(k), label=_period_label(k))
+               for k in sorted(periods_seen, key=lambda k: (k <= 0, k))]
+    if n_escaped:
+        handles.append(Line2D([], [], marker="x", ls="none", color="#999999", label=f"escaped ({n_escaped} runs)"))
+    if len(dirs) > 1 or dirs[0] != "independent":
+        for name in sorted(dirs, key=lambda n: _DIR_STYLE[n][3]):
+            marker, _, label, _ = _DIR_STYLE[name]
+            handles.append(Line2D([], [], marker=marker, ls="none", color="k", ms=5, label=label))
+    ax.legend(handles=handles, fontsize="small", loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax.set_xlabel(diagram.param + ("" if diagram.fields == (diagram.param,) else f"  ({', '.join(diagram.fields)})"))
+    ax.set_ylabel(f"{diagram.state_names[j]} at forcing phase 0")
+    ax.set_title(title or f"Bifurcation diagram of {diagram.system} ({len(diagram.starts)} starts per value)")
+    return fig
+
+
+def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, title: str | None = None):
+    """Stacked basin shares against the parameter (a :class:`~jaxgear.BasinSweep`).
+
+    One band per global attractor (``attractor_color(id)``, labelled with its id and
+    period(s), e.g. ``"1: P-4/P-8"`` when it doubles along the sweep), then the sink and
+    unresolved cells. With ``mark_events`` a dotted line marks where an attractor
+    appears or vanishes.
+    """
+    x = np.asarray(sweep.values)
+    f = 100.0 if percent else 1.0
+    ys, cols, labels = [], [], []
+    for g in range(sweep.n_attractors):
+        ys.append(f * sweep.shares[:, g])
+        cols.append(attractor_color(g))
+        labels.append(f"{g}: {sweep.attractor_label(g)}")
+    if np.any(sweep.sink_share > 0) or not ys:
+        ys.append(f * sweep.sink_share)
+        cols.append(SINK_COLOR)
+        labels.append("sink")
+    if np.any(sweep.unresolved_share > 0):
+        ys.append(f * sweep.unresolved_share)
+        cols.append(UNRESOLVED_COLOR)
+        labels.append("unresolved")
+    fig = new_figure(figsize=(7.5, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    if len(x) == 1:
+        bottom = 0.0
+        for y, c, lab in zip(ys, cols, labels):
+            ax.bar(x, y, bottom=bottom, color=c, label=lab, width=1.0)
+            bottom = bottom + y
+    else:
+        ax.stackplot(x, *ys, colors=cols, labels=labels, step=None)
+    if mark_events and len(x) > 1:
+        for e in sweep.events():
+            if e["event"] in ("appears", "vanishes"):
+                i = e["index"]
+                ax.axvline(0.5 * (x[i - 1] + x[i]), color="k", ls=":", lw=0.8)
+    if len(x) > 1:
+        ax.set_xlim(x.min(), x.max())
+    ax.set_ylim(0, f)
+    ax.set_xlabel(sweep.param)
+    ax.set_ylabel("share of the grid [%]" if percent else "share of the grid")
+    ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small")
+    ax.set_title(title or f"Basin shares ({sweep.method}, {sweep.grid.n_cells} cells per value)")
+    return fig
+
+
+def _edges(c: np.ndarray) -> np.ndarray:
+    c = np.asarray(c, dtype=float)
+    if len(c) == 1:
+        return np.array([c[0] - 0.5, c[0] + 0.5])
+    mid = 0.5 * (c[1:] + c[:-1])
+    return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
+
+
+def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None = None):
+    """Two-parameter map as an image (a :class:`~jaxgear.ParameterMap`).
+
+    ``quantity="period"`` (default: the map's own): the period reached from the first
+    start, one colour per period (:func:`period_color`) with a legend;
+    ``"n_attractors"``: the number of distinct attractors reached from the starts.
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+
+    quantity = quantity or pmap.quantity
+    if quantity not in ("period", "n_attractors"):
+        raise ValueError(f"quantity must be 'period' or 'n_attractors', got {quantity!r}.")
+    fig = new_figure(figsize=(7.0, 5.0), layout="constrained")
+    ax = fig.add_subplot()
+    X, Y = _edges(pmap.values_x), _edges(pmap.values_y)
+    if quantity == "period":
+        data = np.asarray(pmap.period[:, :, 0])
+        codes = sorted(np.unique(data).tolist(), key=lambda k: (k <= 0, k if k > 0 else -k))
+        idx = np.searchsorted(np.array(sorted(codes)), data)
+        order = sorted(codes)
+        cmap = ListedColormap([period_color(k) for k in order])
+        ax.pcolormesh(X, Y, idx, cmap=cmap, vmin=-0.5, vmax=len(order) - 0.5, shading="flat")
+        handles = [Patch(color=period_color(k), label=_period_label(k)) for k in codes]
+        ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small",
+                  title="from start 0")
+    else:
+        data = np.asarray(pmap.n_attractors)
+        top = max(int(data.max()), 1)
+        base = ["#f7f7f7"] + [_PALETTE[i % len(_PALETTE)] for i in range(top)]
+        cmap = ListedColormap(base[: top + 1])
+        norm = BoundaryNorm(np.arange(-0.5, top + 1.5), cmap.N)
+        m = ax.pcolormesh(X, Y, data, cmap=cmap, norm=norm, shading="flat")
+        cb = fig.colorbar(m, ax=ax, ticks=np.arange(0, top + 1))
+        cb.set_label(f"distinct attractors from {len(pmap.starts)} starts")
+    ax.set_xlabel(pmap.param_x)
+    ax.set_ylabel(pmap.param_y)
+    ax.set_title(title or ("Period of the attractor reached" if quantity == "period"
+                           else "Number of coexisting attractors"))
+    return fig

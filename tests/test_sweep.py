@@ -1,0 +1,501 @@
+"""Parameter sweeps (issue 5): bifurcation diagrams, basin sweeps, parameter maps, resume, CLI.
+
+References that do not come from jaxgear's sweep code:
+- the first parametric-resonance tongue of the damped Mathieu equation from one-harmonic
+  balance (perturbation theory, error O(eps^2));
+- the jump-up/jump-down frequencies of the hardening Duffing oscillator from harmonic
+  balance (fold points of [(alpha - w^2 + 3/4 beta A^2)^2 + (delta w)^2] A^2 = gamma^2,
+  computed here with numpy) and its two branch amplitudes;
+- the foundation's stroboscopic_orbit one value at a time (vmap versus loop);
+- an uninterrupted run (kill-and-resume).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgear as jg
+from jaxgear import _sweep
+from jaxgear._sweep import (
+    APERIODIC,
+    ESCAPED,
+    basin_sweep,
+    bifurcation_diagram,
+    load_basin_sweep,
+    load_bifurcation,
+    load_parameter_map,
+    parameter_map,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+# ----------------------------------------------------------------- a user-defined system
+class ParamDuffing(eqx.Module):
+    """x'' + 2 zeta x' + (1 + eps cos(Omega t)) x + beta x^3 = 0 (all float64 arrays)."""
+
+    zeta: Any = eqx.field(converter=lambda x: jnp.asarray(x, jnp.float64))
+    eps: Any = eqx.field(converter=lambda x: jnp.asarray(x, jnp.float64))
+    beta: Any = eqx.field(converter=lambda x: jnp.asarray(x, jnp.float64))
+    Omega: Any = eqx.field(converter=lambda x: jnp.asarray(x, jnp.float64))
+
+
+def _param_duffing(t, x, p):
+    return jnp.stack([x[1], -2.0 * p.zeta * x[1] - (1.0 + p.eps * jnp.cos(p.Omega * t)) * x[0] - p.beta * x[0] ** 3])
+
+
+PARAM_DUFFING = jg.ForcedSystem(vector_field=_param_duffing, period=lambda p: 2.0 * jnp.pi / p.Omega,
+                                state_names=("x", "v"), name="param-duffing")
+
+
+def mathieu_tongue(eps, zeta):
+    """Edges (Omega_-, Omega_+) of the first tongue: x = a cos(Omega t/2) + b sin(Omega t/2)
+    in the linearisation gives (1 - w^2)^2 + 4 zeta^2 w^2 = eps^2/4, w = Omega/2 (error O(eps^2))."""
+    c = 1.0 - 2.0 * zeta**2
+    r = np.sqrt(eps**2 / 4.0 - 4.0 * zeta**2 + 4.0 * zeta**4)
+    return 2.0 * np.sqrt(c - r), 2.0 * np.sqrt(c + r)
+
+
+def duffing_hb(delta, alpha, beta, gamma, w):
+    """Real positive amplitudes A of the one-harmonic balance at frequency w (ascending)."""
+    c = [(0.75 * beta) ** 2, 1.5 * beta * (alpha - w**2), (alpha - w**2) ** 2 + (delta * w) ** 2, -gamma**2]
+    z = np.roots(c)
+    z = np.sort(z[(np.abs(z.imag) < 1e-9) & (z.real > 0)].real)
+    return np.sqrt(z)
+
+
+def duffing_folds(delta, alpha, beta, gamma):
+    w = np.linspace(0.8, 2.5, 17001)
+    three = np.array([len(duffing_hb(delta, alpha, beta, gamma, x)) == 3 for x in w])
+    i = np.nonzero(three)[0]
+    return w[i[0]], w[i[-1]]
+
+
+DUFF = dict(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3)
+
+
+# ----------------------------------------------------------------- bifurcation diagrams
+def test_period_doubling_of_the_trivial_orbit_at_the_mathieu_tongue():
+    """Sweeping Omega up, the trivial P-1 of the parametric Duffing oscillator gives way to
+    a P-2 where perturbation theory puts the first tongue's lower edge (a flip: the P-2
+    motion has half the forcing frequency)."""
+    eps, zeta = 0.2, 0.01
+    lower, _ = mathieu_tongue(eps, zeta)  # 1.8993
+    res = 0.005
+    values = np.round(np.arange(1.85, 1.95 + 1e-9, res), 6)
+    p = ParamDuffing(zeta=zeta, eps=eps, beta=1.0, Omega=2.0)
+    d = bifurcation_diagram(PARAM_DUFFING, p, "Omega", values, [[0.1, 0.0]], transient=3000, record=40,
+                            integrator=jg.RK4(64), max_period=8, progress=False)
+    per = d.period[0, :, 0]
+    assert set(per.tolist()) == {1, 2}, per
+    first = int(np.argmax(per == 2))
+    assert np.all(per[:first] == 1) and np.all(per[first:] == 2)  # one change, P-1 -> P-2
+    change = 0.5 * (values[first - 1] + values[first])
+    theory_err = eps**2 / 16  # the O(eps^2) term of the undamped expansion is ~eps^2/27 in Omega
+    assert abs(change - lower) <= res + theory_err, (change, lower)
+    # below: the trivial orbit (x = 0); above: a P-2 of non-zero amplitude alternating in sign
+    x = d.points[0, :, 0, -2:, 0]
+    assert np.all(np.abs(x[:first]) < 1e-8)
+    assert np.all(np.abs(x[first:]).min(axis=1) > 1e-3) and np.all(x[first:, 0] * x[first:, 1] < 0)
+    assert d.transitions()[0]["from"] == ["P-1"] and d.transitions()[0]["to"] == ["P-2"]
+
+
+def test_hysteresis_of_the_hardening_duffing_oscillator():
+    """Up and down sweeps in omega differ inside the harmonic-balance jump interval
+    (different branches, amplitudes near the upper and lower HB roots) and agree outside."""
+    w_up, w_down = duffing_folds(**DUFF)  # jump-up (lower fold) 1.261, jump-down (upper fold) 1.551
+    values = np.round(np.linspace(1.0, 1.8, 41), 6)
+    p = jg.DuffingParams(**DUFF, omega=1.0)
+    d = bifurcation_diagram(jg.DUFFING, p, "omega", values, [[0.0, 0.0]], transient=400, record=40,
+                            direction="both", integrator=jg.RK4(64), max_period=8, progress=False)
+    assert d.directions == ("up", "down")
+    assert np.all(d.period == 1)
+    up, down = d.points[0, :, 0, -1], d.points[1, :, 0, -1]
+    gap = np.linalg.norm(up - down, axis=1)
+    margin = 0.02 + 0.01 * values  # one sweep step + 1 % for the one-harmonic approximation
+    inside = (values > w_up + margin) & (values < w_down - margin)
+    outside = (values < w_up - margin) | (values > w_down + margin)
+    assert inside.sum() >= 8 and outside.sum() >= 15
+    assert np.all(gap[inside] > 0.3), gap[inside]
+    assert np.all(gap[outside] < 1e-6), gap[outside]
+    diff = d.differs("up", "down")
+    assert diff[inside].all() and not diff[outside].any()
+    # the up sweep rides the upper branch, the down sweep the lower one (amplitude of the harmonic)
+    for i in np.nonzero(inside)[0]:
+        roots = duffing_hb(**DUFF, w=values[i])
+        amp = lambda x: np.hypot(x[0], x[1] / values[i])  # noqa: E731
+        assert abs(amp(up[i]) - roots[-1]) < 0.1 * roots[-1]
+        assert abs(amp(down[i]) - roots[0]) < 0.1 * roots[-1]
+
+
+def test_sweep_equals_one_value_at_a_time_and_clocks_agree():
+    """Batched values (vmap, one clock or one per value) equal the foundation's
+    stroboscopic_orbit run at each value separately."""
+    p = jg.DuffingParams(**DUFF, omega=1.3)
+    X0 = np.array([[0.5, 0.0], [-2.0, 1.0]])
+    integ = jg.RK4(32)
+    for name, vals in (("gamma", [0.2, 0.3, 0.4]), ("omega", [1.1, 1.3, 1.5])):
+        d = bifurcation_diagram(jg.DUFFING, p, name, vals, X0, transient=5, record=17, integrator=integ,
+                                max_period=8, progress=False)
+        for i, v in enumerate(vals):
+            pv = jg.with_param(p, name, v)
+            x = jg.stroboscopic_map(jg.DUFFING, pv, X0, periods=5, integrator=integ)
+            ref = np.asarray(jg.stroboscopic_orbit(jg.DUFFING, pv, x, n_points=17, integrator=integ))
+            np.testing.assert_allclose(d.points[0, i], ref, rtol=1e-11, atol=1e-11)
+    # a shared-clock parameter run through the per-value clock gives the same points
+    V = np.array([[0.2], [0.3]])
+    a = _sweep._compute_independent(jg.DUFFING, p, ("gamma",), V, 2, jnp.asarray(X0), 3, 5, integ, True)
+    b = _sweep._compute_independent(jg.DUFFING, p, ("gamma",), V, 2, jnp.asarray(X0), 3, 5, integ, False)
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
+def test_escaped_and_aperiodic_codes():
+    """Unbounded motion is 'escaped' (never a silent NaN); no recurrence is 'aperiodic'."""
+    # negative linear stiffness, no cubic term: x grows without bound
+    p = jg.DuffingParams(delta=0.1, alpha=-1.0, beta=0.0, gamma=0.0, omega=1.0)
+    d = bifurcation_diagram(jg.DUFFING, p, "gamma", [0.0, 0.1], [[0.1, 0.0]], transient=60, record=17,
+                            max_period=8, integrator=jg.RK4(32), progress=False)
+    assert np.all(d.period == ESCAPED) and np.all(d.attractor == -1)
+    # a classic chaotic Duffing (Ueda-type): x'' + 0.05 x' + x^3 = 7.5 cos t
+    p = jg.DuffingParams(delta=0.05, alpha=0.0, beta=1.0, gamma=7.5, omega=1.0)
+    d = bifurcation_diagram(jg.DUFFING, p, "gamma", [7.5], [[0.5, 0.0]], transient=100, record=40,
+                            max_period=16, integrator=jg.RK4(100), progress=False)
+    assert d.period[0, 0, 0] == APERIODIC
+    assert "aperiodic" in d.table()
+
+
+# ----------------------------------------------------------------- basin sweep: matching
+def test_basin_sweep_keeps_attractor_identities():
+    """In the hysteresis interval of the hardening Duffing the shares of its two P-1
+    attractors cross; each global id stays on one HB branch and moves continuously."""
+    p = jg.DuffingParams(**DUFF, omega=1.3)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 12), names=("x", "v"))
+    values = np.linspace(1.30, 1.46, 5)
+    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, integrator=jg.RK4(64), max_period=4, progress=False)
+    assert s.n_attractors == 2 and np.all(s.present) and np.all(s.period == 1)
+    np.testing.assert_allclose(s.shares.sum(axis=1) + s.sink_share + s.unresolved_share, 1.0)
+    # the shares cross (so the per-value results, sorted by share, swap their local ids)
+    assert (s.shares[0, 0] - s.shares[0, 1]) * (s.shares[-1, 0] - s.shares[-1, 1]) < 0
+    amp = np.hypot(s.points[:, :, 0, 0], s.points[:, :, 0, 1] / values[:, None])  # (V, G)
+    for i, w in enumerate(values):
+        lo, hi = duffing_hb(**DUFF, w=w)[[0, -1]]
+        big = int(np.argmax(amp[i]))
+        assert big == int(np.argmax(amp[0]))  # the same global id is the large-amplitude one throughout
+        assert abs(amp[i, big] - hi) < 0.1 * hi and abs(amp[i, 1 - big] - lo) < 0.1 * hi
+    step = np.linalg.norm(np.diff(s.points[:, :, 0], axis=0), axis=-1)  # (V-1, G)
+    apart = np.linalg.norm(s.points[:, 0, 0] - s.points[:, 1, 0], axis=-1)
+    assert step.max() < 0.25 * apart.min()
+    assert [e["event"] for e in s.events() if e["event"] in ("appears", "vanishes")] == []
+
+
+def test_matching_is_set_distance_and_cyclic_shift_invariant():
+    """The matcher follows attractors by the distance of their point sets, whatever the
+    order of the points or of the attractors, and starts a new id beyond match_tol."""
+    from jaxgear._result import Attractor
+
+    def res(*atts):
+        a = tuple(Attractor(id=i, period=len(pts), points=np.asarray(pts, float), section_points=np.zeros((0, 2)),
+                            cell_count=1, share=0.5, residual=0.0, periodic_cells=np.zeros(0, np.int64))
+                  for i, pts in enumerate(atts))
+        return type("R", (), {"attractors": a})()
+
+    A = [[0.0, 0.0], [1.0, 1.0]]
+    B = [[5.0, 5.0]]
+    r0 = res(A, B)
+    r1 = res([[5.1, 5.0]], [[1.05, 1.0], [0.0, 0.05]])  # order of attractors and of A's points swapped
+    r2 = res([[9.0, 9.0]], [[1.05, 1.0], [0.0, 0.05]])  # B vanished, a new one far away
+    ids = _sweep._match([r0, r1, r2], match_tol=0.5)
+    assert ids[0].tolist() == [0, 1] and ids[1].tolist() == [1, 0] and ids[2].tolist() == [2, 0]
+
+
+# ----------------------------------------------------------------- kill and resume
+class _Kill(BaseException):
+    pass
+
+
+def _interrupt_after(monkeypatch, n):
+    real = _sweep._save_part
+    calls = {"n": 0}
+
+    def save(path, arrays):
+        calls["n"] += 1
+        if calls["n"] > n:
+            raise _Kill()  # killed after n blocks were written
+        real(path, arrays)
+
+    monkeypatch.setattr(_sweep, "_save_part", save)
+
+
+def _assert_same_file(a, b):
+    import xarray as xr
+
+    with xr.open_dataset(a, engine="h5netcdf") as da, xr.open_dataset(b, engine="h5netcdf") as db:
+        assert da.identical(db)
+
+
+def _counting(monkeypatch, name, seen):
+    real = getattr(_sweep, name)
+
+    def wrapper(system, params, names, V, *a, **k):
+        seen.extend(np.asarray(V).reshape(len(V), -1)[:, 0].tolist())  # (the up value of a two-way scan)
+        return real(system, params, names, V, *a, **k)
+
+    monkeypatch.setattr(_sweep, name, wrapper)
+
+
+@pytest.mark.parametrize("direction", ["both", "independent"])
+def test_kill_and_resume_bifurcation(tmp_path, monkeypatch, direction):
+    p = jg.DuffingParams(**DUFF, omega=1.0)
+    kw = dict(transient=30, record=17, direction=direction, integrator=jg.RK4(32), max_period=8, chunk_size=8,
+              progress=False)
+    values = np.linspace(1.0, 1.6, 12)
+    X0 = [[0.0, 0.0], [2.0, 0.0]]
+    full = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "full", **kw)
+    with monkeypatch.context() as m:
+        _interrupt_after(m, 2)  # killed after two blocks were written
+        with pytest.raises(_Kill):
+            bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+    assert len(list((tmp_path / "run" / "parts").glob("*.npz"))) == 2
+    B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_values"][direction]
+    assert 1 < B < 6  # several blocks of several values
+    computed = []
+    _counting(monkeypatch, "_compute_independent" if direction == "independent" else "_compute_scan", computed)
+    resumed = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+    assert sorted(computed) == values[2 * B:].tolist()  # every unfinished value once, no finished one again
+    _assert_same_file(tmp_path / "full" / "bifurcation.nc", tmp_path / "run" / "bifurcation.nc")
+    np.testing.assert_array_equal(resumed.points, full.points)
+    computed.clear()  # a finished sweep: nothing is computed again
+    bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+    assert computed == []
+    # the same folder with another setting: a clear error, or a restart
+    with pytest.raises(ValueError, match="transient"):
+        bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **dict(kw, transient=31))
+    bifurcation_diagram(jg.DUFFING, p, "omega", values[:4], X0, out=tmp_path / "run", restart=True, **kw)
+    assert sorted(computed) == values[:4].tolist()
+
+
+def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
+    p = jg.DuffingParams(**DUFF, omega=1.3)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
+    values = [1.30, 1.35, 1.40, 1.45]
+    kw = dict(integrator=jg.RK4(32), max_period=4, progress=False)
+    basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "full", **kw)
+    real = _sweep._analyze_value
+    calls = []
+
+    def analyze(system, params, *a, **k):
+        calls.append(float(params.omega))
+        if kill and len(calls) == 3:
+            raise _Kill()
+        return real(system, params, *a, **k)
+
+    monkeypatch.setattr(_sweep, "_analyze_value", analyze)
+    kill = True
+    with pytest.raises(_Kill):
+        basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
+    calls.clear()
+    kill = False
+    basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
+    assert calls == values[2:]
+    _assert_same_file(tmp_path / "full" / "basins.nc", tmp_path / "run" / "basins.nc")
+
+
+# ----------------------------------------------------------------- parameter map
+def test_parameter_map_period_follows_the_mathieu_tongue():
+    """Period reached from a small start on an (Omega, eps) grid: P-2 inside the tongue,
+    P-1 outside (grid points closer than the theory error to an edge are not judged)."""
+    zeta = 0.01
+    Om = np.linspace(1.7, 2.3, 9)
+    eps = np.array([0.1, 0.3, 0.5])
+    p = ParamDuffing(zeta=zeta, eps=0.2, beta=1.0, Omega=2.0)
+    m = parameter_map(PARAM_DUFFING, p, "Omega", Om, "eps", eps, [[0.1, 0.0], [-1.5, 0.0]], transient=1500,
+                      integrator=jg.RK4(48), max_period=4, progress=False)
+    assert m.period.shape == (3, 9, 2) and m.n_attractors.shape == (3, 9)
+    judged = 0
+    for j, e in enumerate(eps):
+        lo, hi = mathieu_tongue(e, zeta)
+        for i, w in enumerate(Om):
+            margin = e**2 / 8 + 0.01
+            if lo + margin < w < hi - margin:
+                assert m.data[j, i] == 2, (e, w)
+                judged += 1
+            elif w < lo - margin or w > hi + margin:
+                assert m.period[j, i, 0] == 1, (e, w)
+                judged += 1
+    assert judged >= 18
+    assert np.all(m.n_attractors >= 1) and m.n_attractors.max() <= 2
+    assert m.quantity == "period" and "attractors reached" in m.table()
+
+
+# ----------------------------------------------------------------- bad input
+def test_bad_input_raises_value_error():
+    p = jg.paper_params()
+    x0 = np.zeros(4)
+    with pytest.raises(ValueError, match="valid names: .*kappa_amp"):
+        bifurcation_diagram(jg.REDUCED, p, "backlash", [1.0, 2.0], x0)
+    with pytest.raises(ValueError, match="empty"):
+        bifurcation_diagram(jg.REDUCED, p, "b", [], x0)
+    with pytest.raises(ValueError, match="b_sp"):
+        bifurcation_diagram(jg.REDUCED, p, "b", [-1.0, 2.0], x0, progress=False)
+    with pytest.raises(ValueError, match="direction"):
+        bifurcation_diagram(jg.REDUCED, p, "b", [1.0, 2.0], x0, direction="sideways")
+    with pytest.raises(ValueError, match="record"):
+        bifurcation_diagram(jg.REDUCED, p, "b", [1.0, 2.0], x0, record=10, max_period=16)
+    with pytest.raises(ValueError, match="distinct"):
+        bifurcation_diagram(jg.REDUCED, p, "b", [2.0, 2.0], x0)
+    with pytest.raises(ValueError, match="same field"):
+        parameter_map(jg.REDUCED, p, "b", [1, 2], "b_sp", [1, 2], x0)
+    with pytest.raises(ValueError, match="period"):
+        bifurcation_diagram(jg.DUFFING, jg.DuffingParams(), "omega", [0.0, 1.0], [0.0, 0.0])
+
+
+# ----------------------------------------------------------------- save, load, plot
+@pytest.fixture(scope="module")
+def small_results(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sweeps")
+    p = jg.DuffingParams(**DUFF, omega=1.3)
+    bif = bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.2, 1.6, 5), [[0.0, 0.0], [2.0, 0.0]],
+                              transient=100, record=17, direction="both", integrator=jg.RK4(32), max_period=8,
+                              progress=False)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (6, 6), names=("x", "v"))
+    bas = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, integrator=jg.RK4(32), max_period=4,
+                      progress=False)
+    pm = parameter_map(jg.DUFFING, p, "omega", [1.2, 1.4, 1.6], "gamma", [0.2, 0.3], [[0.0, 0.0], [2.0, 0.0]],
+                       quantity="n_attractors", transient=100, integrator=jg.RK4(32), max_period=4, progress=False)
+    paths = {k: r.save(d / f"{k}.nc") for k, r in (("bif", bif), ("bas", bas), ("pm", pm))}
+    return dict(bif=bif, bas=bas, pm=pm, paths=paths)
+
+
+def _assert_equal_results(a, b):
+    import dataclasses
+
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.shape == y.shape, f.name
+            np.testing.assert_array_equal(x, y, err_msg=f.name)  # NaN == NaN, bit for bit otherwise
+        else:
+            assert x == y, f.name
+
+
+def test_save_load_round_trip(small_results):
+    import xarray as xr
+
+    for key, load, kind in (("bif", load_bifurcation, "BifurcationDiagram"), ("bas", load_basin_sweep, "BasinSweep"),
+                            ("pm", load_parameter_map, "ParameterMap")):
+        orig, path = small_results[key], small_results["paths"][key]
+        _assert_equal_results(orig, load(path))
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            assert ds.attrs["jaxgear_type"] == kind and ds.attrs["system"] == "duffing"
+            assert json.loads(ds.attrs["params"])["beta"] == 0.5 and ds.attrs["version"] == jg.__version__
+            assert "omega" in ds.coords and "state" in ds.coords
+    with pytest.raises(ValueError, match="not a BasinSweep"):
+        load_basin_sweep(small_results["paths"]["bif"])
+    for key, kind in (("bif", jg.BifurcationDiagram), ("bas", jg.BasinSweep), ("pm", jg.ParameterMap)):
+        assert type(jg.load(small_results["paths"][key])) is kind  # the generic loader dispatches here
+    bif = load_bifurcation(small_results["paths"]["bif"])
+    assert bif.points.flags.writeable is False  # immutable results
+    assert "omega" in bif.table() and json.dumps(bif.summary())
+    assert json.dumps(small_results["bas"].summary()) and small_results["pm"].table()
+
+
+def test_plots_draw_from_loaded_results(small_results):
+    from matplotlib.collections import PathCollection, PolyCollection, QuadMesh
+
+    from jaxgear import plotting
+
+    bif = load_bifurcation(small_results["paths"]["bif"])
+    fig = plotting.plot_bifurcation(bif, "x")
+    ax = fig.axes[0]
+    sc = [c for c in ax.collections if isinstance(c, PathCollection)]
+    assert len(sc) >= 2 and sum(len(c.get_offsets()) for c in sc) > 0  # up and down sweeps
+    assert ax.get_legend() is not None and "omega" in ax.get_xlabel()
+    with pytest.raises(ValueError, match="coordinate"):
+        plotting.plot_bifurcation(bif, "x9")
+    fig = plotting.plot_basin_shares(load_basin_sweep(small_results["paths"]["bas"]))
+    assert any(isinstance(c, PolyCollection) for c in fig.axes[0].collections)
+    pm = load_parameter_map(small_results["paths"]["pm"])
+    for q in ("period", "n_attractors"):
+        fig = plotting.plot_parameter_map(pm, q)
+        assert any(isinstance(c, QuadMesh) for c in fig.axes[0].collections)
+
+
+# ----------------------------------------------------------------- command line
+def test_cli_sweep_writes_files(tmp_path):
+    out = tmp_path / "sw"
+    cmd = [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", "4:6:3", "--starts", "2",
+           "--transient", "20", "--record", "33", "--steps-per-period", "50", "--out", str(out), "--quiet"]
+    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "sweep" in r.stdout and "up" in r.stdout and "down" in r.stdout
+    for f in ("bifurcation.nc", "summary.json", "bifurcation.png", "manifest.json"):
+        assert (out / f).is_file(), f
+    d = load_bifurcation(out / "bifurcation.nc")
+    assert d.param == "b" and d.fields == ("b_sp", "b_rp") and d.values.tolist() == [4.0, 5.0, 6.0]
+    assert json.loads((out / "summary.json").read_text())["kind"] == "bifurcation"
+
+
+def test_cli_bad_input_exit_codes(tmp_path, capsys, monkeypatch):
+    from jaxgear.cli import main
+
+    base = ["sweep", "--param", "b", "--out", str(tmp_path / "x")]
+    for values, msg in (("3:7", "START:STOP:COUNT"), ("3:7:1", "COUNT must be >= 2"), ("5:5:3", "empty"),
+                        ("a:7:3", "numbers"), ("3:7:2.5", "integer")):
+        assert main(base + ["--values", values]) == 2
+        assert msg in capsys.readouterr().err
+    assert main(["sweep", "--param", "backlash", "--values", "3:7:3", "--out", str(tmp_path / "x")]) == 2
+    assert "valid names" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "jaxgear._continuation", None)  # a build without continuation
+    assert main(base + ["--values", "3:7:3", "--kind", "continuation", "--from", "5,0,8,0"]) == 1
+    assert "jaxgear._continuation" in capsys.readouterr().err
+
+
+def test_cli_basins(tmp_path, capsys):
+    from jaxgear.cli import main
+
+    out = tmp_path / "bs"
+    rc = main(["sweep", "--param", "kappa_amp", "--values", "0.36:0.37:2", "--kind", "basins", "--grid", "3,2,3",
+               "--steps-per-period", "50", "--max-period", "8", "--out", str(out), "--quiet",
+               "--no-figures"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "sink" in text and "present" in text
+    s = load_basin_sweep(out / "basins.nc")
+    assert s.labels.shape == (2, 3, 2, 3) and s.fields == ("kappa_sp_amp", "kappa_rp_amp")
+
+
+@pytest.mark.slow
+def test_cli_sweep_killed_and_restarted(tmp_path):
+    """A real kill (SIGKILL) in the middle of `jaxgear sweep`, then the same command again:
+    the file equals that of an uninterrupted run and the finished blocks are kept."""
+    import os
+    import signal
+    import time
+
+    def cmd(out):
+        return [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", "3:7:24", "--starts", "4",
+                "--transient", "300", "--record", "33", "--out", str(out), "--quiet", "--no-figures"]
+
+    assert subprocess.run(cmd(tmp_path / "full"), cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    run = tmp_path / "run"
+    proc = subprocess.Popen(cmd(run), cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while time.time() - t0 < 300 and proc.poll() is None and not list((run / "parts").glob("*.npz")):
+        time.sleep(0.005)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    kept = sorted(p.name for p in (run / "parts").glob("*.npz"))
+    assert proc.returncode == -signal.SIGKILL and 0 < len(kept) < 8, kept  # 24 values in blocks of 3
+    stamps = {n: (run / "parts" / n).stat().st_mtime_ns for n in kept}
+    assert subprocess.run(cmd(run), cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    assert all((run / "parts" / n).stat().st_mtime_ns == t for n, t in stamps.items())  # not recomputed
+    _assert_same_file(tmp_path / "full" / "bifurcation.nc", run / "bifurcation.nc")
