@@ -357,7 +357,7 @@ def bench_shooting(R, quick: bool):
     p = jaxgear.paper_params()
     guesses = random_states(32 if quick else 256, seed=5)
     try:
-        fn = lambda: jaxgear.find_periodic_orbits(jaxgear.REDUCED, p, guesses, period=4)  # noqa: E731
+        fn = lambda: jaxgear.find_periodic_orbits(jaxgear.REDUCED, p, guesses, period=4, progress=False)  # noqa: E731
         m = measure(fn, 1)
         res = fn()
         m["guesses"] = len(guesses)

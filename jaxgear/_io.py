@@ -118,3 +118,13 @@ def load(path: str | Path) -> Any:
     if loader is None:
         raise ImportError(f"{path} holds a {kind}, but {module} has no loader {func}() in this build of jaxgear.")
     return loader(path)
+
+
+def _write_json(obj, path: str | Path, indent: int = 2) -> Path:
+    """Write ``obj`` as JSON to ``path`` (parent folders created); returns the path."""
+    import json
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(obj, indent=indent))
+    return path

@@ -198,10 +198,9 @@ class GlobalResult:
 
     def write_summary(self, path: str | Path) -> Path:
         """Write ``summary.json`` (everything but the per-cell labels)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.summary(), indent=2))
-        return path
+        from ._io import _write_json
+
+        return _write_json(self.summary(), path)
 
 
 def load_result(path: str | Path) -> GlobalResult:

@@ -704,10 +704,9 @@ class OrbitSearch:
 
     def write_summary(self, path: str | Path) -> Path:
         """Write :meth:`summary` as JSON."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.summary(), indent=2))
-        return path
+        from ._io import _write_json
+
+        return _write_json(self.summary(), path)
 
 
 def _complex(re: np.ndarray, im: np.ndarray) -> np.ndarray:

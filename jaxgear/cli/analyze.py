@@ -11,7 +11,7 @@ import json
 import time
 from pathlib import Path
 
-from .common import add_param_options
+from .common import add_param_options, parse_ranges
 
 
 def _ints(text: str) -> tuple[int, ...]:
@@ -24,14 +24,6 @@ def _ints(text: str) -> tuple[int, ...]:
     return vals
 
 
-def _ranges(text: str) -> tuple[tuple[float, float], ...]:
-    out = []
-    for part in text.split(","):
-        lo, sep, hi = part.partition(":")
-        if not sep:
-            raise ValueError(f"--region expects LO:HI per axis, comma-separated (e.g. -25:25,-10:20,-10:50), got {text!r}")
-        out.append((float(lo), float(hi)))
-    return tuple(out)
 
 
 def add_parser(sub) -> None:
@@ -51,7 +43,7 @@ def add_parser(sub) -> None:
                    "stroboscopic: Hsu's simple cell mapping of the stroboscopic map (grid over x1..x4)")
     p.add_argument("--grid", type=_ints, default=None, metavar="N1,N2,N3[,N4]",
                    help="cells per axis (default 50,30,60; stroboscopic default 25,15,30,12)")
-    p.add_argument("--region", type=_ranges, default=None, metavar="LO:HI,...",
+    p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="box bounds per gridded axis (default the paper's D: -25:25,-10:20,-10:50; "
                    "stroboscopic adds x4 in -12:12)")
     p.add_argument("--mapping-steps", type=int, default=None, metavar="L",

@@ -14,3 +14,19 @@ def add_param_options(p: argparse.ArgumentParser) -> None:
         "k_sp_amp=2e8, ...) or a canonical dimensionless name (Omega=0.9, b_sp=4, "
         "kappa_sp_amp=0.3, ...); per-planet values as comma lists; repeatable",
     )
+
+
+def parse_ranges(text: str) -> tuple[tuple[float, float], ...]:
+    """``--region`` value ``LO:HI,LO:HI,...`` -> ``((lo, hi), ...)``, one pair per coordinate."""
+    out = []
+    for part in text.split(","):
+        lo, sep, hi = part.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            out.append((float(lo), float(hi)))
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"--region expects LO:HI per coordinate, comma-separated (e.g. -25:25,-10:20,-10:50), got {text!r}"
+            ) from None
+    return tuple(out)

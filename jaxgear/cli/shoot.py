@@ -18,7 +18,7 @@ import numpy as np
 
 from pathlib import Path
 
-from .common import add_param_options
+from .common import add_param_options, parse_ranges
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
 DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
@@ -31,15 +31,6 @@ def _point(text: str) -> tuple[float, ...]:
         raise ValueError(f"--from expects comma-separated numbers like 1.27,-2.71,5.54,0, got {text!r}") from exc
 
 
-def _ranges(text: str) -> tuple[tuple[float, float], ...]:
-    out = []
-    for part in text.split(","):
-        lo, sep, hi = part.partition(":")
-        if not sep:
-            raise ValueError(f"--region expects LO:HI per coordinate, comma-separated "
-                             f"(e.g. -25:25,-10:20,-10:50,-5:5), got {text!r}")
-        out.append((float(lo), float(hi)))
-    return tuple(out)
 
 
 def add_parser(sub) -> None:
@@ -59,7 +50,7 @@ def add_parser(sub) -> None:
                      help="a saved global-analysis result (jaxgear analyze): every point of each P-k attractor "
                      "seeds a P-k orbit; the result's own parameters are used (--set overrides canonical names)")
     src.add_argument("--random", type=int, metavar="N", help="N random seeds in --region")
-    p.add_argument("--region", type=_ranges, default=DEFAULT_REGION, metavar="LO:HI,...",
+    p.add_argument("--region", type=parse_ranges, default=DEFAULT_REGION, metavar="LO:HI,...",
                    help="box for --random, one LO:HI per coordinate (default the paper's D with x4 in [-5,5]: "
                    "-25:25,-10:20,-10:50,-5:5)")
     p.add_argument("--seed", type=int, default=0, help="random seed for --random (default 0)")

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from .common import add_param_options
+from .common import add_param_options, parse_ranges
 
 KINDS = ("bifurcation", "basins", "continuation")
 
@@ -62,15 +62,6 @@ def _ints(text: str) -> tuple[int, ...]:
     return vals
 
 
-def _ranges(text: str):
-    out = []
-    for part in text.split(","):
-        lo, sep, hi = part.partition(":")
-        if not sep:
-            raise ValueError(f"--region expects LO:HI per axis, comma-separated (e.g. -25:25,-10:20,-10:50), "
-                             f"got {text!r}")
-        out.append((float(lo), float(hi)))
-    return tuple(out)
 
 
 def add_parser(sub) -> None:
@@ -98,7 +89,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of --starts (default 0)")
     p.add_argument("--grid", type=_ints, default=(20, 12, 24), metavar="N1,N2,N3",
                    help="basins: cells over x1, x2, x3 on x4 = 0 (default 20,12,24)")
-    p.add_argument("--region", type=_ranges, default=None, metavar="LO:HI,...",
+    p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="basins: box over x1, x2, x3 (default the paper's D: -25:25,-10:20,-10:50); "
                    "bifurcation: the box of the random starts")
     p.add_argument("--method", default="direct", choices=("direct", "poincare-like", "stroboscopic"),
