@@ -576,14 +576,11 @@ def main(argv=None):
     ap.add_argument("--n", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--repeat", type=int, default=3, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    import jaxgear  # noqa: F401  (enables float64 before any kernel is built)
 
     if a.worker:
-        import jaxgear  # noqa: F401  (float64)
-
         print(json.dumps(_worker(a.worker, a.n, a.repeat)))
         return
-
-    import jaxgear  # noqa: F401
 
     R = {"quick": bool(a.quick), "date": time.strftime("%Y-%m-%d %H:%M:%S"), "load_start": loadavg()}
     R["machine"] = machine_info()

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Any, Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -57,15 +57,6 @@ def _progress(total: int, desc: str, enabled: bool, unit: str = "cell"):
 def _chunks(n: int, size: int):
     for start in range(0, n, size):
         yield start, min(start + size, n)
-
-
-def _bucket(n: int, chunk: int, smallest: int = 256) -> int:
-    """Batch size for ``n`` remaining lanes: ``chunk`` or ``chunk / 4^j`` (>= ``smallest``),
-    so a shrinking batch is padded to a nearby size (few compiled shapes, little idle work)."""
-    size = chunk
-    while size // 4 >= max(n, smallest):
-        size //= 4
-    return size
 
 
 def _pad(X: np.ndarray, size: int) -> np.ndarray:
@@ -336,7 +327,6 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     """
     from . import __version__
     from ._model import REDUCED
-    from ._params import GearParams
 
     t_start = time.perf_counter()
     system = REDUCED if system is None else system
@@ -379,7 +369,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         section_index=sec_idx, max_period=int(max_period), period_tol=period_tol,
         settle_periods=int(settle_periods), merge_tol=merge_tol, chunk_size=int(chunk_size),
     )
-    params_dict = params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
+    params_dict = _pytree_dict(params)
 
     if method == "direct":
         settings.update(round_periods=int(round_periods), max_periods=int(max_periods),
@@ -425,6 +415,12 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
 
 
 def _pytree_dict(params) -> dict:
+    """Parameters as a JSON-ready dict: the canonical names for :class:`GearParams`
+    (MODEL.md §4), the pytree paths of the leaves for any other parameter pytree."""
+    from ._params import GearParams
+
+    if isinstance(params, GearParams):
+        return params.to_dict()
     leaves = jax.tree_util.tree_leaves_with_path(params)
     out = {}
     for path, leaf in leaves:

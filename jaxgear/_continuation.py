@@ -58,9 +58,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._integrate import RK4, Integrator
-from ._params import GearParams, format_table, get_param, with_param
+from ._params import format_table, get_param, with_param
 from ._shooting import SHOOT_CONVERGED, SHOOT_STATUS_NAMES, _check_period, _flow, _sorted_eigvals, periodic_orbit
 from ._system import ForcedSystem, check_state_shape, check_system
+from ._cellmap import _pytree_dict
 
 __all__ = [
     "Branch",
@@ -594,12 +595,6 @@ def _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max
     return k, p0, ds_min, ds_max, bounds
 
 
-def _params_dict(params) -> dict:
-    from ._cellmap import _pytree_dict
-
-    return params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
-
-
 def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds, max_angle, detect,
          locate_tol, progress, desc, param, settings, params_start):
     """The continuation loop from the converged point ``first`` (tangent oriented already)."""
@@ -761,7 +756,7 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
     return _run(ctx, first, stop=float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=int(max_steps),
                 bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol, progress=progress,
                 desc=f"P-{k} continuation in {param}", param=param, settings=settings,
-                params_start=_params_dict(with_param(params, param, p0)))
+                params_start=_pytree_dict(with_param(params, param, p0)))
 
 
 def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: BifurcationPoint | int, *,
@@ -840,4 +835,4 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
     return _run(ctx, first, stop=None if stop is None else float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max,
                 max_steps=int(max_steps), bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol,
                 progress=progress, desc=f"P-{k2} continuation in {param}", param=param, settings=settings,
-                params_start=_params_dict(with_param(params, param, float(first.z[-1]))))
+                params_start=_pytree_dict(with_param(params, param, float(first.z[-1]))))

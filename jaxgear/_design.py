@@ -59,11 +59,11 @@ from ._shooting import (
     PeriodicOrbit,
     _check_period,
     _flow,
-    _sorted_eigvals,
     classify_multipliers,
     periodic_orbit,
 )
 from ._system import ForcedSystem, check_state_shape, check_system
+from ._cellmap import _pytree_dict
 
 __all__ = [
     "OrbitSamples",
@@ -324,13 +324,6 @@ def replace_params(params, **changes):
                          "(static fields such as N cannot change).") from None
 
 
-def _params_dict(params) -> dict:
-    from ._cellmap import _pytree_dict
-    from ._params import GearParams
-
-    return params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
-
-
 def _params_type(params) -> str:
     t = type(params)
     return f"{t.__module__}:{t.__qualname__}"
@@ -437,8 +430,6 @@ class DesignResult:
         along ``parameter``, orbit points along ``point`` × state names)."""
         import xarray as xr
 
-        from . import __version__  # noqa: F401  (version stored from the result)
-
         names = list(self.free)
         h = self.history
         extra = [k for k in h if k not in names and k != "objective"]
@@ -464,7 +455,7 @@ class DesignResult:
                       for tag, o in (("orbit", self.orbit), ("initial_orbit", self.initial_orbit))}
         attrs = dict(
             jaxgear_type="DesignResult", title="jaxgear design optimisation",
-            params=json.dumps(_params_dict(self.params)), params_type=_params_type(self.params),
+            params=json.dumps(_pytree_dict(self.params)), params_type=_params_type(self.params),
             initial_params=json.dumps(self.initial_params), system=self.system, version=self.version,
             status=self.status, message=self.message, free=json.dumps({n: list(b) for n, b in self.free.items()}),
             settings=json.dumps(self.settings), orbits=json.dumps(orbit_meta),
@@ -693,7 +684,7 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
     lows_a, highs_a = jnp.asarray(lows), jnp.asarray(highs)
     u = jnp.asarray([(float(_get(params, n)) - lo) / (hi - lo) for n, lo, hi in zip(names, lows, highs)])
     u = jnp.clip(u, 0.0, 1.0)
-    initial_dict = _params_dict(params)
+    initial_dict = _pytree_dict(params)
 
     def evaluate(u, guess):
         return _evaluate(u, jnp.asarray(guess), params, lows_a, highs_a, names, system, objective, k,

@@ -38,21 +38,26 @@ LOADERS: dict[str, str] = {
 """Result type (``attrs["jaxgear_type"]``) -> ``"module:function"`` that loads it."""
 
 
-def _write_netcdf(ds, path: str | Path) -> Path:
-    """Write ``ds`` to ``path`` (netCDF-4 via h5netcdf) atomically: a temporary file in the
-    same folder, then ``os.replace``; a reader never sees a half-written file and a
-    failed write leaves an existing file untouched. Creates missing parent folders."""
+def _atomic_write(path: str | Path, write) -> Path:
+    """Call ``write(tmp)`` on a temporary file in ``path``'s folder, then ``os.replace`` it
+    onto ``path``: a reader never sees a half-written file and a failed write leaves an
+    existing file untouched. Creates missing parent folders."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
-        ds.to_netcdf(tmp, engine="h5netcdf")
+        write(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _write_netcdf(ds, path: str | Path) -> Path:
+    """Write ``ds`` to ``path`` (netCDF-4 via h5netcdf) atomically (:func:`_atomic_write`)."""
+    return _atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
 
 
 def _read_netcdf(path: str | Path):

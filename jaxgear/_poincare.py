@@ -20,7 +20,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._integrate import RK4, Adaptive, Integrator, _batched_field, _lane_field, advance_batch, rk4_step_batch, sample
+from ._integrate import RK4, Integrator, _batched_field, _lane_field, advance_batch, rk4_step_batch, sample
 from ._system import ForcedSystem, check_state_shape
 
 __all__ = [

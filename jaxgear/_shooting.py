@@ -394,12 +394,7 @@ def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
     """
     k = _check_period(period)
     check_state_shape(system, x0)
-    if not (tol > 0):
-        raise ValueError(f"tol={tol} must be > 0.")
-    if int(max_iter) < 1:
-        raise ValueError(f"max_iter={max_iter} must be >= 1.")
-    if not (period_tol > 0):
-        raise ValueError(f"period_tol={period_tol} must be > 0.")
+    _check_newton_options(tol, max_iter, period_tol)
     if _params_concrete(params):
         check_system(system, params, np.asarray(x0, dtype=float).reshape(-1, system.dim)[0], batched=False)
     x0 = jnp.asarray(x0, dtype=jnp.float64)
@@ -838,13 +833,6 @@ def _check_newton_options(tol, max_iter, period_tol) -> None:
         raise ValueError(f"period_tol={period_tol} must be > 0.")
 
 
-def _pad_rows(X: np.ndarray, size: int) -> np.ndarray:
-    """Pad a chunk of seeds to ``size`` rows (one compiled shape) by repeating its first row."""
-    if len(X) == size:
-        return X
-    return np.concatenate([X, np.repeat(X[:1], size - len(X), axis=0)], axis=0)
-
-
 def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | Sequence[int] = 1, t0=0.0,
                          integrator: Integrator = RK4(), tol: float = 1e-10, max_iter: int = 40,
                          max_norm: float = 1e6, period_tol: float = 1e-6, dedup_tol: float = 1e-6,
@@ -893,8 +881,7 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
             options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
     """
     from . import __version__
-    from ._cellmap import _chunks, _progress, _pytree_dict
-    from ._params import GearParams
+    from ._cellmap import _chunks, _pad, _progress, _pytree_dict
 
     start = time.perf_counter()
     if isinstance(seeds, Mapping):
@@ -929,7 +916,7 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
             size = min(int(chunk_size), len(X))
             parts = []
             for a, b in _chunks(len(X), size):
-                res = _shoot_kernel(system, params, jnp.asarray(_pad_rows(X[a:b], size)), t0_arr, k, integrator,
+                res = _shoot_kernel(system, params, jnp.asarray(_pad(X[a:b], size)), t0_arr, k, integrator,
                                     float(tol), int(max_iter), float(max_norm), float(period_tol))
                 parts.append([np.asarray(f)[: b - a] for f in res])
                 bar.update(b - a)
@@ -948,7 +935,7 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
         period_tol=float(period_tol), dedup_tol=float(dedup_tol), chunk_size=int(chunk_size),
         trajectory_samples=int(trajectory_samples),
     )
-    params_dict = params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
+    params_dict = _pytree_dict(params)
     return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
                        state_names=tuple(system.state_names), section_index=system.section_index,
                        params=params_dict, settings=settings, version=__version__,

@@ -42,9 +42,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -53,8 +51,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._cellmap import _progress, _pytree_dict, detect_period
+from ._cellmap import _pad, _progress, _pytree_dict, _set_distance, detect_period
 from ._integrate import RK4, Adaptive, Integrator, advance_batch
+from ._io import _atomic_write
 from ._params import _targets, with_param
 from ._system import ForcedSystem, check_state_shape, check_system
 
@@ -138,12 +137,6 @@ def _integrator_dict(integ: Integrator) -> dict:
         return {"type": "Adaptive", "solver": type(integ.solver).__name__, "rtol": integ.rtol,
                 "atol": integ.atol, "max_steps": int(integ.max_steps)}
     raise TypeError(f"unknown integrator {integ!r}; use jaxgear.RK4 or jaxgear.Adaptive.")
-
-
-def _params_dict(params) -> dict:
-    from ._params import GearParams
-
-    return params.to_dict() if isinstance(params, GearParams) else _pytree_dict(params)
 
 
 def _coord_name(param: str, taken: Sequence[str]) -> str:
@@ -286,18 +279,6 @@ def _hash(settings: Mapping) -> str:
     return hashlib.sha256(json.dumps(settings, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
-def _atomic_write(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _save_dataset(ds, path) -> Path:
     """The shared atomic netCDF writer (:mod:`jaxgear._io`), large arrays compressed."""
     from ._io import _write_netcdf
@@ -313,7 +294,7 @@ def _read_dataset(path, expected: str):
 
     ds = _read_netcdf(path)
     _check_type(ds, expected, path)
-    if ds.attrs.get("jaxgear_type") != expected:
+    if ds.attrs.get("jaxgear_type") != expected:  # sweep files always carry their type
         raise ValueError(f"{path} is not a {expected} (it has no jaxgear_type {expected!r}).")
     return ds
 
@@ -671,7 +652,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
         else:  # sequential: the block only sets how often the sweep is saved
             blocks[name] = max(1, min(V, int(chunk_size) // (S * len(ds)), -(-V // 8)))
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
-                    starts=X0.tolist(), params=_params_dict(params), transient=int(transient), record=int(record),
+                    starts=X0.tolist(), params=_pytree_dict(params), transient=int(transient), record=int(record),
                     direction=direction, integrator=_integrator_dict(integrator), max_period=int(max_period),
                     tol=float(tol), merge_tol=float(merge_tol), escape_bound=float(escape_bound),
                     block_values=blocks, version=__version__)
@@ -711,7 +692,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     diagram = BifurcationDiagram(
         param=param, fields=_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
         period=period, attractor=attractor, system=system.name, state_names=tuple(system.state_names),
-        params=_params_dict(params), settings={k: v for k, v in settings.items()
+        params=_pytree_dict(params), settings={k: v for k, v in settings.items()
                                                if k not in ("values", "starts", "params", "system", "param")},
         version=__version__,
     )
@@ -720,17 +701,11 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     return diagram
 
 
-def _pad_rows(V: np.ndarray, size: int) -> np.ndarray:
-    if len(V) == size:
-        return V
-    return np.concatenate([V, np.repeat(V[-1:], size - len(V), axis=0)], axis=0)
-
-
 def _compute_independent(system, params, names, Vrows, size, X0, transient, record, integrator, shared):
     """One block of parameter rows ``Vrows (n, m)``, every start from ``X0``, padded to
     ``size`` rows (one compiled shape). Returns points ``(n, S, R, dim)``."""
     n = len(Vrows)
-    V = jnp.asarray(_pad_rows(np.asarray(Vrows, dtype=float), size))
+    V = jnp.asarray(_pad(np.asarray(Vrows, dtype=float), size))
     pts = _independent_kernel(system, params, names, V, X0, transient, record, integrator, shared)
     return np.asarray(pts)[:n]
 
@@ -740,7 +715,7 @@ def _compute_scan(system, params, names, seq, size, X0, carry, transient, record
     from ``carry (nd, S, dim)``; padded to ``size`` steps. Returns points ``(n, nd, S, R, dim)``
     and the carried state after the block's last value ``(nd, S, dim)``."""
     n = len(seq)
-    V = jnp.asarray(_pad_rows(np.asarray(seq, dtype=float), size))
+    V = jnp.asarray(_pad(np.asarray(seq, dtype=float), size))
     pts, car = _scan_kernel(system, params, names, V, jnp.asarray(carry), X0, transient, record, integrator, bound,
                             shared)
     return np.asarray(pts)[:n], np.asarray(car)[n - 1]
@@ -891,7 +866,7 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     S, n = len(X0), len(VV)
     B = max(1, min(n, int(chunk_size) // S))
     settings = dict(kind="parameter_map", system=system.name, param_x=param_x, values_x=vx.tolist(),
-                    param_y=param_y, values_y=vy.tolist(), starts=X0.tolist(), params=_params_dict(params),
+                    param_y=param_y, values_y=vy.tolist(), starts=X0.tolist(), params=_pytree_dict(params),
                     transient=int(transient), record=int(record), integrator=_integrator_dict(integrator),
                     max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
                     escape_bound=float(escape_bound), block_points=int(B), version=__version__)
@@ -923,7 +898,7 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
         fields_y=_targets(params, param_y), values_y=vy, starts=X0, quantity=quantity,
         period=period.reshape(ny, nx, S), attractor=attractor.reshape(ny, nx, S),
         n_attractors=n_att.reshape(ny, nx).astype(np.int64), last_point=last.reshape(ny, nx, S, system.dim),
-        system=system.name, state_names=tuple(system.state_names), params=_params_dict(params),
+        system=system.name, state_names=tuple(system.state_names), params=_pytree_dict(params),
         settings={k: v for k, v in settings.items()
                   if k not in ("values_x", "values_y", "starts", "params", "system", "param_x", "param_y")},
         version=__version__,
@@ -936,8 +911,7 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
 # =============================================================================== basin sweep
 def _hausdorff(A: np.ndarray, B: np.ndarray) -> float:
     """Symmetric Hausdorff distance of two point sets (invariant to the order of the points)."""
-    d = np.linalg.norm(A[:, None, :] - B[None, :, :], axis=-1)
-    return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
+    return max(_set_distance(A, B), _set_distance(B, A))
 
 
 def _match(results, match_tol: float) -> list[np.ndarray]:
@@ -1197,7 +1171,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid=No
     kw = dict(analyze_kw)
     integ = kw.get("integrator")
     kw_json = {k: (_integrator_dict(v) if isinstance(v, Integrator) else v) for k, v in kw.items()}
-    settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(), params=_params_dict(params),
+    settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(), params=_pytree_dict(params),
                     grid=grid.to_dict(), method=method, match_tol=float(match_tol), analyze=kw_json,
                     version=__version__)
     try:
@@ -1220,7 +1194,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid=No
         bar.update(1)
     bar.close()
     sweep = _assemble_basins(results, param, _targets(params, param), vals, grid, method, float(match_tol), system,
-                             _params_dict(params), {k: v for k, v in settings.items()
+                             _pytree_dict(params), {k: v for k, v in settings.items()
                                                     if k not in ("values", "params", "system", "param", "grid",
                                                                  "method", "match_tol")}, __version__)
     if out is not None:

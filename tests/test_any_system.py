@@ -62,7 +62,7 @@ def test_duffing_multistable_all_methods_confirmed_by_shooting():
     for r in (direct, strobe):
         assert sorted(a.period for a in r.attractors) == [1, 1], r.table()
         assert r.n_unresolved == 0 and r.n_sink == 0
-        search = _confirm_by_shooting(MY_DUFFING, p, r, RK, atol=1e-6)
+        _confirm_by_shooting(MY_DUFFING, p, r, RK, atol=1e-6)
     # shooting also finds the saddle between the two attractors: it is no attractor
     assert any(not o.stable and o.instability == "fold" for o in
                jg.find_periodic_orbits(MY_DUFFING, p, jg.seeds_in_box(30, [-2, -2], [2, 2], seed=3),

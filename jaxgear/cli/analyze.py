@@ -11,19 +11,7 @@ import json
 import time
 from pathlib import Path
 
-from .common import add_param_options, parse_ranges
-
-
-def _ints(text: str) -> tuple[int, ...]:
-    try:
-        vals = tuple(int(t) for t in text.replace("x", ",").split(",") if t.strip())
-    except ValueError as exc:
-        raise ValueError(f"--grid expects counts like 50,30,60, got {text!r}") from exc
-    if not vals or min(vals) < 1:
-        raise ValueError(f"--grid expects positive counts like 50,30,60, got {text!r}")
-    return vals
-
-
+from .common import add_param_options, parse_counts, parse_ranges
 
 
 def add_parser(sub) -> None:
@@ -41,7 +29,7 @@ def add_parser(sub) -> None:
                    "poincare-like: the paper's map (l periods, then the next crossing of x4 = 0, restarted at "
                    "phase 0: it loses the forcing phase, see README); "
                    "stroboscopic: Hsu's simple cell mapping of the stroboscopic map (grid over x1..x4)")
-    p.add_argument("--grid", type=_ints, default=None, metavar="N1,N2,N3[,N4]",
+    p.add_argument("--grid", type=parse_counts, default=None, metavar="N1,N2,N3[,N4]",
                    help="cells per axis (default 50,30,60; stroboscopic default 25,15,30,12)")
     p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="box bounds per gridded axis (default the paper's D: -25:25,-10:20,-10:50; "

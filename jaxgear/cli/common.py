@@ -30,3 +30,23 @@ def parse_ranges(text: str) -> tuple[tuple[float, float], ...]:
                 f"--region expects LO:HI per coordinate, comma-separated (e.g. -25:25,-10:20,-10:50), got {text!r}"
             ) from None
     return tuple(out)
+
+
+def parse_point(text: str) -> tuple[float, ...]:
+    """``--from`` value ``x1,x2,...`` -> a state tuple."""
+    try:
+        return tuple(float(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--from expects comma-separated numbers like 5.4,-0.2,8.3,-0.8, got {text!r}") from None
+
+
+def parse_counts(text: str) -> tuple[int, ...]:
+    """``--grid`` value ``N1,N2,...`` (or ``N1xN2x...``) -> positive cell counts per axis."""
+    try:
+        vals = tuple(int(t) for t in text.replace("x", ",").split(",") if t.strip())
+    except ValueError:
+        vals = ()
+    if not vals or min(vals) < 1:
+        raise argparse.ArgumentTypeError(f"--grid expects positive counts like 50,30,60, got {text!r}")
+    return vals

@@ -18,19 +18,10 @@ import numpy as np
 
 from pathlib import Path
 
-from .common import add_param_options, parse_ranges
+from .common import add_param_options, parse_point, parse_ranges
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
 DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
-
-
-def _point(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(t) for t in text.split(","))
-    except ValueError as exc:
-        raise ValueError(f"--from expects comma-separated numbers like 1.27,-2.71,5.54,0, got {text!r}") from exc
-
-
 
 
 def add_parser(sub) -> None:
@@ -44,7 +35,7 @@ def add_parser(sub) -> None:
     )
     add_param_options(p)
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--from", dest="points", type=_point, action="append", metavar="x1,x2,x3,x4",
+    src.add_argument("--from", dest="points", type=parse_point, action="append", metavar="x1,x2,x3,x4",
                      help="a seed point (repeatable)")
     src.add_argument("--seeds-from", metavar="RESULT",
                      help="a saved global-analysis result (jaxgear analyze): every point of each P-k attractor "

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from .common import add_param_options, parse_ranges
+from .common import add_param_options, parse_counts, parse_point, parse_ranges
 
 KINDS = ("bifurcation", "basins", "continuation")
 
@@ -45,25 +45,6 @@ def _values(text: str):
     return start, stop, count, np.linspace(start, stop, count)
 
 
-def _point(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(t) for t in text.split(","))
-    except ValueError as exc:
-        raise ValueError(f"--from expects comma-separated numbers like 5.4,-0.2,8.3,-0.8, got {text!r}") from exc
-
-
-def _ints(text: str) -> tuple[int, ...]:
-    try:
-        vals = tuple(int(t) for t in text.replace("x", ",").split(",") if t.strip())
-    except ValueError as exc:
-        raise ValueError(f"--grid expects counts like 20,12,24, got {text!r}") from exc
-    if len(vals) != 3 or min(vals) < 1:
-        raise ValueError(f"--grid expects three positive counts (x1, x2, x3 on x4 = 0) like 20,12,24, got {text!r}")
-    return vals
-
-
-
-
 def add_parser(sub) -> None:
     p = sub.add_parser(
         "sweep", help="parameter sweeps: bifurcation diagrams, basin shares, orbit continuation",
@@ -84,10 +65,10 @@ def add_parser(sub) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--starts", type=int, default=None, metavar="N",
                      help="bifurcation: N random starts in the paper's region D on x4 = 0 (jaxgear.seeds_in_box over x1, x2, x3 with --seed; default 16)")
-    src.add_argument("--from", dest="points", type=_point, action="append", metavar="x1,x2,x3,x4",
+    src.add_argument("--from", dest="points", type=parse_point, action="append", metavar="x1,x2,x3,x4",
                      help="a start (repeatable; continuation: the point on or near the orbit to follow)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --starts (default 0)")
-    p.add_argument("--grid", type=_ints, default=(20, 12, 24), metavar="N1,N2,N3",
+    p.add_argument("--grid", type=parse_counts, default=(20, 12, 24), metavar="N1,N2,N3",
                    help="basins: cells over x1, x2, x3 on x4 = 0 (default 20,12,24)")
     p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="basins: box over x1, x2, x3 (default the paper's D: -25:25,-10:20,-10:50); "
