@@ -10,7 +10,8 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+NOTEBOOK_DIR = Path(__file__).parent.parent / "notebooks"
+NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
@@ -25,15 +26,14 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     client.execute()
 
 
-def test_notebooks_match_their_sources():
-    """Each notebook is built from notebooks/src/<name>.py (``python tools/make_notebook.py``)."""
-    import importlib.util
+def test_notebooks_match_their_paired_scripts():
+    """Each notebook is paired with notebooks/<name>.py by jupytext (notebooks/jupytext.toml):
+    both hold the same cells, so an edit to one without ``jupytext --sync`` fails here."""
+    import jupytext
 
-    root = Path(__file__).parent.parent
-    spec = importlib.util.spec_from_file_location("make_notebook", root / "tools" / "make_notebook.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    for src in sorted((root / "notebooks" / "src").glob("*.py")):
-        built = mod.notebook(src)
-        stored = nbformat.read(root / "notebooks" / (src.stem + ".ipynb"), as_version=4)
-        assert [c.source for c in built.cells] == [c.source for c in stored.cells], src.name
+    scripts = sorted(NOTEBOOK_DIR.glob("*.py"))
+    assert [p.stem for p in scripts] == [p.stem for p in NOTEBOOKS], "every notebook has a paired .py and vice versa"
+    for path in NOTEBOOKS:
+        stored, script = jupytext.read(path), jupytext.read(path.with_suffix(".py"))
+        cells = lambda nb: [(c.cell_type, c.source) for c in nb.cells]
+        assert cells(stored) == cells(script), f"{path.name} and {path.stem}.py differ: jupytext --sync {path.stem}.py"

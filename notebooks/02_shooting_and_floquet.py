@@ -1,3 +1,11 @@
+# ---
+# jupyter:
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # %% [markdown]
 # # Shooting, Floquet multipliers, and why a local method misses orbits
 #
@@ -115,6 +123,7 @@ plotting.plot_multipliers(orbits)
 assert P1.max_multiplier > 1 and P2.max_multiplier > 1
 assert P4.max_multiplier < 1 and P8.max_multiplier < 1
 assert abs(P1.multipliers[0].imag) < 1e-12 and abs(P2.multipliers[0].imag) < 1e-12  # real: a flip, not a pair
+
 
 # %% [markdown]
 # ## 4. Verification by direct integration

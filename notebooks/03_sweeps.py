@@ -1,3 +1,11 @@
+# ---
+# jupyter:
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # %% [markdown]
 # # Sweeps: backlash and mesh-stiffness amplitude of the paper's gear set
 #
@@ -79,6 +87,7 @@ at_b0 = bif_b.attractors_at(i0, "independent")
 print(f"b = {bif_b.values[i0]:g}:", [(a["label"], a["starts"]) for a in at_b0])
 assert np.isclose(bif_b.values[i0], b0)
 assert {"P-4", "P-8"} <= {a["label"] for a in at_b0}
+
 
 # %% [markdown]
 # Above `b ≈ 3` the P-4 does not change shape at all: its points move by exactly

@@ -1,3 +1,11 @@
+# ---
+# jupyter:
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # %% [markdown]
 # # Design through the periodic orbit: lowering the dynamic mesh force of the paper's set
 #
@@ -136,6 +144,7 @@ axes[1].legend(fontsize="small")
 axes[2].plot(hist["max_multiplier"])
 axes[2].axhline(1.0, color="k", lw=0.8, ls="--")
 axes[2].set(xlabel="step", ylabel="max |multiplier|", title="stability of the tracked P-4", ylim=(0, 1.1))
+
 
 # %% [markdown]
 # The damping moves in opposite directions: more sun-planet damping, but *less*

@@ -1,3 +1,11 @@
+# ---
+# jupyter:
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # %% [markdown]
 # # Your own forced system, analysed like the gear set
 #
@@ -23,6 +31,7 @@ import jaxgear as jg
 from jaxgear import plotting
 
 n = 60 if FULL else 20  # cells per axis
+
 
 # %% [markdown]
 # ## 1. A system in ten lines
