@@ -26,9 +26,15 @@
 # one draws in.
 #
 # `FULL = False` runs in well under a minute; `FULL = True` uses more seeds and a finer grid.
+#
+# Written files go to `SCRATCH`: `$JAXGEAR_SCRATCH` if set, else a new temporary folder.
 
 # %%
 FULL = False
+
+import os
+import tempfile
+from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -40,6 +46,11 @@ p = jg.paper_params()
 n_box = 128 if FULL else 32  # seeds in the box around the paper's P-1 guess
 n_ball = 64 if FULL else 16  # seeds per radius in the convergence study
 counts = (20, 12, 24) if FULL else (6, 4, 8)  # cells of region D for the global analysis
+
+# every file this notebook writes goes here, never next to the notebook
+SCRATCH = Path(os.environ.get("JAXGEAR_SCRATCH") or tempfile.mkdtemp(prefix="jaxgear-"))
+SCRATCH.mkdir(parents=True, exist_ok=True)
+print("files go to", SCRATCH)
 
 # %% [markdown]
 # ## 1. Unstable orbits: the P-1 and the P-2
@@ -242,7 +253,7 @@ assert frac[1][radii < gap].max() == 0.0  # no seed nearer than the P-8 ever fin
 # integrating (`plot_orbit(search, i)` needs neither the system nor the parameters).
 
 # %%
-path = cells.save("orbits.nc")
+path = cells.save(SCRATCH / "orbits.nc")
 again = jg.load(path)
 assert [o.period for o in again.orbits] == [4, 8]
 np.testing.assert_array_equal(again.orbits[0].points, cells.orbits[0].points)

@@ -24,10 +24,13 @@
 # Every sweep is also one command of the `jaxgear sweep` CLI (shown before each cell; the
 # CLI writes the result file, `summary.json` and the figures). `FULL = False` runs reduced
 # sizes in about a minute; `FULL = True` the sizes of the README figures (several minutes).
+#
+# Written files go to `SCRATCH`: `$JAXGEAR_SCRATCH` if set, else a new temporary folder.
 
 # %%
 FULL = False
 
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -47,6 +50,11 @@ n_starts = 32 if FULL else 16
 D = np.asarray(jg.PAPER_REGION)
 starts = np.zeros((n_starts, 4))
 starts[:, :3] = jg.seeds_in_box(n_starts, D[:, 0], D[:, 1], seed=0)
+
+# every file this notebook writes goes here, never next to the notebook
+SCRATCH = Path(os.environ.get("JAXGEAR_SCRATCH") or tempfile.mkdtemp(prefix="jaxgear-"))
+SCRATCH.mkdir(parents=True, exist_ok=True)
+print("files go to", SCRATCH)
 
 # %% [markdown]
 # ## 1. Backlash: bifurcation diagram
@@ -239,7 +247,7 @@ plotting.plot_parameter_map(pmap, "n_attractors")
 # same file as that of an uninterrupted run. Here the second call finds everything done:
 
 # %%
-folder = Path(tempfile.mkdtemp()) / "sweep-kappa"
+folder = Path(tempfile.mkdtemp(prefix="sweep-kappa-", dir=SCRATCH))  # new and empty: the first run starts afresh
 t = time.perf_counter()
 first = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", k_values, starts[:4], direction="both", out=folder,
                                progress=False)

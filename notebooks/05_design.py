@@ -22,11 +22,16 @@
 #
 # `FULL = False` runs the reduced design (40 steps, about a minute); `FULL = True` runs
 # 150 steps and longer checks.
+#
+# Written files go to `SCRATCH`: `$JAXGEAR_SCRATCH` if set, else a new temporary folder.
 
 # %%
 FULL = False
 
+import os
+import tempfile
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -37,6 +42,11 @@ import jaxgear as jg
 
 steps = 150 if FULL else 40
 settle = 2000 if FULL else 600
+
+# every file this notebook writes goes here, never next to the notebook
+SCRATCH = Path(os.environ.get("JAXGEAR_SCRATCH") or tempfile.mkdtemp(prefix="jaxgear-"))
+SCRATCH.mkdir(parents=True, exist_ok=True)
+print("files go to", SCRATCH)
 
 # %% [markdown]
 # ## 1. The stable P-4 of the paper's set
@@ -207,10 +217,10 @@ assert share_new > 0.4
 # new set (`jaxgear.analyze_global`) is the check to run before adopting a design.
 #
 # The designed set, its orbit and the history can be saved and reloaded
-# (`result.save("design.nc")`, `jaxgear.load_design`).
+# (`result.save(SCRATCH / "design.nc")`, `jaxgear.load_design`).
 
 # %%
-path = result.save("design.nc")
+path = result.save(SCRATCH / "design.nc")
 back = jg.load_design(path)
 assert back.params.to_dict() == result.params.to_dict()
 print(back.params.table())
