@@ -402,10 +402,15 @@ def _worker(kind: str, n: int, repeat: int) -> dict:
         fn = lambda: _block(jaxgear.stroboscopic_map(jaxgear.REDUCED, p, Xj, periods=1))  # noqa: E731
     elif kind == "jaxgear-unchunked":
         # The kernel before chunking: one fori_loop over the whole (4, n) batch.
-        from jaxgear._integrate import _rk4_loop
+        from jaxgear.integrate import rk4_step
 
         Yj = jnp.asarray(X.T.copy())
-        f = jax.jit(lambda p, Y: _rk4_loop(jaxgear.REDUCED, p, Y, 0.0, STEPS, jaxgear.REDUCED.period(p) / STEPS))
+
+        def unchunked(p, Y):
+            h = jaxgear.REDUCED.period(p) / STEPS
+            return jax.lax.fori_loop(0, STEPS, lambda i, Z: rk4_step(jaxgear.REDUCED, p, i * h, Z, h), Y)
+
+        f = jax.jit(unchunked)
         fn = lambda: _block(f(p, Yj))  # noqa: E731
     elif kind == "direct":
         # The whole direct global analysis on a paper-region grid of about n cells.

@@ -1,53 +1,52 @@
-"""Saved results: one netCDF convention for every result type, and :func:`load`.
+"""Saved results and output files: atomic writes, one loader for every result type.
 
-Every result type ``R`` of jaxgear has ``R.to_xarray() -> xarray.Dataset`` and
-``R.save(path)``, which writes that dataset to a netCDF-4 file (``engine="h5netcdf"``)
-atomically, and a module-level ``load_<thing>(path)`` that restores it exactly
-(arrays bit-for-bit, metadata equal). The file carries
+Every result type saves through the one codec of :mod:`jaxgear._codec` to a netCDF-4
+file (``engine="h5netcdf"``) and :func:`load` restores it exactly. Files of jaxgear 0.1
+(written before the codec) are read by :mod:`jaxgear._legacy`.
 
-- ``attrs["jaxgear_type"]``: the class name (what :func:`load` dispatches on),
-- ``attrs["params"]``: the full canonical parameter set as JSON (MODEL.md §4 names for
-  the gear models), ``attrs["system"]``: the system's name,
-  ``attrs["version"]``: the jaxgear version that wrote it,
-- coordinates named after the state variables (and parameters, for sweeps), units in
-  the attributes,
-
-so any file opens as labelled arrays with ``xarray.open_dataset(path)`` and plotting a
-loaded result needs no recomputation.
+Every file jaxgear writes (netCDF, JSON, figures, checkpoint parts) is written to a
+temporary file in the target folder and moved onto its name (``os.replace``), so a
+reader never sees a half-written file and a failed or killed write leaves the previous
+file untouched; files get the permissions of the user's umask.
 """
 
 from __future__ import annotations
 
-import importlib
+import json
+import math
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
-__all__ = ["load", "LOADERS"]
+__all__ = ["load", "save_result", "atomic_write", "write_json", "write_text", "save_figure", "read_dataset",
+           "strict_json", "TMP_PREFIX", "remove_stale_temporaries", "NotAResultFile"]
 
-LOADERS: dict[str, str] = {
-    "GlobalResult": "jaxgear._result:load_result",
-    "OrbitSearch": "jaxgear._shooting:load_orbits",
-    "BifurcationDiagram": "jaxgear._sweep:load_bifurcation",
-    "BasinSweep": "jaxgear._sweep:load_basin_sweep",
-    "ParameterMap": "jaxgear._sweep:load_parameter_map",
-    "Branch": "jaxgear._continuation:load_branch",
-    "DesignResult": "jaxgear._design:load_design",
-}
-"""Result type (``attrs["jaxgear_type"]``) -> ``"module:function"`` that loads it."""
+TMP_PREFIX = ".jaxgear-tmp-"
+"""Name prefix of temporary files (removed on success, cleaned up by later runs)."""
 
 
-def _atomic_write(path: str | Path, write) -> Path:
+class NotAResultFile(ValueError):
+    """The path does not hold a readable jaxgear result."""
+
+
+def _umask_mode() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
     """Call ``write(tmp)`` on a temporary file in ``path``'s folder, then ``os.replace`` it
-    onto ``path``: a reader never sees a half-written file and a failed write leaves an
-    existing file untouched. Creates missing parent folders."""
+    onto ``path``; creates missing parent folders; the file's mode follows the umask.
+    A failed write removes the temporary file and leaves an existing ``path`` untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f"{TMP_PREFIX}{path.name}.", dir=path.parent)
     os.close(fd)
     try:
         write(tmp)
+        os.chmod(tmp, _umask_mode())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -55,81 +54,123 @@ def _atomic_write(path: str | Path, write) -> Path:
     return path
 
 
-def _write_netcdf(ds, path: str | Path) -> Path:
-    """Write ``ds`` to ``path`` (netCDF-4 via h5netcdf) atomically (:func:`_atomic_write`)."""
-    return _atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+def remove_stale_temporaries(folder: str | Path) -> None:
+    """Remove temporary files a killed run left in ``folder`` (names starting with
+    :data:`TMP_PREFIX`)."""
+    folder = Path(folder)
+    if folder.is_dir():
+        for p in folder.glob(f"{TMP_PREFIX}*"):
+            try:
+                p.unlink() if p.is_file() else None
+            except OSError:
+                pass
 
 
-def _read_netcdf(path: str | Path):
-    """The dataset at ``path`` fully read into memory (the file is closed on return)."""
-    import xarray as xr
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no result file at {path}")
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        return ds.load()
-
-
-def _check_type(ds, expected: str, path) -> None:
-    """Raise ``ValueError`` when the file says it holds another result type."""
-    kind = ds.attrs.get("jaxgear_type")
-    if kind is not None and kind != expected:
-        raise ValueError(f"{path} holds a {kind}, not a {expected}; open it with jaxgear.load(path).")
+def strict_json(obj: Any) -> Any:
+    """``obj`` with every NaN or infinite float replaced by ``None`` (JSON has no NaN)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    if hasattr(obj, "item") and getattr(obj, "ndim", None) == 0:  # numpy scalar
+        return strict_json(obj.item())
+    if hasattr(obj, "tolist"):
+        return strict_json(obj.tolist())
+    return obj
 
 
-def result_type(ds) -> str:
-    """The ``jaxgear_type`` of a dataset; files written before the attribute existed
-    (global-analysis results of jaxgear 0.1) are recognised by their content."""
-    kind = ds.attrs.get("jaxgear_type")
-    if kind:
-        return str(kind)
-    if "labels" in ds.variables and "grid" in ds.attrs:
-        return "GlobalResult"
-    raise ValueError("this netCDF file has no attrs['jaxgear_type']: it was not written by jaxgear "
-                     "(open it with xarray.open_dataset instead).")
+def write_text(text: str, path: str | Path) -> Path:
+    """Write ``text`` to ``path`` atomically."""
+    return atomic_write(path, lambda tmp: Path(tmp).write_text(text))
 
 
-def load(path: str | Path) -> Any:
-    """Load any saved jaxgear result (``GlobalResult``, ``OrbitSearch``, sweeps, branches).
+def write_json(obj: Any, path: str | Path, indent: int = 2) -> Path:
+    """Write ``obj`` as strict JSON (NaN and infinities as ``null``) to ``path`` atomically."""
+    return write_text(json.dumps(strict_json(obj), indent=indent, allow_nan=False), path)
 
-    Reads ``attrs["jaxgear_type"]`` of the netCDF file and calls the matching loader of
-    :data:`LOADERS` (e.g. :func:`jaxgear.load_result`, :func:`jaxgear.load_orbits`); the
-    returned object equals the saved one (arrays bit-for-bit, metadata equal).
 
-    Raises:
-        FileNotFoundError: no file at ``path``.
-        ValueError: the file is not a jaxgear result, or names an unknown type.
-        ImportError: the type's module is not part of this build of jaxgear.
+def save_figure(fig, path: str | Path, **kw) -> Path:
+    """Save a matplotlib figure atomically (the format from ``path``'s suffix)."""
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, format=fmt, **kw))
+
+
+def save_result(result, path: str | Path) -> Path:
+    """Write a result object to a netCDF file atomically through the codec; large arrays
+    are compressed."""
+    from ._codec import to_dataset
+
+    ds = to_dataset(result)
+    for k in ds.data_vars:
+        if ds[k].size > 4096 and ds[k].dtype.kind in "biuf":
+            ds[k].encoding.update(zlib=True, complevel=4)
+    return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+
+
+def read_dataset(path: str | Path):
+    """The netCDF dataset at ``path`` fully read into memory (the file is closed on return).
+
+    Raises :class:`NotAResultFile` (a ``ValueError``) with the reason when ``path`` is
+    missing, a folder, empty, truncated or not netCDF.
     """
     import xarray as xr
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no result file at {path}")
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        kind = result_type(ds)
-    if kind not in LOADERS:
-        raise ValueError(f"{path}: unknown jaxgear_type {kind!r}; known types: {', '.join(LOADERS)}.")
-    module, func = LOADERS[kind].split(":")
+    if not path.exists():
+        raise NotAResultFile(f"not a jaxgear result file: {path} does not exist.")
+    if path.is_dir():
+        raise NotAResultFile(f"not a jaxgear result file: {path} is a folder (give the .nc file inside it).")
     try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as exc:
-        if exc.name != module:
-            raise
-        raise ImportError(f"{path} holds a {kind}, which needs the module {module} "
-                          f"(loader {LOADERS[kind]}); it is not present in this build of jaxgear.") from exc
-    loader = getattr(mod, func, None)
-    if loader is None:
-        raise ImportError(f"{path} holds a {kind}, but {module} has no loader {func}() in this build of jaxgear.")
-    return loader(path)
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError as exc:
+        raise NotAResultFile(f"not a jaxgear result file: {path} cannot be read ({exc.strerror}).") from None
+    if size == 0:
+        raise NotAResultFile(f"not a jaxgear result file: {path} is empty.")
+    if not head.startswith(b"\x89HDF\r\n\x1a\n"):
+        what = "a JSON file" if head.lstrip()[:1] in (b"{", b"[") else "not a netCDF-4/HDF5 file"
+        raise NotAResultFile(f"not a jaxgear result file: {path} is {what}.")
+    try:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            return ds.load()
+    except Exception as exc:  # truncated or corrupted HDF5: h5py raises many kinds
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise NotAResultFile(f"not a jaxgear result file: {path} is damaged or truncated ({first}).") from None
 
 
-def _write_json(obj, path: str | Path, indent: int = 2) -> Path:
-    """Write ``obj`` as JSON to ``path`` (parent folders created); returns the path."""
-    import json
+def load(path: str | Path, expected: str | None = None) -> Any:
+    """Load any saved jaxgear result (``GlobalResult``, ``OrbitSearch``, sweeps, branches,
+    designs), exactly as it was saved.
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(obj, indent=indent))
-    return path
+    Reads ``attrs["jaxgear_type"]`` of the netCDF file and rebuilds the object through the
+    codec (files of jaxgear 0.1 through :mod:`jaxgear._legacy`). ``expected``: a type
+    name the file must hold.
+
+    Raises:
+        ValueError: the path is not a readable jaxgear result file (the message says
+            why: missing, a folder, empty, truncated, not netCDF, another program's
+            file, an unknown or unexpected result type).
+    """
+    from . import _registry  # noqa: F401  (registers every result type with the codec)
+    from ._codec import FORMAT, from_dataset
+    from ._legacy import legacy_type, load_legacy
+
+    ds = read_dataset(path)
+    fmt = ds.attrs.get("jaxgear_format")
+    if fmt is None:
+        kind = legacy_type(ds, path)
+        if expected is not None and kind != expected:
+            raise ValueError(f"{path} holds a {kind}, not a {expected}; open it with jaxgear.load(path).")
+        return load_legacy(ds, kind)
+    if int(fmt) > FORMAT:
+        raise NotAResultFile(f"{path} was written by a newer jaxgear (format {fmt}, this one reads up to "
+                             f"{FORMAT}): upgrade jaxgear.")
+    try:
+        return from_dataset(ds, expected)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    except (KeyError, TypeError) as exc:
+        raise NotAResultFile(f"not a jaxgear result file: {path} is missing {exc} of its layout.") from None

@@ -1,15 +1,16 @@
 """Poincaré maps of a forced system (paper §3, eq. 7-9).
 
 - :func:`stroboscopic_map` — the exact Poincaré map of a forced system,
-  ``x(t0) -> x(t0 + periods*T)`` on the full state (MODEL.md §6);
+  ``x(t0) -> x(t0 + periods*T)`` on the full state (model document §6);
 - :func:`stroboscopic_orbit` — the sequence ``P(x), P^2(x), ..., P^n(x)``;
 - :func:`section_map` — the paper's hyperplane section Σ = {x_i = 0}: integrate whole
   periods, then on to the next crossing of Σ in a chosen direction, located to
-  round-off by a safeguarded Newton iteration on the length of the last RK4 step;
+  round-off by a safeguarded Newton iteration on the length of the last step;
 - :func:`sample_trajectory` — dense samples over some periods, for figures.
 
 All take states of shape ``(..., dim)`` (any batch), parameters as a pytree (a change
-of value does not recompile) and one ``jit`` boundary each.
+of value does not recompile), an integrator object (default
+:func:`~jaxgear.integrate.default_integrator`) and one ``jit`` boundary each.
 """
 
 from __future__ import annotations
@@ -20,23 +21,18 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._integrate import RK4, Integrator, _batched_field, _lane_field, advance_batch, rk4_step_batch, sample
+from ._checks import check_choice, check_int, check_number
+from ._status import Status
 from ._system import ForcedSystem, check_state_shape
+from .integrate import AbstractIntegrator, batch_field, default_integrator, resolve_integrator
 
-__all__ = [
-    "stroboscopic_map",
-    "stroboscopic_orbit",
-    "section_map",
-    "SectionHit",
-    "sample_trajectory",
-    "STATUS_OK",
-    "STATUS_DIVERGED",
-    "STATUS_NO_CROSSING",
-]
+__all__ = ["stroboscopic_map", "stroboscopic_orbit", "section_map", "SectionHit", "sample_trajectory",
+           "section_kernel", "check_periods"]
 
-STATUS_OK = 0
-STATUS_DIVERGED = 1
-STATUS_NO_CROSSING = 2
+
+def check_periods(periods, name: str = "periods", minimum: int = 1) -> int:
+    """``periods`` as an int >= ``minimum`` (a count of forcing periods), else ``ValueError``."""
+    return check_int(periods, name, minimum)
 
 
 def _to_batch(system, x0):
@@ -47,26 +43,29 @@ def _to_batch(system, x0):
 
 @eqx.filter_jit
 def _strobe_kernel(system, params, Y, t0, periods, integrator):
-    return advance_batch(system, params, Y, t0, periods, integrator)
+    return integrator.advance(system, params, Y, t0, periods)
 
 
 def stroboscopic_map(system: ForcedSystem, params, x0, *, periods: int = 1, t0=0.0,
-                     integrator: Integrator = RK4()):
+                     integrator: AbstractIntegrator | None = None):
     """Stroboscopic (exact) Poincaré map ``P^periods``: ``x(t0) -> x(t0 + periods*T)``.
 
-    The exact Poincaré map of a forced system (paper eq. 6; MODEL.md §6), the map whose
-    fixed points are the P-k motions of paper §4. Times in the system's unit
+    The exact Poincaré map of a forced system (paper eq. 6; model document §6), the map
+    whose fixed points are the P-k motions of paper §4. Times in the system's unit
     (dimensionless ``tau`` for the gear models), states in state units.
 
     Args:
         x0: states, shape ``(..., dim)``.
-        periods: number of forcing periods (an int; sets the loop length).
+        periods: number of forcing periods (an int >= 1; sets the loop length).
         t0: start time; the forcing phase is ``2 pi t0 / T``.
+        integrator: default :func:`~jaxgear.integrate.default_integrator`.
     Returns:
         states of shape ``(..., dim)``; a lane that blew up is non-finite.
     """
+    periods = check_periods(periods)
+    integrator = resolve_integrator(integrator)
     lead, Y = _to_batch(system, x0)
-    Y = _strobe_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), int(periods), integrator)
+    Y = _strobe_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), periods, integrator)
     return Y.T.reshape(*lead, system.dim)
 
 
@@ -75,7 +74,7 @@ def _orbit_kernel(system, params, Y, t0, n_points, periods_between, integrator):
     T = system.period(params)
 
     def step(carry, j):
-        Y = advance_batch(system, params, carry, t0 + j * periods_between * T, periods_between, integrator)
+        Y = integrator.advance(system, params, carry, t0 + j * periods_between * T, periods_between)
         return Y, Y
 
     _, Ys = jax.lax.scan(step, Y, jnp.arange(n_points))
@@ -83,17 +82,19 @@ def _orbit_kernel(system, params, Y, t0, n_points, periods_between, integrator):
 
 
 def stroboscopic_orbit(system: ForcedSystem, params, x0, *, n_points: int, periods_between: int = 1,
-                       t0=0.0, integrator: Integrator = RK4()):
+                       t0=0.0, integrator: AbstractIntegrator | None = None):
     """The iterates ``P(x0), ..., P^n(x0)`` of the stroboscopic map: shape ``(..., n, dim)``.
 
     ``P`` advances ``periods_between`` forcing periods (the exact Poincaré map of a
-    forced system, paper eq. 6; MODEL.md §6). ``x0``: states ``(..., dim)`` at time
-    ``t0`` (system time unit); ``n = n_points``. A lane that blew up is non-finite.
+    forced system, paper eq. 6; model document §6). ``x0``: states ``(..., dim)`` at
+    time ``t0`` (system time unit); ``n = n_points``. A lane that blew up is non-finite.
     """
+    n_points = check_periods(n_points, "n_points")
+    periods_between = check_periods(periods_between, "periods_between")
+    integrator = resolve_integrator(integrator)
     lead, Y = _to_batch(system, x0)
-    Ys = _orbit_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), int(n_points), int(periods_between),
-                       integrator)
-    return jnp.moveaxis(Ys, 2, 0).reshape(*lead, int(n_points), system.dim)
+    Ys = _orbit_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), n_points, periods_between, integrator)
+    return jnp.moveaxis(Ys, 2, 0).reshape(*lead, n_points, system.dim)
 
 
 class SectionHit(NamedTuple):
@@ -101,7 +102,8 @@ class SectionHit(NamedTuple):
 
     state: ``(..., dim)`` state at the crossing (``state[..., index] = 0`` to round-off);
     time: ``(...)`` crossing time; phase: ``(...)`` forcing phase in [0, 2 pi);
-    status: ``(...)`` int, ``STATUS_OK``, ``STATUS_DIVERGED`` or ``STATUS_NO_CROSSING``.
+    status: ``(...)`` int, a :class:`~jaxgear.Status`: ``CONVERGED`` (crossing found),
+    ``DIVERGED`` or ``NO_CROSSING``.
     """
 
     state: jax.Array
@@ -119,14 +121,17 @@ def _crossed(g_old, g_new, direction):
 
 
 @eqx.filter_jit
-def _section_kernel(system, params, Y, t0, periods, index, direction, max_extra_periods, integrator,
-                    search_steps, refine_iters=30):
+def section_kernel(system, params, Y, t0, periods, index, direction, max_extra_periods, integrator,
+                   refine_iters=30):
+    """The section map on a batch ``Y (dim, n)``: ``(states (dim, n), times (n,), phases (n,),
+    status (n,))`` (see :func:`section_map`)."""
     T = system.period(params)
     if periods > 0:
-        Y = advance_batch(system, params, Y, t0, periods, integrator)
+        Y = integrator.advance(system, params, Y, t0, periods)
+    stepper = integrator.crossing_stepper
+    search_steps = int(stepper.steps_per_period)
     t_start = t0 + periods * T
     h = T / search_steps
-    f = _batched_field(system)
     n = Y.shape[1]
     max_steps = int(max_extra_periods * search_steps)
 
@@ -136,8 +141,7 @@ def _section_kernel(system, params, Y, t0, periods, index, direction, max_extra_
 
     def body(c):
         k, Y, found, Yb, kb = c
-        t = t_start + k * h
-        Yn = rk4_step_batch(f, t, Y, h, params)
+        Yn = stepper.step(system, params, t_start + k * h, Y, h)
         hit = _crossed(Y[index], Yn[index], direction) & ~found
         Yb = jnp.where(hit[None, :], Y, Yb)
         kb = jnp.where(hit, k, kb)
@@ -148,17 +152,15 @@ def _section_kernel(system, params, Y, t0, periods, index, direction, max_extra_
     _, Yend, found, Yb, kb = jax.lax.while_loop(cond, body, init)
     tb = t_start + kb * h
 
-    # Safeguarded Newton on the step length s in [0, h] so that RK4(Yb, s)[index] = 0.
-    fl = _lane_field(system)
+    # Safeguarded Newton on the step length s in [0, h] so that step(Yb, s)[index] = 0.
     g0 = Yb[index]
-    lo = jnp.zeros(n)
-    hi = jnp.full(n, h)
+    tiny = 8 * jnp.finfo(jnp.float64).eps * jnp.abs(h)
 
     def refine(_, c):
         s, lo, hi = c
-        Ys = rk4_step_batch(fl, tb, Yb, s, params)
+        Ys = stepper.step(system, params, tb, Yb, s)
         g = Ys[index]
-        dg = fl(tb + s, Ys, params)[index]
+        dg = batch_field(system, params, tb + s, Ys)[index]
         same_side = jnp.sign(g) == jnp.sign(g0)
         lo = jnp.where(same_side, s, lo)
         hi = jnp.where(same_side, hi, s)
@@ -172,73 +174,81 @@ def _section_kernel(system, params, Y, t0, periods, index, direction, max_extra_
         s_new = jnp.where((g == 0) | converged, s, s_new)
         return s_new, lo, hi
 
-    tiny = 8 * jnp.finfo(jnp.float64).eps * jnp.abs(h)
     s0 = jnp.full(n, 0.5 * h)
-    s, _, _ = jax.lax.fori_loop(0, refine_iters, refine, (s0, lo, hi))
-    Yc = rk4_step_batch(fl, tb, Yb, s, params)
+    s, _, _ = jax.lax.fori_loop(0, refine_iters, refine, (s0, jnp.zeros(n), jnp.full(n, h)))
+    Yc = stepper.step(system, params, tb, Yb, s)
     tc = tb + s
     finite = jnp.all(jnp.isfinite(Yc), axis=0) & jnp.all(jnp.isfinite(Yend), axis=0)
     crossed = found & jnp.all(jnp.isfinite(Yb), axis=0)
-    status = jnp.where(~finite, STATUS_DIVERGED, jnp.where(crossed, STATUS_OK, STATUS_NO_CROSSING))
-    Yc = jnp.where((status == STATUS_OK)[None, :], Yc, jnp.nan)
+    status = jnp.where(~finite, int(Status.DIVERGED), jnp.where(crossed, int(Status.CONVERGED),
+                                                                 int(Status.NO_CROSSING)))
+    Yc = jnp.where((status == Status.CONVERGED)[None, :], Yc, jnp.nan)
     phase = jnp.mod(2 * jnp.pi * tc / T, 2 * jnp.pi)
     return Yc, tc, phase, status
 
 
+def check_section(system: ForcedSystem, index, direction) -> int:
+    """The section coordinate (default ``system.section_index``) after checking ``index``
+    and ``direction``; ``ValueError`` naming the problem."""
+    index = system.section_index if index is None else index
+    if index is None:
+        raise ValueError(f"{system.name} has no default section: pass index=i for Σ = {{x_i = 0}}.")
+    check_choice(direction, "direction", (1, -1, 0))
+    return check_int(index, "index", 0, system.dim - 1)
+
+
 def section_map(system: ForcedSystem, params, x0, *, periods: int = 1, t0=0.0, index: int | None = None,
-                direction: int = 1, max_extra_periods: float = 4.0, integrator: Integrator = RK4(),
-                search_steps_per_period: int | None = None) -> SectionHit:
+                direction: int = 1, max_extra_periods: float = 4.0,
+                integrator: AbstractIntegrator | None = None) -> SectionHit:
     """The paper's Poincaré-like map on the hyperplane Σ = {x_index = 0} (paper §3, §4.1).
 
     From ``x0`` at time ``t0``: integrate ``periods`` whole forcing periods, then on to the
     next crossing of Σ with ``direction`` (+1: ``x_index`` increasing, -1: decreasing,
-    0: either). The crossing is located to round-off within the RK4 step that brackets
-    it (safeguarded Newton on the step length), so ``state[..., index]`` is ~1e-15.
+    0: either). The crossing is bracketed by the integrator's
+    :attr:`~jaxgear.integrate.AbstractIntegrator.crossing_stepper` and located to
+    round-off within the bracketing step (safeguarded Newton on the step length), so
+    ``state[..., index]`` is ~1e-15.
 
     Args:
         x0: ``(..., dim)`` states (the paper starts on Σ at phase 0, ``t0 = 0``).
+        periods: whole forcing periods before the search (an int >= 0).
         index: section coordinate; default ``system.section_index``.
         max_extra_periods: how long to search for the crossing before giving up
-            (``STATUS_NO_CROSSING``).
-        search_steps_per_period: RK4 steps per period during the search (default: the
-            integrator's ``steps_per_period``, or 400 for :class:`Adaptive`).
+            (``Status.NO_CROSSING``), in forcing periods (> 0).
     Returns:
         :class:`SectionHit` with the batch shape of ``x0``; failed lanes have NaN state
-        and a non-zero status (never a silent wrong value).
+        and a status other than ``Status.CONVERGED`` (never a silent wrong value).
     """
-    index = system.section_index if index is None else int(index)
-    if index is None:
-        raise ValueError(f"{system.name} has no default section: pass index=i for Σ = {{x_i = 0}}.")
-    if not 0 <= index < system.dim:
-        raise ValueError(f"section index {index} is outside 0..{system.dim - 1}.")
-    if direction not in (-1, 0, 1):
-        raise ValueError(f"direction must be +1, -1 or 0, got {direction}.")
-    if max_extra_periods <= 0:
-        raise ValueError("max_extra_periods must be > 0.")
-    if search_steps_per_period is None:
-        search_steps_per_period = integrator.steps_per_period if isinstance(integrator, RK4) else 400
+    index = check_section(system, index, direction)
+    periods = check_periods(periods, minimum=0)
+    check_number(max_extra_periods, "max_extra_periods", 0, strict_min=True)
+    integrator = resolve_integrator(integrator)
     lead, Y = _to_batch(system, x0)
-    Yc, tc, ph, st = _section_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), int(periods), index,
-                                     int(direction), float(max_extra_periods), integrator,
-                                     int(search_steps_per_period))
+    Yc, tc, ph, st = section_kernel(system, params, Y, jnp.asarray(t0, jnp.float64), periods, index,
+                                    int(direction), float(max_extra_periods), integrator)
     return SectionHit(Yc.T.reshape(*lead, system.dim), tc.reshape(lead), ph.reshape(lead), st.reshape(lead))
 
 
 @eqx.filter_jit
 def _sample_kernel(system, params, x0, t0, periods, samples_per_period, integrator):
-    return sample(system, params, x0, t0, periods, samples_per_period, integrator)
+    lead = x0.shape[:-1]
+    ts, Ys = integrator.trajectory(system, params, x0.reshape(-1, system.dim).T, t0, periods, samples_per_period)
+    return ts, jnp.moveaxis(Ys, 2, 0).reshape(*lead, Ys.shape[0], system.dim)
 
 
 def sample_trajectory(system: ForcedSystem, params, x0, *, periods: int = 1, samples_per_period: int = 100,
-                      t0=0.0, integrator: Integrator = RK4()):
+                      t0=0.0, integrator: AbstractIntegrator | None = None):
     """Trajectory samples for figures: ``(times (m,), states (..., m, dim))``,
     ``m = periods*samples_per_period + 1``, from ``t0`` to ``t0 + periods*T``.
 
     The phase trajectories of paper Fig. 3-6. ``x0``: states ``(..., dim)`` at ``t0``
-    (system time unit; ``T = system.period(params)``). With :class:`RK4` each sample
-    interval is a whole number of steps (``steps_per_period`` rounded up to a multiple
-    of ``samples_per_period``).
+    (system time unit; ``T = system.period(params)``). With a fixed-step integrator each
+    sample interval is a whole number of steps (``steps_per_period`` rounded up to a
+    multiple of ``samples_per_period``).
     """
     check_state_shape(system, x0)
+    periods = check_periods(periods)
+    samples_per_period = check_periods(samples_per_period, "samples_per_period")
+    integrator = resolve_integrator(integrator)
     return _sample_kernel(system, params, jnp.asarray(x0, jnp.float64), jnp.asarray(t0, jnp.float64),
-                          int(periods), int(samples_per_period), integrator)
+                          periods, samples_per_period, integrator)

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["ForcedSystem", "check_system"]
+__all__ = ["ForcedSystem", "check_system", "check_state_shape", "state_index"]
 
 
 class ForcedSystem(eqx.Module):
@@ -130,3 +130,15 @@ def check_state_shape(system: ForcedSystem, x: Any) -> None:
         )
     if not isinstance(x, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(x))):
         raise ValueError(f"{system.name}: initial states contain NaN or infinite values.")
+
+
+def state_index(state_names, name) -> int:
+    """Index of a state coordinate given by name (``"x3"``) or index; ``ValueError`` naming
+    the valid ones."""
+    if isinstance(name, str):
+        if name not in state_names:
+            raise ValueError(f"unknown coordinate {name!r}; the state is ({', '.join(state_names)}).")
+        return list(state_names).index(name)
+    if isinstance(name, bool) or not isinstance(name, (int, np.integer)) or not 0 <= int(name) < len(state_names):
+        raise ValueError(f"coordinate {name!r} must be a name or an index in 0..{len(state_names) - 1}.")
+    return int(name)

@@ -76,7 +76,7 @@ ax.legend()
 
 # %%
 grid = jg.CellGrid.paper(counts=counts)
-paper_method = jg.analyze_global(jg.REDUCED, p, grid, method="poincare-like", progress=False)
+paper_method = jg.analyze_global(jg.REDUCED, p, grid, method=jg.PoincareCellMap(), progress=False)
 print(paper_method.table())
 
 # %% [markdown]
@@ -86,7 +86,7 @@ print(paper_method.table())
 # attractor is recognised. It is the reference for the cell methods.
 
 # %%
-direct = jg.analyze_global(jg.REDUCED, p, grid, method="direct", progress=False)
+direct = jg.analyze_global(jg.REDUCED, p, grid, method=jg.Direct(), progress=False)
 print(direct.table())
 periods = sorted(a.period for a in direct.attractors)
 assert periods == [4, 8], periods  # the paper's coexisting P-4 and P-8

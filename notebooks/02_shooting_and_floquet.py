@@ -94,7 +94,7 @@ print(np.array2string(hist, precision=2))
 
 # %%
 grid = jg.CellGrid.paper(counts=counts)
-glob = jg.analyze_global(jg.REDUCED, p, grid, method="direct", progress=False)
+glob = jg.analyze_global(jg.REDUCED, p, grid, method=jg.Direct(), progress=False)
 print(glob.table())
 cells = jg.find_periodic_orbits(jg.REDUCED, p, jg.seeds_from_result(glob), progress=False)
 print(cells.table())
@@ -261,5 +261,5 @@ np.testing.assert_array_equal(again.orbits[0].points, cells.orbits[0].points)
 import xarray as xr
 
 with xr.open_dataset(path) as ds:
-    print(ds[["period", "points", "multipliers_abs", "stable"]])
+    print(ds[["orbits__period", "orbits__points", "orbits__stable"]])
 plotting.plot_orbit(again, 1, coords=(0, 1, 2))

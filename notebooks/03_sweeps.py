@@ -258,5 +258,5 @@ again = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", k_values, starts[:4],
 t2 = time.perf_counter() - t
 print(f"first run {t1:.2f} s, second run {t2:.2f} s; files:", sorted(x.name for x in folder.iterdir()))
 assert np.array_equal(first.points, again.points)
-loaded = jg.load_bifurcation(folder / "bifurcation.nc")
+loaded = jg.load(folder / "bifurcation.nc")
 assert np.array_equal(loaded.period, first.period)

@@ -217,10 +217,10 @@ assert share_new > 0.4
 # new set (`jaxgear.analyze_global`) is the check to run before adopting a design.
 #
 # The designed set, its orbit and the history can be saved and reloaded
-# (`result.save(SCRATCH / "design.nc")`, `jaxgear.load_design`).
+# (`result.save(SCRATCH / "design.nc")`, `jaxgear.load`).
 
 # %%
 path = result.save(SCRATCH / "design.nc")
-back = jg.load_design(path)
+back = jg.load(path)
 assert back.params.to_dict() == result.params.to_dict()
 print(back.params.table())

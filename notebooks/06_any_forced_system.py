@@ -74,8 +74,8 @@ except ValueError as e:
 
 # %%
 grid = jg.CellGrid.box([(-2.5, 2.5), (-2.5, 2.5)], (n, n), names=system.state_names)
-direct = jg.analyze_global(system, p, grid, method="direct", progress=False)
-strobe = jg.analyze_global(system, p, grid, method="stroboscopic", mapping_steps=10, progress=False)
+direct = jg.analyze_global(system, p, grid, method=jg.Direct(), progress=False)
+strobe = jg.analyze_global(system, p, grid, method=jg.StroboscopicCellMap(mapping_steps=10), progress=False)
 print(direct.table())
 for r in (direct, strobe):
     print(f"{r.method:>12}: " + ", ".join(f"{a.label} at x = {a.points[0][0]:+.3f}: {100 * a.share:.1f} %"
@@ -130,7 +130,7 @@ assert np.allclose(np.asarray(orbit.point), linear, rtol=2e-5)
 # %%
 sp = jg.SpurPairParams(zeta=0.02, kappa=0.2, b=1.0, f_m=0.1, e_amp=0.2, Omega=0.7)
 grid_sp = jg.CellGrid.box([(-4, 4), (-4, 4)], (n, n), names=jg.SPUR_PAIR.state_names)
-spur = jg.analyze_global(jg.SPUR_PAIR, sp, grid_sp, method="direct", progress=False)
+spur = jg.analyze_global(jg.SPUR_PAIR, sp, grid_sp, method=jg.Direct(), progress=False)
 print(spur.table())
 spur_orbits = jg.find_periodic_orbits(jg.SPUR_PAIR, sp, jg.seeds_from_result(spur))
 for o in spur_orbits.orbits:

@@ -74,8 +74,9 @@ def test_cell_map_rejects_bad_images():
 @pytest.mark.parametrize("method", ["stroboscopic", "direct"])
 def test_forced_linear_oscillator_one_p1_at_closed_form(method):
     grid = CellGrid.box([(-3, 3), (-3, 3)], (12, 12), names=("x", "v"))
-    r = jg.analyze_global(jg.DUFFING, LINEAR, grid, method=method, mapping_steps=3 if method != "direct" else None,
-                          steps_per_period=200, settle_periods=150, progress=False)
+    opts = dict(mapping_steps=3, settle_periods=150) if method != "direct" else {}
+    r = jg.analyze_global(jg.DUFFING, LINEAR, grid, jg.analysis.method_from_name(method, integrator=jg.RK4(200), **opts),
+                          progress=False)
     assert len(r.attractors) == 1
     a = r.attractors[0]
     assert a.period == 1
@@ -88,8 +89,7 @@ def test_forced_linear_oscillator_one_p1_at_closed_form(method):
 def test_poincare_like_on_linear_oscillator():
     # grid over x on the section v = 0; the single attractor is P-1 at the closed form
     grid = CellGrid.box([(-3, 3)], (30,), axes=(0,), base=(0.0, 0.0), names=("x", "v"))
-    r = jg.analyze_global(jg.DUFFING, LINEAR, grid, method="poincare-like", mapping_steps=20, direction=-1,
-                          settle_periods=150, progress=False)
+    r = jg.analyze_global(jg.DUFFING, LINEAR, grid, method=jg.PoincareCellMap(mapping_steps=20, direction=-1, settle_periods=150), progress=False)
     assert [a.period for a in r.attractors] == [1]
     np.testing.assert_allclose(r.attractors[0].points[0], linear_response(LINEAR), atol=1e-7)
     sec = r.attractors[0].section_points
@@ -106,8 +106,8 @@ def test_poincare_like_on_linear_oscillator():
 def test_bistable_1d_exact_separatrix(method):
     grid = CellGrid.box([(-2, 2)], (40,), names=("x",))
     p = BistableParams(a=1.0)
-    r = jg.analyze_global(BISTABLE_1D, p, grid, method=method, mapping_steps=2 if method != "direct" else None,
-                          settle_periods=60, progress=False)
+    opts = dict(mapping_steps=2, settle_periods=60) if method != "direct" else {}
+    r = jg.analyze_global(BISTABLE_1D, p, grid, jg.analysis.method_from_name(method, **opts), progress=False)
     assert sorted(a.period for a in r.attractors) == [1, 1]
     centres = grid.centres()[:, 0]
     pos = [a for a in r.attractors if a.points[0, 0] > 0][0]
@@ -120,7 +120,7 @@ def test_bistable_1d_exact_separatrix(method):
 
 def test_double_well_mirror_symmetric_basins():
     grid = CellGrid.box([(-2, 2), (-2, 2)], (16, 16), names=("x", "v"))
-    r = jg.analyze_global(jg.DUFFING, DOUBLE_WELL, grid, method="direct", progress=False)
+    r = jg.analyze_global(jg.DUFFING, DOUBLE_WELL, grid, method=jg.Direct(), progress=False)
     assert sorted(a.period for a in r.attractors) == [1, 1]
     np.testing.assert_allclose(sorted(a.points[0, 0] for a in r.attractors), [-1.0, 1.0], atol=1e-8)
     L = r.labels
@@ -138,12 +138,13 @@ def test_double_well_mirror_symmetric_basins():
 def test_invariants_and_chunk_size_independence():
     p = jg.paper_params()
     grid = CellGrid.paper(counts=(6, 4, 6))
-    images_a = jg.cell_images(jg.REDUCED, p, grid, mapping_steps=5, chunk_size=7, progress=False)
-    images_b = jg.cell_images(jg.REDUCED, p, grid, mapping_steps=5, chunk_size=1000, progress=False)
+    images_a = jg.cell_images(jg.REDUCED, p, grid, jg.PoincareCellMap(mapping_steps=5, chunk_size=7), progress=False)
+    images_b = jg.cell_images(jg.REDUCED, p, grid, jg.PoincareCellMap(mapping_steps=5, chunk_size=1000),
+                              progress=False)
     assert images_a.shape == (grid.n_cells,)  # exactly one image per cell
     assert np.array_equal(images_a, images_b)
-    r = jg.analyze_global(jg.REDUCED, p, grid, method="direct", chunk_size=32, progress=False)
-    r2 = jg.analyze_global(jg.REDUCED, p, grid, method="direct", chunk_size=50, progress=False)
+    r = jg.analyze_global(jg.REDUCED, p, grid, method=jg.Direct(chunk_size=32), progress=False)
+    r2 = jg.analyze_global(jg.REDUCED, p, grid, method=jg.Direct(chunk_size=50), progress=False)
     assert np.array_equal(r.labels, r2.labels)
     # labels partition the grid and shares sum to one
     ids = {a.id for a in r.attractors}
@@ -162,8 +163,7 @@ def test_invariants_and_chunk_size_independence():
 @pytest.mark.parametrize("l", [1, 2, 3])
 def test_period_two_reported_as_p2_whatever_l(l):
     grid = CellGrid.box([(-1.6, 1.6), (-1.2, 1.2)], (10, 8), names=("x", "v"))
-    r = jg.analyze_global(jg.DUFFING, PERIOD_TWO, grid, method="stroboscopic", mapping_steps=l,
-                          settle_periods=300, progress=False)
+    r = jg.analyze_global(jg.DUFFING, PERIOD_TWO, grid, method=jg.StroboscopicCellMap(mapping_steps=l, settle_periods=300), progress=False)
     periodic = [a for a in r.attractors if a.share > 0.05]
     assert periodic and all(a.period == 2 for a in periodic)
     for a in periodic:
@@ -189,7 +189,7 @@ def test_escaping_orbits_go_to_sink_not_nan():
     grid = CellGrid.box([(-1, 1)], (10,), names=("x",))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        r = jg.analyze_global(blow, BistableParams(), grid, method="direct", max_periods=60, progress=False)
+        r = jg.analyze_global(blow, BistableParams(), grid, method=jg.Direct(max_periods=60), progress=False)
     centres = grid.centres()[:, 0]
     assert np.all(r.labels[centres > 0.5] == jg.SINK)
     assert r.n_sink >= 2
@@ -201,7 +201,7 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match="method"):
         jg.analyze_global(method="nope", grid=CellGrid.paper(counts=(2, 2, 2)), progress=False)
     with pytest.raises(ValueError, match="every state coordinate"):
-        jg.analyze_global(method="stroboscopic", grid=CellGrid.paper(counts=(2, 2, 2)), progress=False)
+        jg.analyze_global(method=jg.StroboscopicCellMap(), grid=CellGrid.paper(counts=(2, 2, 2)), progress=False)
     with pytest.raises(ValueError):
         CellGrid.box([(1, -1)], (3,))
     with pytest.raises(ValueError):
@@ -210,8 +210,8 @@ def test_bad_arguments():
 
 def test_direct_round_length_does_not_change_labels():
     grid = CellGrid.paper(counts=(5, 3, 6))
-    a = jg.analyze_global(grid=grid, method="direct", round_periods=5, progress=False)
-    b = jg.analyze_global(grid=grid, method="direct", round_periods=10, progress=False)
+    a = jg.analyze_global(grid=grid, method=jg.Direct(round_periods=5), progress=False)
+    b = jg.analyze_global(grid=grid, method=jg.Direct(round_periods=10), progress=False)
     assert np.array_equal(a.labels, b.labels)
     assert sorted(x.period for x in a.attractors) == [4, 8]  # the paper's coexisting P-4 and P-8
 
@@ -221,15 +221,15 @@ def test_direct_shortcuts_do_not_change_labels():
     time: with capture off (pure recurrence) and with a pool far smaller than the grid
     (lanes refilled many times) every cell gets the same attractor."""
     grid = CellGrid.paper(counts=(6, 4, 6))
-    fast = jg.analyze_global(grid=grid, method="direct", progress=False)
-    slow = jg.analyze_global(grid=grid, method="direct", capture_radius=0.0, chunk_size=37, progress=False)
+    fast = jg.analyze_global(grid=grid, method=jg.Direct(), progress=False)
+    slow = jg.analyze_global(grid=grid, method=jg.Direct(capture_radius=0.0, chunk_size=37), progress=False)
     assert np.array_equal(fast.labels, slow.labels)
     assert [a.period for a in fast.attractors] == [a.period for a in slow.attractors]
     assert fast.mean_periods < slow.mean_periods  # capture decides cells before a full recurrence test
 
 
 def test_capture_radius_stays_below_attractor_separation():
-    from jaxgear._cellmap import _capture_radius
+    from jaxgear.analysis._direct import capture_radius as _capture_radius
 
     a = np.array([[0.0, 0.0], [1.0, 0.0]])
     b = np.array([[0.0, 0.04], [1.0, 1.0]])
@@ -238,4 +238,4 @@ def test_capture_radius_stays_below_attractor_separation():
     assert _capture_radius([[a, 2, 0.0]], "auto") == pytest.approx(0.02)  # 1 % of 1 + max|x|
     assert _capture_radius([[a, 2, 0.0]], 0.3) == 0.3
     with pytest.raises(ValueError, match="capture_radius"):
-        jg.analyze_global(grid=CellGrid.paper(counts=(2, 2, 2)), method="direct", capture_radius=-1, progress=False)
+        jg.Direct(capture_radius=-1)

@@ -19,7 +19,7 @@ def test_analyze_writes_result_summary_and_figures(tmp_path, capsys):
         assert (out / f).is_file(), f
     s = json.loads((out / "summary.json").read_text())
     assert s["params"] == jg.paper_params().to_dict()
-    r = jg.load_result(out / "result.nc")
+    r = jg.load(out / "result.nc")
     # every reported attractor is periodic under an independent, finer integration
     p = jg.paper_params()
     for a in r.attractors:

@@ -2,6 +2,7 @@
 finite differences of re-converged orbits, closed-form optima of a linear system, the
 Mathieu stability boundary and a Duffing fold located by independent shooting."""
 
+import json
 from typing import NamedTuple
 
 import jax
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxgear as jg
-from jaxgear._design import _set_params
+from jaxgear._params import set_fields as _set_params
 
 # A point near the stable P-4 of the paper preset (stroboscopic map, phase 0).
 P4_SEED = np.array([5.8575, -0.6064, 12.1892, -0.9570])
@@ -69,12 +70,12 @@ def test_gradient_does_not_unroll_newton():
     assert int(it_far) >= 4 and int(it_at) == 0
     assert abs(float(g_far) - float(g_at)) <= 1e-10 * abs(float(g_at))
     # the Newton loop cannot be reverse-differentiated: differentiating through it raises
-    from jaxgear._shooting import _damped_newton, _flow, _orbit_jacobians
+    from jaxgear.shooting._newton import damped_newton, orbit_jacobians
 
     def unrolled(gamma):
         q = p.__class__(delta=0.1, alpha=1.0, beta=1.0, gamma=gamma, omega=1.4)
-        x, _ = _damped_newton(lambda z: _orbit_jacobians(jg.DUFFING, q, z, 0.0, 1, jg.RK4()),
-                              lambda z: _flow(jg.DUFFING, q, z, 0.0, 1, jg.RK4()), far, 1, 1e-10, 40, 1e6)
+        x, _ = damped_newton(lambda z: orbit_jacobians(jg.DUFFING, q, z, 0.0, 1, jg.RK4()),
+                             lambda z: jg.RK4().flow(jg.DUFFING, q, z, 0.0, 1), far, 1, 1e-10, 40, 1e6)
         return jnp.sum(x)
 
     with pytest.raises(ValueError, match="while_loop"):
@@ -142,7 +143,7 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
     text = r2.table()
     assert "psi" in text and "a2" in text and "(at bound)" in text
     path = r2.save(tmp_path / "design.nc")
-    back = jg.load_design(path)
+    back = jg.load(path)
     assert back.params == r2.params and isinstance(back.params, TwoSource)
     for key in r2.history:
         np.testing.assert_array_equal(back.history[key], r2.history[key])
@@ -154,7 +155,9 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
 
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         assert ds.attrs["jaxgear_type"] == "DesignResult" and ds.attrs["system"] == "two-source"
-        assert list(ds["parameter"].values) == ["psi", "a2"] and list(ds["state"].values) == ["x1", "v1", "x2", "v2"]
+        assert json.loads(ds.attrs["free"]) == {"psi": list(r2.free["psi"]), "a2": list(r2.free["a2"])}
+        np.testing.assert_array_equal(ds["history__psi"].values, r2.history["psi"])
+        assert list(ds["state"].values) == ["x1", "v1", "x2", "v2"]
 
 
 # --------------------------------------------------------------------------- tracking limits

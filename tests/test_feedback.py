@@ -32,10 +32,11 @@ ROTATION = ForcedSystem(
     period=lambda p: 1.0 + 0 * p.a, state_names=("x", "y"), name="rotation")
 
 
-def _run(system, grid, params=None, **kw):
+def _run(system, grid, params=None, method="direct", **options):
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
-        r = jg.analyze_global(system, params or Params(), grid, progress=False, **kw)
+        r = jg.analyze_global(system, params or Params(), grid, jg.analysis.method_from_name(method, **options),
+                              progress=False)
     return r, [str(x.message) for x in w]
 
 

@@ -4,6 +4,7 @@ arrays with xarray, and every plotting function draws from a loaded result witho
 integrating anything (the integration kernels are replaced by functions that raise)."""
 
 import dataclasses
+from pathlib import Path
 import json
 import warnings
 
@@ -66,11 +67,11 @@ def duffing_results():
     g2 = CellGrid.box([(-2, 2), (-2, 2)], (6, 5), names=("x", "v"))
     g1 = CellGrid.box([(-2, 2)], (8,), axes=(0,), base=(0.0, 0.0), names=("x", "v"))
     return {
-        "direct": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method="direct", progress=False),
-        "stroboscopic": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method="stroboscopic",
-                               settle_periods=50, progress=False),
-        "poincare-like": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g1, method="poincare-like",
-                                mapping_steps=3, settle_periods=50, progress=False),
+        "direct": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.Direct(), progress=False),
+        "stroboscopic": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.StroboscopicCellMap(settle_periods=50),
+                               progress=False),
+        "poincare-like": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g1, method=jg.PoincareCellMap(mapping_steps=3, settle_periods=50),
+                                progress=False),
     }
 
 
@@ -78,7 +79,7 @@ def duffing_results():
 def paper_result():
     """The paper preset's P-4 by the paper's method on a 3 x 2 x 3 grid of region D."""
     return _quiet(jg.analyze_global, jg.REDUCED, jg.paper_params(), CellGrid.paper(counts=(3, 2, 3)),
-                  method="poincare-like", mapping_steps=20, settle_periods=300, progress=False)
+                  method=jg.PoincareCellMap(mapping_steps=20, settle_periods=300), progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +103,7 @@ def test_global_result_round_trip_exact(duffing_results, method, tmp_path):
     r = duffing_results[method]
     assert r.method == method and sorted(a.period for a in r.attractors) == [1, 1]
     path = r.save(tmp_path / "r.nc")
-    assert_same(jg.load_result(path), r)
+    assert_same(jg.load(path), r)
     assert_same(jg.load(path), r)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.nc"]  # no temporary file left behind
 
@@ -120,6 +121,7 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         np.testing.assert_array_equal(ds["x3"].values, r.grid.axis_centres(2))
         assert list(ds["state"].values) == ["x1", "x2", "x3", "x4"]
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
+        assert ds.attrs["jaxgear_format"] == 2
         for name, v in jg.paper_params().to_dict().items():  # the canonical set, one attribute each
             assert ds.attrs[f"param_{name}"] == v
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
@@ -129,10 +131,10 @@ def test_orbit_search_round_trip_exact(duffing_search, tmp_path):
     s = duffing_search
     assert [o.period for o in s.orbits] == [1, 1, 1] and [o.stable for o in s.orbits].count(False) == 1
     st = s.shots[1].status
-    assert np.any(st == jg._shooting.SHOOT_CONVERGED) and np.any(st != jg._shooting.SHOOT_CONVERGED)
+    assert np.any(st == jg.Status.CONVERGED) and np.any(st != jg.Status.CONVERGED)
     assert all(o.trajectory.shape == (41, 2) for o in s.orbits)
     path = s.save(tmp_path / "orbits.nc")
-    assert_same(jg.load_orbits(path), s)
+    assert_same(jg.load(path), s)
     assert_same(jg.load(path), s)
     # the stored multipliers are the complex numbers themselves, not only their moduli
     q = jg.load(path)
@@ -154,11 +156,11 @@ def test_paper_orbit_search_labelled(paper_search, tmp_path):
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         assert ds.attrs["jaxgear_type"] == "OrbitSearch"
         assert list(ds["state"].values) == list(jg.REDUCED.state_names)
-        assert ds["points"].dims == ("orbit", "point", "state")
-        np.testing.assert_array_equal(ds["points"].sel(state="x3").values[0, :1], s.orbits[0].points[:, 2])
+        assert ds["orbits__points"].dims == ("orbit", "point", "state")
+        np.testing.assert_array_equal(ds["orbits__points"].sel(state="x3").values[0, :1], s.orbits[0].points[:, 2])
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
         assert ds.attrs["param_Omega"] == jg.paper_params().to_dict()["Omega"]
-        assert str(ds["instability"].values[0]) == "flip"
+        assert str(ds["orbits__instability"].values[0]) == "flip"
 
 
 def test_save_overwrites_atomically(duffing_results, tmp_path):
@@ -171,80 +173,110 @@ def test_save_overwrites_atomically(duffing_results, tmp_path):
 
 
 # ---------------------------------------------------------------- jaxgear.load
-def test_load_reads_files_without_jaxgear_type(duffing_results, tmp_path):
-    r = duffing_results["direct"]
-    ds = r.to_xarray()
-    del ds.attrs["jaxgear_type"]  # as written by jaxgear 0.1
-    ds.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
-    assert_same(jg.load(tmp_path / "old.nc"), r)
-    assert_same(jg.load_result(tmp_path / "old.nc"), r)
+LEGACY = Path(__file__).parent / "data" / "v0.1"
 
 
-def test_load_errors_name_the_problem(duffing_results, duffing_search, tmp_path, monkeypatch):
-    from jaxgear._io import LOADERS
+@pytest.mark.parametrize("name", sorted(p.name for p in LEGACY.glob("*.nc")))
+def test_files_of_version_0_1_still_load(name, tmp_path):
+    """Result files written by jaxgear 0.1 (the layout before the codec) load into today's
+    types with the values they held (recorded when they were written)."""
+    expected = json.loads((LEGACY / "expected.json").read_text())[name]
+    r = jg.load(LEGACY / name)
+    assert type(r).__name__ == expected["type"]
+    if expected["type"] == "GlobalResult":
+        assert np.asarray(r.labels).ravel().tolist() == expected["labels"]
+        assert [a.period for a in r.attractors] == expected["periods"]
+        assert [a.share for a in r.attractors] == expected["shares"]
+        assert [np.asarray(a.points).tolist() for a in r.attractors] == expected["points"]
+        assert r.method == expected["method"] and r.params == expected["params"]
+    elif expected["type"] == "OrbitSearch":
+        assert [o.period for o in r.orbits] == expected["periods"]
+        assert [o.points.tolist() for o in r.orbits] == expected["points"]
+        assert [np.abs(o.multipliers).tolist() for o in r.orbits] == expected["mult_abs"]
+        assert {str(k): np.asarray(v.status).tolist() for k, v in r.shots.items()} == expected["status"]
+    elif expected["type"] == "BifurcationDiagram":
+        assert r.period.tolist() == expected["period"] and r.values.tolist() == expected["values"]
+        assert list(r.directions) == expected["directions"]
+    elif expected["type"] == "BasinSweep":
+        assert r.shares.tolist() == expected["shares"] and r.labels.ravel().tolist() == expected["labels"]
+    elif expected["type"] == "ParameterMap":
+        assert r.period.tolist() == expected["period"] and r.n_attractors.tolist() == expected["n_attractors"]
+    elif expected["type"] == "Branch":
+        assert r.values.tolist() == expected["values"] and r.status == expected["status"]
+        assert [b.kind for b in r.bifurcations] == expected["kinds"]
+    elif expected["type"] == "DesignResult":
+        assert r.status == expected["status"] and r.history["objective"].tolist() == expected["objective"]
+        assert float(r.params.kappa) == expected["kappa"] and r.orbit.points.tolist() == expected["orbit_points"]
+    # a file of the old layout saves again in today's and round-trips exactly
+    assert_same(jg.load(r.save(tmp_path / name)), r)
 
-    with pytest.raises(FileNotFoundError):
-        jg.load(tmp_path / "missing.nc")
+
+def test_every_result_type_round_trips_through_the_codec(tmp_path):
+    """Each registered result type, built with fields of every kind the codec handles
+    (None arrays, empty tuples, nested records, complex numbers, dicts of arrays), saves and
+    loads exactly."""
+    from jaxgear import _registry  # noqa: F401
+    from jaxgear._codec import RESULT_TYPES
+
+    assert {"GlobalResult", "OrbitSearch", "BifurcationDiagram", "BasinSweep", "ParameterMap", "Branch",
+            "DesignResult"} <= set(RESULT_TYPES)
+    for name, cls in RESULT_TYPES.items():
+        assert getattr(jg, name) is cls, f"{name} is not exported from jaxgear"
+    for f in LEGACY.glob("*.nc"):  # one instance of every type, saved and loaded again
+        r = jg.load(f)
+        q = jg.load(r.save(tmp_path / f.name))
+        assert_same(q, r, f.name)
+
+
+def test_load_errors_name_the_problem(duffing_results, tmp_path):
+    """Anything that is not a whole jaxgear result file is refused with one line saying why."""
+    cases = {"missing.nc": None, "folder": "dir", "empty.nc": b"", "text.json": b'{"a": 1}',
+             "garbage.nc": b"\x00" * 64}
+    for name, content in cases.items():
+        p = tmp_path / name
+        if content == "dir":
+            p.mkdir()
+        elif content is not None:
+            p.write_bytes(content)
+        with pytest.raises(ValueError, match="not a jaxgear result file") as info:
+            jg.load(p)
+        assert "\n" not in str(info.value)
+    good = duffing_results["direct"].save(tmp_path / "r.nc")
+    data = good.read_bytes()
+    (tmp_path / "truncated.nc").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="not a jaxgear result file"):
+        jg.load(tmp_path / "truncated.nc")
     xr.Dataset({"a": ("i", np.arange(3))}).to_netcdf(tmp_path / "foreign.nc", engine="h5netcdf")
-    with pytest.raises(ValueError, match="not written by jaxgear"):
+    with pytest.raises(ValueError, match="another program"):
         jg.load(tmp_path / "foreign.nc")
-    xr.Dataset(attrs={"jaxgear_type": "Nonsense"}).to_netcdf(tmp_path / "bad.nc", engine="h5netcdf")
+    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": 2}).to_netcdf(tmp_path / "bad.nc",
+                                                                                  engine="h5netcdf")
     with pytest.raises(ValueError, match="unknown jaxgear_type 'Nonsense'"):
         jg.load(tmp_path / "bad.nc")
-    # a type whose module is not part of this build (e.g. sweeps in a build without them):
-    # the error names the module
-    monkeypatch.setitem(LOADERS, "Future", "jaxgear._not_in_this_build:load_future")
-    xr.Dataset(attrs={"jaxgear_type": "Future"}).to_netcdf(tmp_path / "future.nc", engine="h5netcdf")
-    with pytest.raises(ImportError, match=r"jaxgear\._not_in_this_build"):
-        jg.load(tmp_path / "future.nc")
-    # a typed loader refuses the other type
-    duffing_search.save(tmp_path / "orbits.nc")
     with pytest.raises(ValueError, match="OrbitSearch"):
-        jg.load_result(tmp_path / "orbits.nc")
-    duffing_results["direct"].save(tmp_path / "r.nc")
-    with pytest.raises(ValueError, match="GlobalResult"):
-        jg.load_orbits(tmp_path / "r.nc")
-
-
-def test_registry_resolves_to_loaders_of_each_type():
-    """Every registered type names a loader that exists and is exported from jaxgear."""
-    import importlib
-
-    from jaxgear._io import LOADERS
-
-    for typ, target in LOADERS.items():
-        module, func = target.split(":")
-        loader = getattr(importlib.import_module(module), func)
-        assert callable(loader), typ
-        assert getattr(jg, func) is loader, f"{func} is not exported from jaxgear"
-        assert hasattr(jg, typ), f"{typ} is not exported from jaxgear"
+        jg.load(good, expected="OrbitSearch")
 
 
 # ---------------------------------------------------------------- plotting from disk
 @pytest.fixture
 def no_integration(monkeypatch):
     """Every integration entry point raises: a figure drawn now used stored data only."""
-    import jaxgear._cellmap as cm
-    import jaxgear._integrate as it
-    import jaxgear._poincare as pc
-    import jaxgear._shooting as sh
+    import jaxgear.integrate as it
     import jaxgear.plotting._orbit as po
 
     def boom(*a, **k):
         raise AssertionError("integration during plotting")
 
-    for mod, names in ((it, ("advance", "advance_batch", "sample", "rk4_step_batch")),
-                       (pc, [n for n in dir(pc) if "kernel" in n] + ["stroboscopic_map", "stroboscopic_orbit",
-                                                                   "section_map", "sample_trajectory"]),
-                       (sh, ("_shoot_kernel", "_monodromy_kernel", "_flow", "sample_trajectory",
-                             "stroboscopic_orbit")),
-                       (cm, ("_strobe_chunk", "_direct_round", "_section_kernel", "sample_trajectory", "section_map",
-                             "stroboscopic_orbit")),
-                       (po, ("sample_trajectory",)),
-                       (jg, ("advance", "stroboscopic_map", "stroboscopic_orbit", "section_map", "sample_trajectory"))):
+    # every integration goes through an integrator object's operations
+    for cls in (it.AbstractFixedStep, it.Adaptive):
+        for n in ("advance", "trajectory", "flow", "step"):
+            if n in vars(cls):
+                monkeypatch.setattr(cls, n, boom)
+    monkeypatch.setattr(it.RK4, "step", boom)
+    for mod, names in ((po, ("sample_trajectory",)),
+                       (jg, ("stroboscopic_map", "stroboscopic_orbit", "section_map", "sample_trajectory"))):
         for n in names:
-            if hasattr(mod, n):
-                monkeypatch.setattr(mod, n, boom)
+            monkeypatch.setattr(mod, n, boom)
 
 
 def test_no_integration_fixture_is_effective(no_integration):

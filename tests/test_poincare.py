@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 
 import jaxgear as jg
-from jaxgear import REDUCED, STATUS_DIVERGED, STATUS_NO_CROSSING, STATUS_OK
+from jaxgear import REDUCED, Status
+
+STATUS_OK, STATUS_DIVERGED, STATUS_NO_CROSSING = Status.CONVERGED, Status.DIVERGED, Status.NO_CROSSING
 
 P = jg.paper_params()
 T = 2 * math.pi / 0.87

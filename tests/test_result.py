@@ -11,13 +11,13 @@ import jaxgear as jg
 def _small_result():
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (8, 6), names=("x", "v"))
     p = jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
-    return jg.analyze_global(jg.DUFFING, p, grid, method="direct", progress=False)
+    return jg.analyze_global(jg.DUFFING, p, grid, method=jg.Direct(), progress=False)
 
 
 def test_save_load_round_trip_exact(tmp_path):
     r = _small_result()
     path = r.save(tmp_path / "r.nc")
-    q = jg.load_result(path)
+    q = jg.load(path)
     assert np.array_equal(q.labels, r.labels) and q.labels.dtype == r.labels.dtype
     assert q.grid == r.grid and q.method == r.method and q.params == r.params
     assert q.settings == r.settings and q.state_names == r.state_names

@@ -14,7 +14,10 @@ import pytest
 from scipy.optimize import brentq
 
 import jaxgear as jg
-from jaxgear._shooting import FLIP, SHOOT_CONVERGED, SHOOT_SINGULAR, STABLE
+from jaxgear import Instability, Status
+
+FLIP, STABLE = Instability.FLIP, Instability.STABLE
+SHOOT_CONVERGED, SHOOT_SINGULAR = Status.CONVERGED, Status.SINGULAR
 
 # Hardening Duffing with three P-1 orbits (checked by shooting from a box of seeds;
 # harmonic balance gives amplitudes 0.34, 0.95, 1.24): two stable, one saddle between.
@@ -215,7 +218,7 @@ def test_cli_shoot_json(paper_p4, monkeypatch):
     assert len(out["orbits"]) == 1 and out["orbits"][0]["period"] == 4 and out["orbits"][0]["stable"]
     # --seeds-from: any loader returning an object with .attractors and .params
     fake = SimpleNamespace(params=p.to_dict(), attractors=[SimpleNamespace(points=pts + 0.01, period=4)])
-    monkeypatch.setattr(jg, "load_result", lambda path: fake, raising=False)
+    monkeypatch.setattr("jaxgear._io.load", lambda path, expected=None: fake)
     buf = io.StringIO()
     with redirect_stdout(buf):
         assert main(["shoot", "--seeds-from", "whatever.nc"]) == 0

@@ -24,17 +24,23 @@ import numpy as np
 import pytest
 
 import jaxgear as jg
-from jaxgear import _sweep
-from jaxgear._sweep import (
-    APERIODIC,
-    ESCAPED,
-    basin_sweep,
-    bifurcation_diagram,
-    load_basin_sweep,
-    load_bifurcation,
-    load_parameter_map,
-    parameter_map,
-)
+from jaxgear import basin_sweep, bifurcation_diagram, parameter_map
+from jaxgear.sweep import APERIODIC, ESCAPED
+from jaxgear.sweep import _basins as basins_module
+from jaxgear.sweep import _bifurcation as bifurcation_module
+from jaxgear.sweep import _checkpoint as checkpoint_module
+
+
+def load_bifurcation(path):
+    return jg.load(path, expected="BifurcationDiagram")
+
+
+def load_basin_sweep(path):
+    return jg.load(path, expected="BasinSweep")
+
+
+def load_parameter_map(path):
+    return jg.load(path, expected="ParameterMap")
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -137,8 +143,8 @@ def test_hysteresis_of_the_hardening_duffing_oscillator():
         assert abs(amp(down[i]) - roots[0]) < 0.1 * roots[-1]
 
 
-def test_sweep_equals_one_value_at_a_time_and_clocks_agree():
-    """Batched values (vmap, one clock or one per value) equal the foundation's
+def test_sweep_equals_one_value_at_a_time():
+    """Batched values (vmap over values, a period per value when omega is swept) equal the
     stroboscopic_orbit run at each value separately."""
     p = jg.DuffingParams(**DUFF, omega=1.3)
     X0 = np.array([[0.5, 0.0], [-2.0, 1.0]])
@@ -151,11 +157,6 @@ def test_sweep_equals_one_value_at_a_time_and_clocks_agree():
             x = jg.stroboscopic_map(jg.DUFFING, pv, X0, periods=5, integrator=integ)
             ref = np.asarray(jg.stroboscopic_orbit(jg.DUFFING, pv, x, n_points=17, integrator=integ))
             np.testing.assert_allclose(d.points[0, i], ref, rtol=1e-11, atol=1e-11)
-    # a shared-clock parameter run through the per-value clock gives the same points
-    V = np.array([[0.2], [0.3]])
-    a = _sweep._compute_independent(jg.DUFFING, p, ("gamma",), V, 2, jnp.asarray(X0), 3, 5, integ, True)
-    b = _sweep._compute_independent(jg.DUFFING, p, ("gamma",), V, 2, jnp.asarray(X0), 3, 5, integ, False)
-    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
 
 
 def test_escaped_and_aperiodic_codes():
@@ -180,7 +181,8 @@ def test_basin_sweep_keeps_attractor_identities():
     p = jg.DuffingParams(**DUFF, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 12), names=("x", "v"))
     values = np.linspace(1.30, 1.46, 5)
-    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, integrator=jg.RK4(64), max_period=4, progress=False)
+    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=jg.Direct(integrator=jg.RK4(64), max_period=4),
+                    progress=False)
     assert s.n_attractors == 2 and np.all(s.present) and np.all(s.period == 1)
     np.testing.assert_allclose(s.shares.sum(axis=1) + s.sink_share + s.unresolved_share, 1.0)
     # the shares cross (so the per-value results, sorted by share, swap their local ids)
@@ -200,7 +202,7 @@ def test_basin_sweep_keeps_attractor_identities():
 def test_matching_is_set_distance_and_cyclic_shift_invariant():
     """The matcher follows attractors by the distance of their point sets, whatever the
     order of the points or of the attractors, and starts a new id beyond match_tol."""
-    from jaxgear._result import Attractor
+    from jaxgear import Attractor
 
     def res(*atts):
         a = tuple(Attractor(id=i, period=len(pts), points=np.asarray(pts, float), section_points=np.zeros((0, 2)),
@@ -213,7 +215,7 @@ def test_matching_is_set_distance_and_cyclic_shift_invariant():
     r0 = res(A, B)
     r1 = res([[5.1, 5.0]], [[1.05, 1.0], [0.0, 0.05]])  # order of attractors and of A's points swapped
     r2 = res([[9.0, 9.0]], [[1.05, 1.0], [0.0, 0.05]])  # B vanished, a new one far away
-    ids = _sweep._match([r0, r1, r2], match_tol=0.5)
+    ids = basins_module.match_across_values([r0, r1, r2], match_tol=0.5)
     assert ids[0].tolist() == [0, 1] and ids[1].tolist() == [1, 0] and ids[2].tolist() == [2, 0]
 
 
@@ -223,7 +225,7 @@ class _Kill(BaseException):
 
 
 def _interrupt_after(monkeypatch, n):
-    real = _sweep._save_part
+    real = checkpoint_module._save_part
     calls = {"n": 0}
 
     def save(path, arrays):
@@ -232,7 +234,7 @@ def _interrupt_after(monkeypatch, n):
             raise _Kill()  # killed after n blocks were written
         real(path, arrays)
 
-    monkeypatch.setattr(_sweep, "_save_part", save)
+    monkeypatch.setattr(checkpoint_module, "_save_part", save)
 
 
 def _assert_same_file(a, b):
@@ -243,13 +245,13 @@ def _assert_same_file(a, b):
 
 
 def _counting(monkeypatch, name, seen):
-    real = getattr(_sweep, name)
+    real = getattr(bifurcation_module, name)
 
     def wrapper(system, params, names, V, *a, **k):
         seen.extend(np.asarray(V).reshape(len(V), -1)[:, 0].tolist())  # (the up value of a two-way scan)
         return real(system, params, names, V, *a, **k)
 
-    monkeypatch.setattr(_sweep, name, wrapper)
+    monkeypatch.setattr(bifurcation_module, name, wrapper)
 
 
 @pytest.mark.parametrize("direction", ["both", "independent"])
@@ -268,7 +270,7 @@ def test_kill_and_resume_bifurcation(tmp_path, monkeypatch, direction):
     B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_values"][direction]
     assert 1 < B < 6  # several blocks of several values
     computed = []
-    _counting(monkeypatch, "_compute_independent" if direction == "independent" else "_compute_scan", computed)
+    _counting(monkeypatch, "independent_points" if direction == "independent" else "sequential_points", computed)
     resumed = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
     assert sorted(computed) == values[2 * B:].tolist()  # every unfinished value once, no finished one again
     _assert_same_file(tmp_path / "full" / "bifurcation.nc", tmp_path / "run" / "bifurcation.nc")
@@ -287,9 +289,9 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
     p = jg.DuffingParams(**DUFF, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
     values = [1.30, 1.35, 1.40, 1.45]
-    kw = dict(integrator=jg.RK4(32), max_period=4, progress=False)
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
     basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "full", **kw)
-    real = _sweep._analyze_value
+    real = basins_module._analyze_value
     calls = []
 
     def analyze(system, params, *a, **k):
@@ -298,7 +300,7 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
             raise _Kill()
         return real(system, params, *a, **k)
 
-    monkeypatch.setattr(_sweep, "_analyze_value", analyze)
+    monkeypatch.setattr(basins_module, "_analyze_value", analyze)
     kill = True
     with pytest.raises(_Kill):
         basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
@@ -367,7 +369,7 @@ def small_results(tmp_path_factory):
                               transient=100, record=17, direction="both", integrator=jg.RK4(32), max_period=8,
                               progress=False)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (6, 6), names=("x", "v"))
-    bas = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, integrator=jg.RK4(32), max_period=4,
+    bas = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, method=jg.Direct(integrator=jg.RK4(32), max_period=4),
                       progress=False)
     pm = parameter_map(jg.DUFFING, p, "omega", [1.2, 1.4, 1.6], "gamma", [0.2, 0.3], [[0.0, 0.0], [2.0, 0.0]],
                        quantity="n_attractors", transient=100, integrator=jg.RK4(32), max_period=4, progress=False)
@@ -454,9 +456,8 @@ def test_cli_bad_input_exit_codes(tmp_path, capsys, monkeypatch):
         assert msg in capsys.readouterr().err
     assert main(["sweep", "--param", "backlash", "--values", "3:7:3", "--out", str(tmp_path / "x")]) == 2
     assert "valid names" in capsys.readouterr().err
-    monkeypatch.setitem(sys.modules, "jaxgear._continuation", None)  # a build without continuation
-    assert main(base + ["--values", "3:7:3", "--kind", "continuation", "--from", "5,0,8,0"]) == 1
-    assert "jaxgear._continuation" in capsys.readouterr().err
+    assert main(base + ["--values", "3:7:3", "--kind", "continuation"]) == 2  # no --from
+    assert "--from" in capsys.readouterr().err
 
 
 def test_cli_basins(tmp_path, capsys):

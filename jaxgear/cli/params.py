@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from .._params import resolve_params
+from .._presets import resolve_params
 from .common import add_param_options
 
 
@@ -12,7 +12,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser(
         "params", help="print the physical and dimensionless parameter tables of a preset",
         description="Print the physical gear-set table (value, unit, source of each value) and the "
-        "canonical dimensionless set of MODEL.md §4; --json prints only the dimensionless set.",
+        "canonical dimensionless set (model document §4); --json prints only the dimensionless set.",
     )
     add_param_options(p)
     p.add_argument("--json", action="store_true", help="print the canonical dimensionless set as one JSON object")
@@ -27,6 +27,6 @@ def run(args) -> int:
     print(f"# preset: {args.preset} (physical units)")
     print(gear_set.table())
     print()
-    print("# dimensionless parameters (MODEL.md §4)")
+    print("# dimensionless parameters (model document §4)")
     print(params.table())
     return 0

@@ -18,6 +18,7 @@ import numpy as np
 
 from pathlib import Path
 
+from .._io import save_figure, write_json
 from .common import add_param_options, parse_point, parse_ranges
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
@@ -25,6 +26,8 @@ DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
 
 
 def add_parser(sub) -> None:
+    from ..integrate import DEFAULT_STEPS_PER_PERIOD
+
     p = sub.add_parser(
         "shoot", help="periodic orbits by shooting: points, minimal period, Floquet multipliers, stability",
         description="Shooting method (paper §4.1): damped Newton on P^k(x) - x = 0 for the stroboscopic map "
@@ -48,7 +51,8 @@ def add_parser(sub) -> None:
     p.add_argument("--period", type=int, action="append", metavar="K",
                    help="shoot for P-K orbits (fixed points of P^K); repeatable (default 1, or the attractors' "
                    "periods with --seeds-from)")
-    p.add_argument("--steps-per-period", type=int, default=200, help="RK4 steps per forcing period (default 200)")
+    p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
+                   help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
     p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on ||P^K(x) - x|| (default 1e-10)")
     p.add_argument("--max-iter", type=int, default=40, help="Newton iteration limit (default 40)")
     p.add_argument("--verify", type=int, default=0, metavar="PERIODS",
@@ -63,19 +67,16 @@ def add_parser(sub) -> None:
 
 
 def _load_seeds(path: str):
-    try:
-        from .. import load_result
-    except ImportError as exc:
-        raise ValueError("--seeds-from needs jaxgear.load_result (saved global-analysis results), which this "
-                         "build of jaxgear does not provide; give seeds with --from or --random.") from exc
-    from .._shooting import seeds_from_result
+    from .._io import load
+    from ..shooting import seeds_from_result
 
-    result = load_result(path)
+    result = load(path, expected="GlobalResult")
     return result, seeds_from_result(result)
 
 
 def _canonical_overrides(overrides) -> dict:
-    from .._params import PARAM_NAMES, _parse_value
+    from .._params import PARAM_NAMES
+    from .._presets import parse_value
 
     out = {}
     for item in overrides:
@@ -86,20 +87,20 @@ def _canonical_overrides(overrides) -> dict:
         if k not in PARAM_NAMES or k == "N":
             raise ValueError(f"with --seeds-from only canonical dimensionless names can be overridden "
                              f"({', '.join(PARAM_NAMES[1:])}); got {k!r}")
-        out[k] = _parse_value(v)
+        out[k] = parse_value(v)
     return out
 
 
 def run(args) -> int:
-    from .. import REDUCED, RK4
-    from .._params import GearParams, resolve_params
-    from .._shooting import find_periodic_orbits, seeds_in_box, verify_orbit
+    from .._model import REDUCED
+    from .._params import GearParams
+    from .._presets import resolve_params
+    from ..integrate import default_integrator
+    from ..shooting import find_periodic_orbits, seeds_in_box, verify_orbit
 
     periods = args.period
     if periods is not None and min(periods) < 1:
         raise ValueError(f"--period must be >= 1, got {min(periods)}.")
-    if args.steps_per_period < 1:
-        raise ValueError(f"--steps-per-period must be >= 1, got {args.steps_per_period}.")
     source = None
     if args.seeds_from:
         result, groups = _load_seeds(args.seeds_from)
@@ -130,7 +131,7 @@ def run(args) -> int:
         raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
                          "the given parameters differ per planet.")
     params = params.uniform()
-    integ = RK4(steps_per_period=args.steps_per_period)
+    integ = default_integrator(args.steps_per_period)
     search = find_periodic_orbits(REDUCED, params, seeds, period=periods or [1], integrator=integ,
                                   tol=args.tol, max_iter=args.max_iter, progress=not (args.quiet or args.json))
     n_seeds = search.n_seeds
@@ -152,7 +153,7 @@ def run(args) -> int:
             "command": "shoot", "system": REDUCED.name, "state_names": list(REDUCED.state_names),
             "params": params.to_dict(),
             "settings": {"periods_tried": sorted(search.shots), "n_seeds": n_seeds,
-                         "steps_per_period": args.steps_per_period, "tol": args.tol, "max_iter": args.max_iter,
+                         "integrator": integ.to_dict(), "tol": args.tol, "max_iter": args.max_iter,
                          "t0": 0.0, "seeds_from": args.seeds_from, "random": args.random, "seed": args.seed},
             "status_counts": search.status_counts,
             "orbits": orbits, "version": search.version,
@@ -166,7 +167,7 @@ def run(args) -> int:
     names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
     print(f"jaxgear shoot: {REDUCED.name} model, {source or 'preset ' + args.preset}, "
           f"Omega={float(params.Omega):.4g}, {n_seeds} seed runs, P^K for K in {sorted(search.shots)}, "
-          f"RK4 {args.steps_per_period} steps/period, tol {args.tol:g}")
+          f"{integ.name} {integ.steps_per_period} steps/period, tol {args.tol:g}")
     print("Newton: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
     if not search.orbits:
         print("no periodic orbit converged from these seeds.")
@@ -200,7 +201,7 @@ def _write_outputs(search, summary: dict, args) -> list[str]:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     search.save(out / "orbits.nc")
-    (out / "orbits.json").write_text(json.dumps(summary, indent=2))
+    write_json(summary, out / "orbits.json")
     written = ["orbits.nc", "orbits.json"]
     if not args.no_figures and search.orbits:
         from ..plotting import plot_multipliers, plot_orbit
@@ -209,6 +210,6 @@ def _write_outputs(search, summary: dict, args) -> list[str]:
                 for i, o in enumerate(search.orbits)}
         figs["multipliers.png"] = plot_multipliers(search)
         for name, fig in figs.items():
-            fig.savefig(out / name, dpi=110)
+            save_figure(fig, out / name, dpi=110)
         written += list(figs)
     return written

@@ -11,11 +11,10 @@ command resumes where it stopped.
 
 from __future__ import annotations
 
-import json
-import sys
 import time
 from pathlib import Path
 
+from .._io import save_figure, write_json
 from .common import add_param_options, parse_counts, parse_point, parse_ranges
 
 KINDS = ("bifurcation", "basins", "continuation")
@@ -46,6 +45,9 @@ def _values(text: str):
 
 
 def add_parser(sub) -> None:
+    from ..analysis import DEFAULT_METHOD, METHODS
+    from ..integrate import DEFAULT_STEPS_PER_PERIOD
+
     p = sub.add_parser(
         "sweep", help="parameter sweeps: bifurcation diagrams, basin shares, orbit continuation",
         description="Sweep one parameter of the reduced gear model (any canonical name: b_sp, kappa_sp_amp, "
@@ -73,13 +75,14 @@ def add_parser(sub) -> None:
     p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="basins: box over x1, x2, x3 (default the paper's D: -25:25,-10:20,-10:50); "
                    "bifurcation: the box of the random starts")
-    p.add_argument("--method", default="direct", choices=("direct", "poincare-like", "stroboscopic"),
-                   help="basins: the global-analysis method (default direct)")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=tuple(METHODS),
+                   help=f"basins: the global-analysis method (default {DEFAULT_METHOD})")
     p.add_argument("--period", type=int, default=1, metavar="K", help="continuation: period of the orbit (default 1)")
     p.add_argument("--max-steps", type=int, default=500, help="continuation: step limit (default 500)")
     p.add_argument("--transient", type=int, default=400, help="bifurcation: periods dropped per value (default 400)")
     p.add_argument("--record", type=int, default=64, help="bifurcation: stroboscopic points kept (default 64)")
-    p.add_argument("--steps-per-period", type=int, default=200, help="RK4 steps per forcing period (default 200)")
+    p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
+                   help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
     p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (also holds the resume parts)")
     p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
@@ -91,9 +94,14 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from .. import REDUCED, RK4, CellGrid, PAPER_REGION, seeds_in_box
-    from .._params import resolve_params
-    from .._sweep import _check_values, _targets, basin_sweep, bifurcation_diagram
+    from .._cells import PAPER_REGION, CellGrid
+    from .._model import REDUCED
+    from .._params import param_targets
+    from .._presets import resolve_params
+    from ..analysis import method_from_name
+    from ..integrate import default_integrator
+    from ..shooting import seeds_in_box
+    from ..sweep import basin_sweep, bifurcation_diagram, check_values
 
     start, stop, count, values = _values(args.values)
     _, params = resolve_params(args.preset, args.overrides)
@@ -101,12 +109,11 @@ def run(args) -> int:
         raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
                          "the given parameters differ per planet.")
     params = params.uniform()
-    _targets(params, args.param)  # unknown name -> the list of valid ones
-    for name, v in (("--steps-per-period", args.steps_per_period), ("--max-period", args.max_period),
-                    ("--period", args.period), ("--max-steps", args.max_steps)):
+    param_targets(params, args.param)  # unknown name -> the list of valid ones
+    for name, v in (("--max-period", args.max_period), ("--period", args.period), ("--max-steps", args.max_steps)):
         if v < 1:
             raise ValueError(f"{name} must be >= 1, got {v}.")
-    integ = RK4(args.steps_per_period)
+    integ = default_integrator(args.steps_per_period)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -144,19 +151,20 @@ def run(args) -> int:
         files = ["bifurcation.nc", "summary.json"]
         figs = {}
         if not args.no_figures:
-            from .. import plotting
+            from ..plotting import plot_bifurcation
 
-            figs = {"bifurcation.png": plotting.plot_bifurcation(result, "x1"),
-                    "bifurcation_x3.png": plotting.plot_bifurcation(result, "x3")}
+            figs = {"bifurcation.png": plot_bifurcation(result, "x1"),
+                    "bifurcation_x3.png": plot_bifurcation(result, "x3")}
     else:  # basins
         region = args.region or PAPER_REGION
         if len(region) != 3:
             raise ValueError("--region for basins needs three LO:HI ranges (x1, x2, x3 on x4 = 0).")
         grid = CellGrid.box(region, args.grid, axes=(0, 1, 2), base=(0.0,) * 4, names=REDUCED.state_names)
-        _check_values(REDUCED, params, (args.param,), values[:, None])
+        check_values(REDUCED, params, (args.param,), values[:, None])
+        method = method_from_name(args.method, integrator=integ, max_period=args.max_period)
         print(head + f", {args.method} on {grid.n_cells} cells per value")
-        result = basin_sweep(REDUCED, params, args.param, values, grid, method=args.method, integrator=integ,
-                             max_period=args.max_period, progress=not args.quiet, out=out, restart=args.restart)
+        result = basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=not args.quiet,
+                             out=out, restart=args.restart)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         print(result.shares_table())
         print()
@@ -164,14 +172,14 @@ def run(args) -> int:
         files = ["basins.nc", "summary.json"]
         figs = {}
         if not args.no_figures:
-            from .. import plotting
+            from ..plotting import plot_basin_shares
 
-            figs = {"shares.png": plotting.plot_basin_shares(result)}
+            figs = {"shares.png": plot_basin_shares(result)}
     summary = result.summary()
     summary["runtime_s"] = time.perf_counter() - t0  # in summary.json only, never in the result file
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_json(summary, out / "summary.json", indent=1)
     for name, fig in figs.items():
-        fig.savefig(out / name, dpi=120)
+        save_figure(fig, out / name, dpi=120)
     print(f"\nwrote {', '.join(files + list(figs))} to {out}/")
     return 0
 
@@ -179,25 +187,17 @@ def run(args) -> int:
 def _continuation(args, params, start, stop, count, integ, out, head) -> int:
     import numpy as np
 
-    from .. import REDUCED
+    from .._model import REDUCED
     from .._params import with_param
-    from .._sweep import _check_values
-
-    try:
-        from .._continuation import continue_orbit
-    except ModuleNotFoundError as exc:
-        if exc.name != "jaxgear._continuation":
-            raise
-        print("jaxgear sweep: error: --kind continuation needs orbit continuation (jaxgear._continuation), "
-              "which this build of jaxgear does not include; use --kind bifurcation or basins.", file=sys.stderr)
-        return 1
+    from ..continuation import continue_orbit
+    from ..sweep import check_values
     if not args.points or len(args.points) != 1:
         raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
                          "at the start value (e.g. from jaxgear shoot).")
     x0 = np.asarray(args.points[0], dtype=float)
     if x0.shape != (REDUCED.dim,):
         raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {x0.size}.")
-    _check_values(REDUCED, params, (args.param,), np.array([[start], [stop]]))
+    check_values(REDUCED, params, (args.param,), np.array([[start], [stop]]))
     p0 = with_param(params, args.param, start)
     ds = abs(stop - start) / (count - 1)
     print(head + f", P-{args.period} orbit from {x0.tolist()}, step {ds:g}")
@@ -213,14 +213,12 @@ def _continuation(args, params, start, stop, count, integ, out, head) -> int:
                    runtime_s=time.perf_counter() - t0)
     if hasattr(branch, "summary"):
         summary["branch"] = branch.summary()
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
+    write_json(summary, out / "summary.json", indent=1)
     files = ["branch.nc", "summary.json"]
     if not args.no_figures:
-        from .. import plotting
+        from ..plotting import plot_branch
 
-        plot_branch = getattr(plotting, "plot_branch", None)
-        if plot_branch is not None:
-            plot_branch(branch).savefig(out / "branch.png", dpi=120)
-            files.append("branch.png")
+        save_figure(plot_branch(branch), out / "branch.png", dpi=120)
+        files.append("branch.png")
     print(f"\nwrote {', '.join(files)} to {out}/")
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.patches import Patch
 
-from .._result import GlobalResult
+from ..analysis import GlobalResult
 from ._style import SINK_COLOR, UNRESOLVED_COLOR, attractor_color, label_colormap, new_figure
 
 

@@ -12,15 +12,16 @@ _MARKERS = {"PD": ("o", "#d62728"), "SN": ("s", "#2ca02c"), "NS": ("D", "#9467bd
 
 def _measure(branch, coordinate):
     """``(m, k)`` values to draw, ``(B, k)`` at the bifurcations, and the axis label."""
-    from .._continuation import _bif_orbit, _coord_index
+    from .._system import state_index
+    from ..continuation import bifurcation_orbit
 
     k = branch.period
-    orbits = [_bif_orbit(b, k) for b in branch.bifurcations]
+    orbits = [bifurcation_orbit(b, k) for b in branch.bifurcations]
     if coordinate in ("norm", "|x|"):
         y = np.linalg.norm(branch.points, axis=-1).max(axis=1, keepdims=True)
         yb = np.array([[np.linalg.norm(o, axis=-1).max()] for o in orbits]).reshape(-1, 1)
         return y, yb, "max ||x|| over the stroboscopic points"
-    j = _coord_index(branch.state_names, 0 if coordinate is None else coordinate)
+    j = state_index(branch.state_names, 0 if coordinate is None else coordinate)
     y = branch.points[:, :, j]
     yb = np.array([o[:, j] for o in orbits]).reshape(-1, k)
     return y, yb, f"{branch.state_names[j]} (stroboscopic points)"

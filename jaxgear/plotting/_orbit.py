@@ -8,7 +8,7 @@ from typing import Sequence
 import numpy as np
 from matplotlib.figure import Figure
 
-from .._integrate import RK4, Integrator
+from ..integrate import AbstractIntegrator
 from .._poincare import sample_trajectory
 from .._system import ForcedSystem
 from ._style import attractor_color
@@ -24,7 +24,7 @@ def _section_crossings(states: np.ndarray, index: int) -> np.ndarray:
 
 def plot_orbit(system, params=None, orbit=None, coords: Sequence[int] = (0, 1), *, t0=None,
                periods: int | None = None, samples_per_period: int | None = None, section: bool = True,
-               integrator: Integrator = RK4(), title: str | None = None) -> Figure:
+               integrator: AbstractIntegrator | None = None, title: str | None = None) -> Figure:
     """Phase trajectory of a periodic orbit, projected on two or three coordinates (paper Fig. 3-6).
 
     Draws the trajectory over the orbit's period (``periods`` forcing periods, default
@@ -53,7 +53,7 @@ def plot_orbit(system, params=None, orbit=None, coords: Sequence[int] = (0, 1), 
     Returns:
         a :class:`matplotlib.figure.Figure` (no pyplot state).
     """
-    from .._shooting import OrbitSearch
+    from ..shooting import OrbitSearch
 
     if isinstance(system, OrbitSearch):
         search = system

@@ -12,6 +12,8 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from .._system import state_index
+from ..sweep import period_label
 from ._style import _PALETTE, SINK_COLOR, UNRESOLVED_COLOR, attractor_color, new_figure
 
 APERIODIC_COLOR = "#404040"
@@ -29,21 +31,6 @@ def period_color(k: int) -> str:
     if k >= 1:
         return _PERIOD_COLORS.get(k, _OTHER_PERIODS[k % len(_OTHER_PERIODS)])
     return APERIODIC_COLOR if k == 0 else SINK_COLOR
-
-
-def _period_label(k: int) -> str:
-    return f"P-{k}" if k > 0 else ("aperiodic" if k == 0 else "escaped")
-
-
-def _coord_index(names, coordinate) -> int:
-    if isinstance(coordinate, str):
-        if coordinate not in names:
-            raise ValueError(f"unknown coordinate {coordinate!r}; the state has {', '.join(names)}.")
-        return list(names).index(coordinate)
-    j = int(coordinate)
-    if not 0 <= j < len(names):
-        raise ValueError(f"coordinate index {j} is outside 0..{len(names) - 1}.")
-    return j
 
 
 _DIR_STYLE = {  # marker, size, legend label, horizontal offset (in units of the dodge)
@@ -69,7 +56,7 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
         directions: subset of ``diagram.directions`` to draw (default all).
     Returns a :class:`matplotlib.figure.Figure`.
     """
-    j = _coord_index(diagram.state_names, coordinate)
+    j = state_index(diagram.state_names, coordinate)
     dirs = list(diagram.directions if directions is None else directions)
     for d in dirs:
         if d not in diagram.directions:
@@ -101,7 +88,7 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
         if len(esc):
             ax.plot(vals[esc] + off * dodge, np.full(len(esc), 0.98), "x", color="#999999", ms=5,
                     transform=ax.get_xaxis_transform())
-    handles = [Patch(color=period_color(k), label=_period_label(k))
+    handles = [Patch(color=period_color(k), label=period_label(k))
                for k in sorted(periods_seen, key=lambda k: (k <= 0, k))]
     if n_escaped:
         handles.append(Line2D([], [], marker="x", ls="none", color="#999999", label=f"escaped ({n_escaped} runs)"))
@@ -193,7 +180,7 @@ def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None =
         order = sorted(codes)
         cmap = ListedColormap([period_color(k) for k in order])
         ax.pcolormesh(X, Y, idx, cmap=cmap, vmin=-0.5, vmax=len(order) - 0.5, shading="flat")
-        handles = [Patch(color=period_color(k), label=_period_label(k)) for k in codes]
+        handles = [Patch(color=period_color(k), label=period_label(k)) for k in codes]
         ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small",
                   title="from start 0")
     else:

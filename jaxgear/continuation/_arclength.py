@@ -1,11 +1,11 @@
 """Continuation of a periodic orbit in one parameter, with Floquet multipliers and bifurcations.
 
-Issue 5, point 3; it extends the shooting of paper §4.1 along a parameter. A P-k orbit
+It extends the shooting of paper §4.1 along a parameter. A P-k orbit
 is a zero of
 
     F(x, p) = P^k(x; p) - x,    F: R^dim x R -> R^dim,
 
-where ``P`` is the stroboscopic map (full state, MODEL.md §6) and ``p`` one scalar
+where ``P`` is the stroboscopic map (full state, model document §6) and ``p`` one scalar
 parameter (any field of the parameter pytree, see :func:`jaxgear._params.with_param`).
 The solutions form curves in ``(x, p)``; they are followed by **pseudo-arclength
 continuation** (Keller):
@@ -45,11 +45,8 @@ steps is Python (inherent: each step depends on the last) with a progress bar.
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import math
 import warnings
-from pathlib import Path
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -57,307 +54,28 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._integrate import RK4, Integrator
-from ._params import format_table, get_param, with_param
-from ._shooting import SHOOT_CONVERGED, SHOOT_STATUS_NAMES, _check_period, _flow, _sorted_eigvals, periodic_orbit
-from ._system import ForcedSystem, check_state_shape, check_system
-from ._cellmap import _pytree_dict
+from .._batching import progress_bar
+from .._checks import check_int, check_number
+from .._params import get_param, params_to_dict, with_param
+from .._status import Status
+from .._system import ForcedSystem, check_state_shape, check_system
+from .._version import __version__
+from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..shooting import periodic_orbit, sorted_eigvals
+from ..shooting._floquet import check_period
+from ._branch import BifurcationPoint, Branch
 
-__all__ = [
-    "Branch",
-    "BifurcationPoint",
-    "continue_orbit",
-    "switch_branch",
-    "load_branch",
-    "BIFURCATION_KINDS",
-    "BRANCH_STATUS",
-]
+__all__ = ["continue_orbit", "switch_branch"]
 
-BIFURCATION_KINDS = {
-    "PD": "period doubling (real multiplier through -1)",
-    "SN": "saddle-node / fold (real multiplier through +1, the parameter turns)",
-    "BP": "branch point (real multiplier through +1, no fold)",
-    "NS": "Neimark-Sacker (complex pair through |lambda| = 1)",
-}
-# Why a branch ended.
-BRANCH_STATUS = {
-    "stop": "reached the stop value of the parameter",
-    "bounds": "left the parameter bounds",
-    "max_steps": "took max_steps steps",
-    "diverged": "the orbit or the flow diverged (||x|| > max_norm or non-finite) at the smallest step",
-    "corrector_failed": "the corrector did not converge at the smallest step ds_min",
-}
-
-# Kernel status codes.
-_OK = 0
-_NOT_CONVERGED = 1
-_DIVERGED = 2
+# Corrector outcomes (a Status) and the code of a still-running corrector.
+_OK = int(Status.CONVERGED)
+_NOT_CONVERGED = int(Status.NOT_CONVERGED)
+_DIVERGED = int(Status.DIVERGED)
 _RUN = -1
 # Test-function columns.
 _T_PD, _T_TP, _T_DET, _T_NS = 0, 1, 2, 3
 
 
-# --------------------------------------------------------------------------- results
-@dataclasses.dataclass(frozen=True, eq=False)
-class BifurcationPoint:
-    """A bifurcation located on a branch.
-
-    Attributes:
-        kind: ``"PD"``, ``"SN"``, ``"BP"`` or ``"NS"`` (see :data:`BIFURCATION_KINDS`).
-        param_value: the parameter at the bifurcation (located to ``locate_tol`` in
-            arclength, typically 1e-10).
-        point: ``(dim,)`` the orbit's point at phase ``t0`` (fixed point of ``P^k``).
-        multipliers: ``(dim,)`` complex Floquet multipliers of ``P^k`` there, by
-            decreasing modulus.
-        index: the bifurcation lies between branch points ``index`` and ``index + 1``.
-        orbit: ``(k, dim)`` the orbit's ``k`` stroboscopic points there (``orbit[0] = point``).
-        test_value: the test function's value at the located point (about 0 for a
-            smooth crossing).
-        nonsmooth: True when the test function jumps across zero instead of crossing
-            it (the multiplier jumps over -1 / +1 / the unit circle at a kink of the
-            map, e.g. a contact starting or ending at a backlash boundary —
-            a discontinuity-induced bifurcation); ``param_value`` is then the jump's
-            location and ``multipliers`` those on one side of it.
-    """
-
-    kind: str
-    param_value: float
-    point: np.ndarray
-    multipliers: np.ndarray
-    index: int
-    orbit: np.ndarray | None = None
-    test_value: float = 0.0
-    nonsmooth: bool = False
-
-    def __repr__(self) -> str:
-        lam = ", ".join(_fmt_complex(z) for z in np.asarray(self.multipliers))
-        ns = ", nonsmooth" if self.nonsmooth else ""
-        return f"BifurcationPoint({self.kind} at {self.param_value:.10g}{ns}, multipliers [{lam}])"
-
-
-def _fmt_complex(z) -> str:
-    z = complex(z)
-    if abs(z.imag) <= 1e-12 * max(1.0, abs(z)):
-        return f"{z.real:.6g}"
-    return f"{z.real:.6g}{z.imag:+.6g}j"
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Branch:
-    """A branch of P-k orbits followed in one parameter (:func:`continue_orbit`).
-
-    Attributes:
-        param: the parameter's name (as given, e.g. ``"Omega"`` or the alias ``"b"``).
-        values: ``(m,)`` parameter value at each point of the branch, in order of arclength.
-        points: ``(m, k, dim)`` the ``k`` stroboscopic points ``x*, P(x*), ..., P^{k-1}(x*)``
-            of each orbit (state at phases ``t0 + jT``).
-        multipliers: ``(m, dim)`` complex Floquet multipliers of ``P^k`` (by decreasing modulus).
-        stable: ``(m,)`` bool, all ``|multiplier| < 1``.
-        residuals: ``(m,)`` ``||P^k(x*) - x*||`` at each point.
-        tangents: ``(m, dim + 1)`` unit tangent ``(dx, dp)`` of the branch at each point.
-        arclength: ``(m,)`` cumulative arclength in ``(x, p)``.
-        status: why the branch ended (a key of :data:`BRANCH_STATUS`).
-        bifurcations: the located :class:`BifurcationPoint` s, in order along the branch.
-        period: ``k`` (forcing periods per return of the continued map).
-        system: the system's name; state_names: its coordinate names.
-        params: the parameter set at the start of the branch (dict of the pytree).
-        settings: step sizes, tolerances, integrator, ``t0``, origin (JSON-able).
-    """
-
-    param: str
-    values: np.ndarray
-    points: np.ndarray
-    multipliers: np.ndarray
-    stable: np.ndarray
-    residuals: np.ndarray
-    tangents: np.ndarray
-    arclength: np.ndarray
-    status: str
-    bifurcations: tuple[BifurcationPoint, ...]
-    period: int
-    system: str
-    state_names: tuple[str, ...]
-    params: dict
-    settings: dict
-    version: str = ""
-
-    # ----------------------------------------------------------------- views
-    def __len__(self) -> int:
-        return int(len(self.values))
-
-    @property
-    def max_multiplier(self) -> np.ndarray:
-        """``(m,)`` largest Floquet multiplier modulus at each point."""
-        return np.max(np.abs(self.multipliers), axis=-1)
-
-    def coordinate(self, name: str | int = 0) -> np.ndarray:
-        """``(m, k)`` one coordinate (name or index) of the stroboscopic points."""
-        return self.points[:, :, _coord_index(self.state_names, name)]
-
-    def amplitude(self) -> np.ndarray:
-        """``(m,)`` largest Euclidean norm of the stroboscopic points of each orbit."""
-        return np.max(np.linalg.norm(self.points, axis=-1), axis=-1)
-
-    def __repr__(self) -> str:
-        bifs = ", ".join(f"{b.kind}@{b.param_value:.6g}" for b in self.bifurcations) or "none"
-        rng = f"{self.values.min():.6g}..{self.values.max():.6g}" if len(self) else "empty"
-        return (f"Branch(P-{self.period} of {self.system}, {self.param} in {rng}, {len(self)} points, "
-                f"status={self.status}, bifurcations: {bifs})")
-
-    def summary(self) -> dict[str, Any]:
-        """JSON-able summary: range, counts, stability changes, bifurcations."""
-        return dict(
-            system=self.system, param=self.param, period=int(self.period), n_points=len(self),
-            param_start=float(self.values[0]) if len(self) else None,
-            param_end=float(self.values[-1]) if len(self) else None,
-            param_min=float(self.values.min()) if len(self) else None,
-            param_max=float(self.values.max()) if len(self) else None,
-            n_stable=int(np.sum(self.stable)), status=self.status, status_text=BRANCH_STATUS.get(self.status, ""),
-            max_residual=float(np.max(self.residuals)) if len(self) else None,
-            bifurcations=[dict(kind=b.kind, param_value=float(b.param_value), point=np.asarray(b.point).tolist(),
-                               multipliers=[[float(z.real), float(z.imag)] for z in np.asarray(b.multipliers)],
-                               index=int(b.index), nonsmooth=bool(b.nonsmooth)) for b in self.bifurcations],
-            settings=self.settings, params=self.params, version=self.version,
-        )
-
-    def table(self, max_rows: int = 30) -> str:
-        """Readable text: the branch (at most ``max_rows`` rows, evenly spread, plus the
-        rows around each bifurcation) and the list of bifurcations."""
-        m = len(self)
-        names = self.state_names
-        head = (f"P-{self.period} branch of {self.system} in {self.param}: {m} points, "
-                f"{self.param} {self.values.min():.6g} .. {self.values.max():.6g}, "
-                f"status: {self.status} ({BRANCH_STATUS.get(self.status, '')})") if m else "empty branch"
-        if m == 0:
-            return head
-        rows_idx = set(np.unique(np.linspace(0, m - 1, min(m, max(2, int(max_rows)))).round().astype(int)).tolist())
-        for b in self.bifurcations:
-            rows_idx.update({b.index, min(b.index + 1, m - 1)})
-        rows = []
-        marks = {}
-        for b in self.bifurcations:
-            marks.setdefault(b.index, []).append(b.kind)
-        for i in sorted(rows_idx):
-            rows.append([str(i), f"{self.values[i]:.8g}"] + [f"{v:.6g}" for v in self.points[i, 0]]
-                        + [f"{self.max_multiplier[i]:.6g}", "yes" if self.stable[i] else "no",
-                           f"{self.residuals[i]:.1e}", " ".join(f"{k}->" for k in marks.get(i, []))])
-        header = ["i", self.param] + list(names) + ["max|lambda|", "stable", "residual", "next"]
-        out = [head, format_table(rows, header)]
-        if self.bifurcations:
-            brows = [[b.kind + (" (nonsmooth)" if b.nonsmooth else ""), f"{b.param_value:.10g}"] + [f"{v:.6g}" for v in np.asarray(b.point)]
-                     + [", ".join(_fmt_complex(z) for z in np.asarray(b.multipliers))]
-                     for b in self.bifurcations]
-            out.append("bifurcations:")
-            out.append(format_table(brows, ["kind", self.param] + list(names) + ["multipliers"]))
-        else:
-            out.append("bifurcations: none detected")
-        return "\n".join(out)
-
-    # ----------------------------------------------------------------- I/O
-    def to_xarray(self):
-        """The branch as an ``xarray.Dataset`` (complex multipliers as real/imag parts)."""
-        import xarray as xr
-
-        from . import __version__
-
-        m, k, dim = self.points.shape
-        B = len(self.bifurcations)
-        coords = {"point": ("point", np.arange(m)), "iterate": ("iterate", np.arange(k)),
-                  "state": ("state", list(self.state_names)), "multiplier": ("multiplier", np.arange(dim)),
-                  "tangent_component": ("tangent_component", list(self.state_names) + [self.param]),
-                  "bifurcation": ("bifurcation", np.arange(B))}
-        data = {
-            "param_value": (("point",), self.values, {"long_name": f"continuation parameter {self.param}"}),
-            "points": (("point", "iterate", "state"), self.points,
-                       {"long_name": "stroboscopic points x*, P(x*), ..., P^{k-1}(x*)", "units": "state units"}),
-            "multipliers_real": (("point", "multiplier"), self.multipliers.real),
-            "multipliers_imag": (("point", "multiplier"), self.multipliers.imag),
-            "stable": (("point",), self.stable.astype(np.int8), {"long_name": "all |multiplier| < 1 (1/0)"}),
-            "residual": (("point",), self.residuals, {"long_name": "||P^k(x*) - x*||"}),
-            "tangent": (("point", "tangent_component"), self.tangents),
-            "arclength": (("point",), self.arclength),
-            "bif_kind": (("bifurcation",), np.array([b.kind for b in self.bifurcations], dtype=object)
-                         if B else np.zeros(0, dtype="S2")),
-            "bif_param": (("bifurcation",), np.array([b.param_value for b in self.bifurcations], dtype=float)),
-            "bif_point": (("bifurcation", "state"), np.array([b.point for b in self.bifurcations],
-                                                             dtype=float).reshape(B, dim)),
-            "bif_orbit": (("bifurcation", "iterate", "state"),
-                          np.array([_bif_orbit(b, k) for b in self.bifurcations], dtype=float).reshape(B, k, dim)),
-            "bif_multipliers_real": (("bifurcation", "multiplier"),
-                                     np.array([b.multipliers for b in self.bifurcations]).reshape(B, dim).real),
-            "bif_multipliers_imag": (("bifurcation", "multiplier"),
-                                     np.array([b.multipliers for b in self.bifurcations]).reshape(B, dim).imag),
-            "bif_index": (("bifurcation",), np.array([b.index for b in self.bifurcations], dtype=np.int64)),
-            "bif_test_value": (("bifurcation",), np.array([b.test_value for b in self.bifurcations], dtype=float)),
-            "bif_nonsmooth": (("bifurcation",), np.array([b.nonsmooth for b in self.bifurcations], dtype=np.int8)),
-        }
-        ds = xr.Dataset(data, coords=coords)
-        if self.param not in ds.variables and self.param not in ds.dims:
-            ds = ds.assign_coords({self.param: ("point", self.values)})
-        ds.attrs.update(
-            jaxgear_type="Branch", param=self.param, period=int(self.period), status=self.status,
-            system=self.system, state_names=json.dumps(list(self.state_names)), params=json.dumps(self.params),
-            settings=json.dumps(self.settings), version=self.version or __version__,
-            bifurcation_kinds=json.dumps([b.kind for b in self.bifurcations]),
-        )
-        return ds
-
-    def save(self, path: str | Path) -> Path:
-        """Write the branch to a netCDF file (h5netcdf, atomically); reload with :func:`load_branch`."""
-        from ._io import _write_netcdf
-
-        return _write_netcdf(self.to_xarray(), path)
-
-
-def load_branch(path: str | Path) -> Branch:
-    """Load a :class:`Branch` saved with :meth:`Branch.save` (exact round trip)."""
-    import xarray as xr
-
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        ds = ds.load()
-    if ds.attrs.get("jaxgear_type") != "Branch":
-        raise ValueError(f"{path} does not hold a Branch (jaxgear_type={ds.attrs.get('jaxgear_type')!r}).")
-    kinds = json.loads(ds.attrs["bifurcation_kinds"])
-    dim = ds.sizes["state"]
-    bifs = []
-    for i, kind in enumerate(kinds):
-        bifs.append(BifurcationPoint(
-            kind=kind, param_value=float(ds["bif_param"].values[i]),
-            point=np.array(ds["bif_point"].values[i], dtype=float).reshape(dim),
-            multipliers=ds["bif_multipliers_real"].values[i] + 1j * ds["bif_multipliers_imag"].values[i],
-            index=int(ds["bif_index"].values[i]), orbit=np.array(ds["bif_orbit"].values[i], dtype=float),
-            test_value=float(ds["bif_test_value"].values[i]),
-            nonsmooth=bool(ds["bif_nonsmooth"].values[i])))
-    return Branch(
-        param=str(ds.attrs["param"]), values=np.asarray(ds["param_value"].values, dtype=float),
-        points=np.asarray(ds["points"].values, dtype=float),
-        multipliers=ds["multipliers_real"].values + 1j * ds["multipliers_imag"].values,
-        stable=np.asarray(ds["stable"].values).astype(bool), residuals=np.asarray(ds["residual"].values, dtype=float),
-        tangents=np.asarray(ds["tangent"].values, dtype=float), arclength=np.asarray(ds["arclength"].values, dtype=float),
-        status=str(ds.attrs["status"]), bifurcations=tuple(bifs), period=int(ds.attrs["period"]),
-        system=str(ds.attrs["system"]), state_names=tuple(json.loads(ds.attrs["state_names"])),
-        params=json.loads(ds.attrs["params"]), settings=json.loads(ds.attrs["settings"]),
-        version=str(ds.attrs["version"]),
-    )
-
-
-def _bif_orbit(b: BifurcationPoint, k: int) -> np.ndarray:
-    if b.orbit is not None:
-        return np.asarray(b.orbit, dtype=float)
-    return np.broadcast_to(np.asarray(b.point, dtype=float), (k, len(b.point)))
-
-
-def _coord_index(state_names, name) -> int:
-    if isinstance(name, (int, np.integer)):
-        if not 0 <= int(name) < len(state_names):
-            raise ValueError(f"coordinate index {name} outside 0..{len(state_names) - 1}.")
-        return int(name)
-    if name not in state_names:
-        raise ValueError(f"unknown coordinate {name!r}; the state is ({', '.join(state_names)}).")
-    return state_names.index(name)
-
-
-# --------------------------------------------------------------------------- kernel
 class _Step(NamedTuple):
     z: jax.Array  # (dim + 1,) corrected (x, p)
     status: jax.Array  # _OK / _NOT_CONVERGED / _DIVERGED
@@ -379,7 +97,7 @@ def _map_and_jac(system, params, name, k, t0, integrator, z):
         T = system.period(prm)
 
         def one(y, j):
-            return _flow(system, prm, y, t0 + j * T, 1, integrator), y
+            return integrator.flow(system, prm, y, t0 + j * T, 1), y
 
         xk, pts = jax.lax.scan(one, x, jnp.arange(k))
         r = xk - x
@@ -398,14 +116,10 @@ def _ns_test(lam):
     return jnp.real(jnp.prod(lam[i] * lam[j] - 1.0))
 
 
-_TRACES = {"correct": 0}  # times the kernel was traced (compiled); read by the tests
-
-
 @eqx.filter_jit
 def _correct(system, params, name, k, integrator, t0, z_guess, anchor, w, tref, tol, max_iter, max_norm):
     """Bordered Newton ``F(z) = 0, w . (z - anchor) = 0`` from ``z_guess``, then the
     tangent, multipliers and test functions at the result (one compiled kernel)."""
-    _TRACES["correct"] += 1
     n = z_guess.shape[0] - 1
     eye = jnp.eye(n)
     evaluate = lambda z: _map_and_jac(system, params, name, k, t0, integrator, z)
@@ -442,7 +156,7 @@ def _correct(system, params, name, k, integrator, t0, z_guess, anchor, w, tref, 
     sgn = jnp.sign(t @ tref)
     t = t * jnp.where(sgn == 0, 1.0, sgn)
     M = Js[:, :n] + eye
-    lam = _sorted_eigvals(M)
+    lam = sorted_eigvals(M)
     tests = jnp.stack([jnp.linalg.det(M + eye), t[-1], jnp.linalg.det(Js[:, :n]), _ns_test(lam)])
     nan = jnp.nan
     return _Step(z=z, status=st, iterations=it, residual=rF, jac=J, tangent=jnp.where(ok, t, nan),
@@ -456,7 +170,7 @@ class _Ctx(NamedTuple):
     params: Any
     name: str
     k: int
-    integrator: Integrator
+    integrator: AbstractIntegrator
     t0: float
     tol: float
     max_iter: int
@@ -573,7 +287,7 @@ def _detect(ctx: _Ctx, a: _Step, b: _Step, index: int, locate_tol: float) -> lis
 
 # --------------------------------------------------------------------------- driver
 def _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max, tol, bounds):
-    k = _check_period(period)
+    k = check_period(period)
     p0 = get_param(params, param)  # ValueError for an unknown name
     if stop is not None and not math.isfinite(float(stop)):
         raise ValueError(f"stop={stop} must be a finite value of {param}.")
@@ -598,16 +312,13 @@ def _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max
 def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds, max_angle, detect,
          locate_tol, progress, desc, param, settings, params_start):
     """The continuation loop from the converged point ``first`` (tangent oriented already)."""
-    from . import __version__
-    from ._cellmap import _progress
-
     n = first.z.shape[0] - 1
     steps = [first]
     bifs: list[BifurcationPoint] = []
     status = "max_steps"
     cur = first
     cos_max = math.cos(max_angle)
-    bar = _progress(int(max_steps), desc, progress, unit="step")
+    bar = progress_bar(int(max_steps), desc, progress, unit="step")
     try:
         while len(steps) <= max_steps:
             z, t = cur.z, cur.tangent
@@ -668,17 +379,15 @@ def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds
 
 
 def _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, **extra):
-    integ = ctx.integrator
-    desc = (f"RK4(steps_per_period={integ.steps_per_period})" if isinstance(integ, RK4) else repr(integ))
     return dict(ds=float(ds), ds_min=float(ds_min), ds_max=float(ds_max), max_steps=int(max_steps),
                 stop=None if stop is None else float(stop), bounds=None if bounds is None else list(bounds),
                 max_angle=float(max_angle), tol=float(ctx.tol), max_iter=int(ctx.max_iter),
-                max_norm=float(ctx.max_norm), locate_tol=float(locate_tol), t0=float(ctx.t0), integrator=desc,
+                max_norm=float(ctx.max_norm), locate_tol=float(locate_tol), t0=float(ctx.t0), integrator=ctx.integrator.to_dict(),
                 **extra)
 
 
 def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float, period: int = 1,
-                   ds: float = 0.01, max_steps: int = 500, integrator: Integrator = RK4(), progress: bool = True,
+                   ds: float = 0.01, max_steps: int = 500, integrator: AbstractIntegrator | None = None, progress: bool = True,
                    t0: float = 0.0, ds_min: float | None = None, ds_max: float | None = None,
                    tol: float = 1e-10, max_iter: int = 10, max_norm: float = 1e6,
                    bounds: tuple[float, float] | None = None, max_angle: float = 0.5, detect: bool = True,
@@ -699,7 +408,7 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
         params: its parameter pytree (``GearParams``, ``DuffingParams``, ...).
         x0: ``(dim,)`` a point near the orbit at the starting parameter (phase ``t0``).
         param: the parameter to vary: a field name (for ``GearParams`` a canonical name
-            of MODEL.md §4, e.g. ``"Omega"``, ``"b_sp"``), or ``"b"`` (``b_sp`` and
+            of model document §4, e.g. ``"Omega"``, ``"b_sp"``), or ``"b"`` (``b_sp`` and
             ``b_rp`` together) / ``"kappa_amp"`` (both stiffness amplitudes).
             Per-planet fields are set for all planets.
         stop: the parameter value at which to end; the initial direction is towards it.
@@ -726,6 +435,7 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
         ValueError: bad arguments (unknown parameter, ``stop`` equal to the start,
             wrong state shape, ...) or Newton did not converge from ``x0``.
     """
+    integrator = resolve_integrator(integrator)
     k, p0, ds_min, ds_max, bounds = _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max,
                                               tol, bounds)
     if float(stop) == p0:
@@ -737,9 +447,9 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
     check_system(system, params, x0)
     res = periodic_orbit(system, params, x0, period=k, t0=t0, integrator=integrator, tol=tol,
                          max_norm=max_norm)
-    if int(res.status) != SHOOT_CONVERGED:
+    if int(res.status) != Status.CONVERGED:
         raise ValueError(f"Newton from x0={x0.tolist()} did not converge to a P-{k} orbit at {param}={p0:.6g} "
-                         f"({SHOOT_STATUS_NAMES[int(res.status)]}, residual {float(res.residual):.2e}); "
+                         f"({Status(int(res.status)).label}, residual {float(res.residual):.2e}); "
                          "give a point nearer the orbit.")
     if int(res.min_period) < k:
         warnings.warn(f"the orbit found from x0 has minimal period {int(res.min_period)} < {k}: continuing it as a "
@@ -756,12 +466,12 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
     return _run(ctx, first, stop=float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=int(max_steps),
                 bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol, progress=progress,
                 desc=f"P-{k} continuation in {param}", param=param, settings=settings,
-                params_start=_pytree_dict(with_param(params, param, p0)))
+                params_start=params_to_dict(with_param(params, param, p0)))
 
 
 def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: BifurcationPoint | int, *,
                   stop: float | None = None, amplitude: float | None = None, ds: float | None = None,
-                  max_steps: int = 500, integrator: Integrator = RK4(), progress: bool = True,
+                  max_steps: int = 500, integrator: AbstractIntegrator | None = None, progress: bool = True,
                   ds_min: float | None = None, ds_max: float | None = None, tol: float = 1e-10,
                   max_iter: int = 10, max_norm: float = 1e6, bounds: tuple[float, float] | None = None,
                   max_angle: float = 0.5, detect: bool = True, locate_tol: float = 1e-10) -> Branch:
@@ -799,6 +509,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
                          f"got kind {bifurcation.kind!r}.")
     ds = float(branch.settings.get("ds", 0.01)) if ds is None else float(ds)
     param = branch.param
+    integrator = resolve_integrator(integrator)
     k2, p_pd, ds_min, ds_max, bounds = _validate(system, params, param, stop, 2 * branch.period, ds, max_steps,
                                                  ds_min, ds_max, tol, bounds)
     h = ds if amplitude is None else float(amplitude)
@@ -835,4 +546,4 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
     return _run(ctx, first, stop=None if stop is None else float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max,
                 max_steps=int(max_steps), bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol,
                 progress=progress, desc=f"P-{k2} continuation in {param}", param=param, settings=settings,
-                params_start=_pytree_dict(with_param(params, param, float(first.z[-1]))))
+                params_start=params_to_dict(with_param(params, param, float(first.z[-1]))))

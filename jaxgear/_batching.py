@@ -1,0 +1,50 @@
+"""Batching helpers shared by every analysis: fixed-size chunks, padding, progress bars.
+
+Heavy kernels are compiled for one batch shape; work larger than a chunk is cut into
+equal chunks (the last one padded), so memory is bounded by the chunk and not by the
+grid, and the results do not depend on the chunk size.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Iterator
+
+import numpy as np
+
+__all__ = ["DEFAULT_CHUNK_CELLS", "chunks", "equal_chunk_size", "pad_rows", "progress_bar"]
+
+DEFAULT_CHUNK_CELLS = 131072
+"""Cells (or trajectories) integrated in one batch by default. On a 2-core CPU batches
+below ~65,000 lanes run single-threaded in XLA's loops, about twice slower per lane."""
+
+
+def chunks(n: int, size: int) -> Iterator[tuple[int, int]]:
+    """``(start, stop)`` of consecutive chunks of at most ``size`` covering ``range(n)``."""
+    for start in range(0, n, size):
+        yield start, min(start + size, n)
+
+
+def equal_chunk_size(n: int, size: int) -> int:
+    """The smallest chunk size that splits ``n`` items into as many equal chunks as
+    chunks of at most ``size`` would need (so padding is spread, not piled on the last)."""
+    n, size = int(n), int(size)
+    if n <= 0:
+        return max(1, size)
+    return -(-n // -(-n // size))
+
+
+def pad_rows(X: np.ndarray, size: int) -> np.ndarray:
+    """Pad ``X`` along axis 0 to ``size`` rows by repeating its first row (one compiled shape)."""
+    if len(X) == size:
+        return X
+    return np.concatenate([X, np.repeat(X[:1], size - len(X), axis=0)], axis=0)
+
+
+def progress_bar(total: int, desc: str, enabled: bool, unit: str = "cell"):
+    """A tqdm bar (a widget in notebooks when ipywidgets is installed) with time left."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # tqdm.auto warns when ipywidgets is missing, then falls back
+        from tqdm.auto import tqdm
+
+        return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=not enabled, leave=False)

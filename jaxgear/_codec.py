@@ -1,0 +1,378 @@
+"""One field-driven codec: every result dataclass <-> an ``xarray.Dataset``.
+
+A result type is a frozen dataclass registered with :func:`result_type`. Its fields
+decide how they are stored, from their type annotations and their ``metadata``:
+
+- arrays (``np.ndarray``, optionally ``None``) become variables; ``array_field(dims)``
+  names their dimensions (strings, or a callable of the object for dimensions named
+  at run time, such as the grid axes ``x1, x2, x3``); complex arrays are stored as
+  ``<name>__real`` and ``<name>__imag``;
+- ``int``, ``float``, ``str`` and ``bool`` become attributes;
+- nested result dataclasses and ``NamedTuple`` s are stored under ``<name>__<field>``;
+- a tuple of dataclasses (``items_field(dim)``: attractors, orbits, bifurcation points)
+  becomes one variable per item field along the item dimension, arrays padded to the
+  largest item with their true shapes in ``<name>__<field>__shape``;
+- a dict whose values are arrays or dataclasses becomes one group of variables per key;
+- anything else (dicts of settings, parameter sets, tuples of numbers) is stored as a
+  JSON attribute; ``custom_field(encode, decode)`` converts values that are not
+  JSON-able (a user's parameter pytree).
+
+Every file carries ``jaxgear_type`` (the class name, what :func:`jaxgear.load`
+dispatches on), ``jaxgear_format`` (:data:`FORMAT`) and a ``jaxgear_schema`` attribute
+with what the annotations cannot say (``None`` fields, dictionary keys, lengths). A
+result type may add labelled coordinates (grid-cell centres, parameter values, state
+names) with a ``_coords()`` method; they are written for readers and ignored on load.
+Saving and loading is an exact round trip: arrays bit-for-bit with their dtypes, every
+other field equal.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import types
+import typing
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
+           "RESULT_TYPES"]
+
+FORMAT = 2
+"""Layout version written into every file (files of jaxgear 0.1 have none)."""
+
+RESULT_TYPES: dict[str, type] = {}
+"""Registered result types by class name."""
+
+
+def result_type(cls):
+    """Class decorator: register a result dataclass with the codec (by its class name)."""
+    RESULT_TYPES[cls.__name__] = cls
+    return cls
+
+
+def array_field(dims=None, **kw):
+    """A dataclass field holding an array; ``dims``: a tuple of dimension names or a
+    callable ``obj -> tuple`` (default names ``<field>_0, <field>_1, ...``)."""
+    return dataclasses.field(metadata={"dims": dims}, **kw)
+
+
+def items_field(dim: str, **kw):
+    """A dataclass field holding a tuple of dataclasses, stored along dimension ``dim``."""
+    return dataclasses.field(metadata={"item_dim": dim}, **kw)
+
+
+def custom_field(encode: Callable[[Any], Any], decode: Callable[[Any], Any], **kw):
+    """A field stored as JSON through ``encode(value) -> JSON-able`` and ``decode(json) -> value``."""
+    return dataclasses.field(metadata={"encode": encode, "decode": decode}, **kw)
+
+
+# ------------------------------------------------------------------------ helpers
+def _hints(cls) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _strip_optional(hint):
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if len(args) == 1:
+            return args[0]
+    return hint
+
+
+def _is_array_hint(hint) -> bool:
+    import jax
+
+    hint = _strip_optional(hint)
+    return hint is np.ndarray or hint is jax.Array
+
+
+def _is_record(cls) -> bool:
+    return isinstance(cls, type) and (dataclasses.is_dataclass(cls) or (issubclass(cls, tuple) and
+                                                                         hasattr(cls, "_fields")))
+
+
+def _record_fields(cls) -> list[tuple[str, Any, dict]]:
+    hints = _hints(cls)
+    if dataclasses.is_dataclass(cls):
+        return [(f.name, hints[f.name], dict(f.metadata)) for f in dataclasses.fields(cls)]
+    return [(name, hints.get(name, Any), {}) for name in cls._fields]
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, tuple):
+        return list(o)
+    raise TypeError(f"not JSON-able: {type(o).__name__}")
+
+
+def _to_json(v) -> str:
+    return json.dumps(v, default=_json_default)
+
+
+def _from_json(text: str, hint):
+    return _retype(json.loads(text), hint)
+
+
+def _retype(v, hint):
+    """JSON value -> the annotated Python type (tuples from lists, int keys, ...)."""
+    hint = _strip_optional(hint)
+    origin = typing.get_origin(hint)
+    if v is None:
+        return None
+    if origin is tuple or hint is tuple:
+        args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_retype(x, args[0]) for x in v)
+        if args:
+            return tuple(_retype(x, a) for x, a in zip(v, args))
+        return tuple(v)
+    if origin is dict:
+        kt, vt = (typing.get_args(hint) + (Any, Any))[:2]
+        return {(_retype(k, kt) if kt is not str else k): _retype(x, vt) for k, x in v.items()}
+    if hint is int and not isinstance(v, bool):
+        return int(v)
+    if hint is float:
+        return float(v)
+    if _is_record(hint) and isinstance(v, dict):
+        return hint(**{name: _retype(v[name], h) for name, h, _ in _record_fields(hint)})
+    return v
+
+
+def _dims_for(meta, obj, name: str, ndim: int, prefix: tuple[str, ...] = ()) -> tuple[str, ...]:
+    dims = meta.get("dims")
+    if callable(dims):
+        dims = dims(obj)
+    dims = tuple(dims) if dims is not None else tuple(f"{name}_{i}" for i in range(ndim - len(prefix)))
+    dims = prefix + dims
+    if len(dims) != ndim:
+        raise ValueError(f"codec: field {name} has {ndim} dimensions, its dims are {dims}.")
+    return dims
+
+
+def _key_tags(keys) -> list[str]:
+    """Names of the variables of a dict's values: the keys themselves when they are
+    identifiers (``history__objective``), else their positions."""
+    if all(isinstance(k, str) and k.isidentifier() for k in keys):
+        return list(keys)
+    return [str(i) for i in range(len(keys))]
+
+
+# ------------------------------------------------------------------------ encode
+class _Writer:
+    def __init__(self):
+        self.data: dict[str, tuple] = {}
+        self.attrs: dict[str, Any] = {}
+        self.schema: dict[str, Any] = {}
+
+    def array(self, path, dims, a, attrs=None):
+        a = np.asarray(a)
+        if a.dtype.kind == "c":
+            self.data[f"{path}__real"] = (dims, np.ascontiguousarray(a.real), attrs or {})
+            self.data[f"{path}__imag"] = (dims, np.ascontiguousarray(a.imag), attrs or {})
+            self.schema[path] = {"complex": str(a.dtype)}
+        else:
+            self.data[path] = (dims, a, attrs or {})
+
+
+def _encode_record(w: _Writer, obj, path: str, root) -> None:
+    for name, hint, meta in _record_fields(type(obj)):
+        _encode_value(w, getattr(obj, name), hint, meta, f"{path}{name}", root if path else obj)
+
+
+def _encode_value(w: _Writer, v, hint, meta, path, owner) -> None:
+    if "encode" in meta:
+        w.attrs[path] = _to_json(meta["encode"](v))
+        return
+    if _is_array_hint(hint):
+        if v is None:
+            w.schema[path] = {"none": True}
+        else:
+            a = np.asarray(v)
+            w.array(path, _dims_for(meta, owner, path, a.ndim), a)
+        return
+    h = _strip_optional(hint)
+    if "item_dim" in meta:
+        _encode_items(w, tuple(v), typing.get_args(h)[0], meta["item_dim"], path)
+        return
+    if _is_record(h):
+        if v is None:
+            w.schema[path] = {"none": True}
+        else:
+            _encode_record(w, v, f"{path}__", owner)
+        return
+    if typing.get_origin(h) is dict:
+        vt = (typing.get_args(h) + (Any, Any))[1]
+        if _is_array_hint(vt) or _is_record(_strip_optional(vt)):
+            keys = list(v.keys())
+            w.schema[path] = {"keys": _to_json(keys)}
+            for k, tag in zip(keys, _key_tags(keys)):
+                _encode_value(w, v[k], vt, {}, f"{path}__{tag}", owner)
+            return
+    if h in (int, float, str) and v is not None and not isinstance(v, bool):
+        w.attrs[path] = v
+        return
+    w.attrs[path] = _to_json(v)
+
+
+def _encode_items(w: _Writer, items: tuple, cls, dim: str, path: str) -> None:
+    w.schema[path] = {"n": len(items)}
+    if not items:
+        return
+    for name, hint, meta in _record_fields(cls):
+        vals = [getattr(it, name) for it in items]
+        p = f"{path}__{name}"
+        if _is_array_hint(hint):
+            arrays = [None if x is None else np.asarray(x) for x in vals]
+            ndim = max([a.ndim for a in arrays if a is not None], default=1)
+            shapes = np.array([[-1] * ndim if a is None else list(a.shape) for a in arrays], dtype=np.int64)
+            shapes = shapes.reshape(len(items), ndim)
+            size = tuple(int(max(1, shapes[:, j].max(initial=1))) for j in range(ndim))
+            dtype = np.result_type(*[a.dtype for a in arrays if a is not None]) if any(
+                a is not None for a in arrays) else np.float64
+            fill = np.nan if dtype.kind in "fc" else (False if dtype.kind == "b" else ("" if dtype.kind in "OUS"
+                                                                                     else -1))
+            stacked = np.full((len(items),) + size, fill, dtype=dtype if dtype.kind not in "US" else object)
+            for i, a in enumerate(arrays):
+                if a is not None:
+                    stacked[(i,) + tuple(slice(0, s) for s in a.shape)] = a
+            dims = _dims_for(meta, None, p, stacked.ndim, prefix=(dim,)) if meta.get("dims") is not None and \
+                not callable(meta.get("dims")) else (dim,) + tuple(f"{p}_{j}" for j in range(ndim))
+            w.array(p, dims, stacked)
+            w.data[f"{p}__shape"] = ((dim, f"{p}__ndim"), shapes, {})
+        elif _strip_optional(hint) in (int, float, bool) and all(x is not None for x in vals):
+            t = _strip_optional(hint)
+            dt = {int: np.int64, float: np.float64, bool: np.bool_}[t]
+            w.data[p] = ((dim,), np.array(vals, dtype=dt).reshape(len(items)), {})
+        elif _strip_optional(hint) is str and all(x is not None for x in vals):
+            w.data[p] = ((dim,), np.array(vals, dtype=object).reshape(len(items)), {})
+        else:
+            w.data[p] = ((dim,), np.array([_to_json(x) for x in vals], dtype=object).reshape(len(items)), {})
+
+
+def to_dataset(obj):
+    """The result ``obj`` (a registered dataclass) as an ``xarray.Dataset`` (see the module)."""
+    import xarray as xr
+
+    cls = type(obj)
+    if cls.__name__ not in RESULT_TYPES:
+        raise TypeError(f"{cls.__name__} is not a registered result type.")
+    w = _Writer()
+    _encode_record(w, obj, "", obj)
+    coords = obj._coords() if hasattr(obj, "_coords") else {}
+    attrs = dict(w.attrs)
+    attrs.update(jaxgear_type=cls.__name__, jaxgear_format=FORMAT, jaxgear_schema=_to_json(w.schema))
+    if hasattr(obj, "_attrs"):
+        attrs.update(obj._attrs())
+    params = getattr(obj, "params", None)
+    if isinstance(params, dict):  # the scalar parameters one attribute each, for readers of the file
+        attrs.update({f"param_{k}": v for k, v in params.items()
+                      if isinstance(v, (int, float)) and not isinstance(v, bool)})
+    data = {}
+    for name, (dims, a, at) in w.data.items():
+        if np.asarray(a).dtype.kind == "U":
+            a = np.asarray(a, dtype=object)
+        data[name] = (dims, a, at)
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+# ------------------------------------------------------------------------ decode
+class _Reader:
+    def __init__(self, ds):
+        self.ds = ds
+        self.schema = json.loads(ds.attrs.get("jaxgear_schema", "{}"))
+
+    def array(self, path):
+        info = self.schema.get(path, {})
+        if "complex" in info:
+            re = self.ds[f"{path}__real"].values
+            im = self.ds[f"{path}__imag"].values
+            z = np.empty(re.shape, dtype=np.dtype(info["complex"]))
+            z.real, z.imag = re, im
+            return z
+        return _native(self.ds[path].values)
+
+
+def _native(a: np.ndarray) -> np.ndarray:
+    if a.dtype.kind == "O":
+        return np.array([str(x) for x in a.ravel()], dtype=object).reshape(a.shape)
+    return a
+
+
+def _decode_record(r: _Reader, cls, path: str):
+    values = {}
+    for name, hint, meta in _record_fields(cls):
+        values[name] = _decode_value(r, hint, meta, f"{path}{name}")
+    return cls(**values)
+
+
+def _decode_value(r: _Reader, hint, meta, path):
+    info = r.schema.get(path, {})
+    if "decode" in meta:
+        return meta["decode"](json.loads(r.ds.attrs[path]))
+    if info.get("none"):
+        return None
+    if _is_array_hint(hint):
+        return r.array(path)
+    h = _strip_optional(hint)
+    if "item_dim" in meta:
+        return _decode_items(r, typing.get_args(h)[0], path)
+    if _is_record(h):
+        return _decode_record(r, h, f"{path}__")
+    if typing.get_origin(h) is dict and "keys" in info:
+        kt, vt = (typing.get_args(h) + (Any, Any))[:2]
+        raw = json.loads(info["keys"])
+        return {_retype(k, kt): _decode_value(r, vt, {}, f"{path}__{tag}") for k, tag in zip(raw, _key_tags(raw))}
+    a = r.ds.attrs[path]
+    if h is int:
+        return int(a)
+    if h is float:
+        return float(a)
+    if h is str:
+        return str(a)
+    return _from_json(a, hint)
+
+
+def _decode_items(r: _Reader, cls, path: str) -> tuple:
+    n = int(r.schema[path]["n"])
+    if n == 0:
+        return ()
+    cols = {}
+    for name, hint, meta in _record_fields(cls):
+        p = f"{path}__{name}"
+        if _is_array_hint(hint):
+            stacked = r.array(p)
+            shapes = r.ds[f"{p}__shape"].values
+            out = []
+            for i in range(n):
+                if np.any(shapes[i] < 0):
+                    out.append(None)
+                else:
+                    out.append(np.ascontiguousarray(stacked[(i,) + tuple(slice(0, int(s)) for s in shapes[i])]))
+            cols[name] = out
+        else:
+            raw = r.ds[p].values
+            h = _strip_optional(hint)
+            if h in (int, float, bool):
+                cols[name] = [h(x) for x in raw]
+            elif h is str:
+                cols[name] = [str(x) for x in raw]
+            else:
+                cols[name] = [_from_json(str(x), hint) for x in raw]
+    return tuple(cls(**{k: v[i] for k, v in cols.items()}) for i in range(n))
+
+
+def from_dataset(ds, expected: str | None = None):
+    """Rebuild the result stored in ``ds`` (written by :func:`to_dataset`)."""
+    kind = str(ds.attrs.get("jaxgear_type", ""))
+    if expected is not None and kind != expected:
+        raise ValueError(f"the file holds a {kind or 'file of another kind'}, not a {expected}; "
+                         "open it with jaxgear.load(path).")
+    if kind not in RESULT_TYPES:
+        raise ValueError(f"unknown jaxgear_type {kind!r}; known types: {', '.join(sorted(RESULT_TYPES))}.")
+    return _decode_record(_Reader(ds), RESULT_TYPES[kind], "")

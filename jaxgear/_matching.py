@@ -1,0 +1,137 @@
+"""Is this the same attractor? One answer, used by every analysis.
+
+An attractor is represented by its stroboscopic points (the ``k`` states of a P-k
+orbit at forcing phase 0, in any order and any cyclic shift) and its period ``k``
+(0: no period found — quasi-periodic, chaotic or a slow transient; negative: escaped).
+Two attractors are the same when their periods agree and the symmetric Hausdorff
+distance of their point sets is at most ``tol * (1 + max |x|)`` (state units, ``tol``
+relative); every non-periodic set counts as one, and so does every escape.
+
+Used by the global analysis (merging cell-map groups and recurrences of the direct
+method, reducing a period to the minimal one), shooting (deduplicating converged
+seeds), sweeps (grouping the starts of one parameter value, matching attractors
+across values) and the comparison of two results.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "hausdorff",
+    "pairwise_hausdorff",
+    "attractor_scale",
+    "same_attractor",
+    "group_attractors",
+    "match_attractors",
+    "minimal_cycle",
+]
+
+
+def _distances(A, B, xp):
+    return xp.linalg.norm(A[..., :, None, :] - B[..., None, :, :], axis=-1)
+
+
+def hausdorff(A, B, xp=np):
+    """Symmetric Hausdorff distance of two point sets ``A (k, dim)`` and ``B (m, dim)``.
+
+    Invariant to the order of the points (so to cyclic shifts of a cycle); state units.
+    ``xp`` is ``numpy`` (default) or ``jax.numpy`` (inside compiled code).
+    """
+    d = _distances(A, B, xp)
+    return xp.maximum(d.min(axis=-1).max(axis=-1), d.min(axis=-2).max(axis=-1))
+
+
+def pairwise_hausdorff(P, Q, xp=np):
+    """Hausdorff distance of every pair of point sets: ``P (..., S, M, dim)``,
+    ``Q (..., T, M', dim)`` -> ``(..., S, T)``."""
+    d = _distances(P[..., :, None, :, :], Q[..., None, :, :, :], xp)  # (..., S, T, M, M')
+    return xp.maximum(d.min(axis=-1).max(axis=-1), d.min(axis=-2).max(axis=-1))
+
+
+def attractor_scale(*point_sets) -> float:
+    """``1 + max |x|`` over the finite coordinates of the given point sets."""
+    m = 0.0
+    for P in point_sets:
+        P = np.asarray(P, dtype=float)
+        if P.size and np.any(np.isfinite(P)):
+            m = max(m, float(np.nanmax(np.abs(np.where(np.isfinite(P), P, np.nan)))))
+    return 1.0 + m
+
+
+def same_attractor(A, k_a: int, B, k_b: int, tol: float) -> bool:
+    """True when ``(A, k_a)`` and ``(B, k_b)`` are the same attractor (see the module).
+
+    ``A``, ``B``: stroboscopic points ``(k, dim)``; ``k_a``, ``k_b``: periods (0
+    non-periodic, negative escaped); ``tol``: relative distance tolerance.
+    """
+    if int(k_a) != int(k_b):
+        return False
+    if int(k_a) <= 0:
+        return True
+    A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    if not (len(A) and len(B)):
+        return False
+    return bool(hausdorff(A, B) <= tol * attractor_scale(A, B))
+
+
+def group_attractors(sets: Sequence[tuple[np.ndarray, int]], tol: float) -> np.ndarray:
+    """Group attractor candidates ``[(points, period), ...]``: ``(n,)`` ids numbered 0.. in
+    order of first appearance; a candidate joins the first earlier group it is the
+    same attractor as (:func:`same_attractor` against that group's first member)."""
+    ids = np.full(len(sets), -1, dtype=np.int64)
+    reps: list[int] = []
+    for i, (pts, k) in enumerate(sets):
+        for g, r in enumerate(reps):
+            if same_attractor(pts, k, sets[r][0], sets[r][1], tol):
+                ids[i] = g
+                break
+        else:
+            reps.append(i)
+            ids[i] = len(reps) - 1
+    return ids
+
+
+def match_attractors(previous: Sequence[tuple[np.ndarray, int]], current: Sequence[tuple[np.ndarray, int]],
+                     max_distance: float) -> np.ndarray:
+    """Match the attractors of one parameter value to those of the previous value.
+
+    Greedy, closest pairs first (at equal distance a pair of the same period first);
+    pairs farther apart than ``max_distance`` (state units, Hausdorff distance of the
+    point sets) stay unmatched. Returns ``(len(current),)``: the index into
+    ``previous`` of each current attractor's match, or -1.
+    """
+    out = np.full(len(current), -1, dtype=np.int64)
+    if not previous or not current:
+        return out
+    D = np.array([[hausdorff(np.asarray(c), np.asarray(p)) if len(c) and len(p) else np.inf
+                   for p, _ in previous] for c, _ in current])
+    same = np.array([[kc == kp for _, kp in previous] for _, kc in current])
+    used = np.zeros(len(previous), bool)
+    for flat in np.lexsort((~same.ravel(), D.ravel())):
+        i, j = divmod(int(flat), len(previous))
+        if D[i, j] > max_distance:
+            break
+        if out[i] < 0 and not used[j]:
+            out[i] = j
+            used[j] = True
+    return out
+
+
+def minimal_cycle(points: np.ndarray, k: int, tol: float) -> tuple[np.ndarray, int]:
+    """Reduce a P-k cycle to its minimal period: the smallest divisor ``j`` of ``k`` with
+    ``points`` equal to themselves shifted by ``j`` within ``tol * (1 + max |x|)``.
+
+    A slowly spiralling transient (complex multipliers rotating by about 2 pi / k per
+    period) can pass a recurrence test at a multiple of the true period; its refined
+    points then repeat with a smaller period. Returns ``(points[:j], j)``.
+    """
+    pts = np.asarray(points)
+    if k > 1 and len(pts) == k and np.all(np.isfinite(pts)):
+        scale = tol * attractor_scale(pts)
+        for j in (d for d in range(1, k) if k % d == 0):
+            if np.max(np.linalg.norm(pts - np.roll(pts, -j, axis=0), axis=1)) <= scale:
+                return pts[:j], j
+    return pts, int(k)

@@ -1,0 +1,26 @@
+"""Global analysis (paper §3-§4): methods, the driver and its result.
+
+- :mod:`._method` — the method interface (options + algorithm) and the registry;
+- :mod:`._direct` — :class:`Direct`, direct integration of every cell (the default);
+- :mod:`._cellmap` — :class:`PoincareCellMap` (the paper's) and :class:`StroboscopicCellMap` (Hsu's);
+- :mod:`._graph` — Hsu's periodic groups and domains of a simple cell map;
+- :mod:`._orbits` — periods, refined points and section crossings of attractors;
+- :mod:`._global` — :func:`analyze_global`, the common steps and the result;
+- :mod:`._result` — :class:`GlobalResult` and :class:`Attractor`;
+- :mod:`._diagnostics` — warnings when a result looks unreliable;
+- :mod:`._compare` — agreement with direct integration on a sample of cells.
+"""
+
+from ._cellmap import PoincareCellMap, StroboscopicCellMap, cell_images
+from ._compare import compare_with_direct
+from ._direct import Direct
+from ._global import DEFAULT_METHOD, analyze_global, default_method
+from ._graph import analyze_cell_map
+from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
+from ._orbits import detect_period
+from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult
+
+__all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCellMap", "analyze_global",
+           "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
+           "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
+           "method_from_dict", "method_from_name", "Classification"]

@@ -1,0 +1,140 @@
+"""Global analysis: every coexisting attractor in a region, its period and its domain.
+
+:func:`analyze_global` runs a method object (:class:`~jaxgear.Direct`, the default;
+:class:`~jaxgear.PoincareCellMap`, the paper's; :class:`~jaxgear.StroboscopicCellMap`,
+Hsu's) and does what every method shares: periods reduced to the minimal one,
+attractors that are the same merged, attractors sorted by decreasing share, their
+section crossings, and the :class:`~jaxgear.GlobalResult`.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .._cells import CellGrid
+from .._checks import check_bool
+from .._matching import group_attractors, minimal_cycle
+from .._params import params_to_dict
+from .._system import ForcedSystem, check_system
+from .._version import __version__
+from ._diagnostics import warn_if_unreliable
+from ._method import AbstractGlobalMethod, method_from_name
+from ._orbits import section_points
+from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
+
+__all__ = ["analyze_global", "default_method", "DEFAULT_METHOD"]
+
+DEFAULT_METHOD = "direct"
+"""Name of the default method: the library, the CLI and the README use the same."""
+
+
+def default_method() -> AbstractGlobalMethod:
+    """The default method object (:class:`~jaxgear.Direct` with its default options)."""
+    return method_from_name(DEFAULT_METHOD)
+
+
+def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGrid | None = None,
+                   method: AbstractGlobalMethod | str | None = None, *, progress: bool = True) -> GlobalResult:
+    """Every coexisting attractor in a region, its period and its domain (paper §3-§4).
+
+    Args:
+        system: a :class:`~jaxgear.ForcedSystem` (default: the reduced gear model).
+        params: its parameter pytree (default: the ``paper`` preset).
+        grid: the :class:`~jaxgear.CellGrid` (default: the method's; for the gear model
+            the paper's region D, 50 x 30 x 60 cells on Σ = {x4 = 0}).
+        method: a method object — :class:`~jaxgear.Direct` (default),
+            :class:`~jaxgear.PoincareCellMap` (the paper's map) or
+            :class:`~jaxgear.StroboscopicCellMap` — holding all its options, or the name
+            of one (``"direct"``, ``"poincare-like"``, ``"stroboscopic"``) for its defaults.
+        progress: show progress bars (tqdm); ``False`` silences them.
+    Returns:
+        :class:`~jaxgear.GlobalResult`. Warnings name what to change when the result looks
+        unreliable: many sink cells or an attractor on the region's edge (enlarge the
+        region), no period found or many unresolved cells (raise ``max_period`` /
+        ``max_periods``), an attractor resolved by few cells (refine the grid).
+    Raises:
+        ValueError: bad input (the message names the argument and what is allowed),
+            found before any integration.
+    """
+    from .._model import REDUCED
+    from .._presets import paper_params
+
+    t_start = time.perf_counter()
+    check_bool(progress, "progress")
+    system = REDUCED if system is None else system
+    if not isinstance(system, ForcedSystem):
+        raise ValueError(f"system must be a jaxgear.ForcedSystem, got {type(system).__name__}.")
+    if params is None:
+        if system is not REDUCED:
+            raise ValueError("analyze_global: pass the parameters of your system (params=...).")
+        params = paper_params()
+    if method is None:
+        method = default_method()
+    elif isinstance(method, str):
+        method = method_from_name(method)
+    elif not isinstance(method, AbstractGlobalMethod):
+        raise ValueError(f"method must be a method object (jaxgear.Direct(), jaxgear.PoincareCellMap(), "
+                         f"jaxgear.StroboscopicCellMap()) or one of their names, got {type(method).__name__}.")
+    grid = method.default_grid(system) if grid is None else grid
+    if not isinstance(grid, CellGrid):
+        raise ValueError(f"grid must be a jaxgear.CellGrid (CellGrid.box(bounds, counts, ...)), "
+                         f"got {type(grid).__name__}.")
+    if grid.dim != system.dim:
+        raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
+    method.check(system, grid)
+    check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+
+    labels, raw, cycles, mean_periods = method.classify(system, params, grid, progress)
+    labels, raw, cycles = _merge_same(labels, raw, cycles, method)
+    result = _assemble(system, params, grid, method, labels, raw, cycles, mean_periods,
+                       time.perf_counter() - t_start)
+    warn_if_unreliable(result)
+    return result
+
+
+def _merge_same(labels, raw, cycles, method):
+    """Reduce each attractor to its minimal period and merge attractors that are the same."""
+    reduced = []
+    for pts, k, res in raw:
+        pts, k = minimal_cycle(np.asarray(pts), int(k), method.period_tol)
+        reduced.append((pts, k, res))
+    ids = group_attractors([(p, k) for p, k, _ in reduced], method.merge_tol)
+    if np.array_equal(ids, np.arange(len(reduced))):
+        return labels, reduced, cycles
+    out = labels.copy()
+    for old, new in enumerate(ids):
+        out[labels == old] = new
+    n_new = int(ids.max(initial=-1)) + 1
+    first = [int(np.argmax(ids == g)) for g in range(n_new)]
+    merged_cycles = [np.unique(np.concatenate([np.asarray(cycles[o], np.int64) for o in np.nonzero(ids == g)[0]]))
+                     for g in range(n_new)]
+    return out, [reduced[i] for i in first], merged_cycles
+
+
+def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime) -> GlobalResult:
+    """Attractors sorted by decreasing share (ids renumbered 0..A-1) and the result object."""
+    n = grid.n_cells
+    counts = np.array([(labels == i).sum() for i in range(len(raw))], dtype=np.int64)
+    order = np.argsort(-counts, kind="stable")
+    out_labels = labels.copy()
+    for new, old in enumerate(order):
+        out_labels[labels == old] = new
+    sec_idx = method.section_index if method.section_index is not None else system.section_index
+    attractors = []
+    for new, old in enumerate(order):
+        pts, per, res = raw[old]
+        sec = (section_points(system, params, pts, method.integrator, sec_idx, method.direction) if per > 0 else
+               np.zeros((0, system.dim)))
+        attractors.append(Attractor(id=new, period=int(per), points=np.asarray(pts, dtype=float),
+                                    section_points=np.asarray(sec, dtype=float), cell_count=int(counts[old]),
+                                    share=float(counts[old]) / n, residual=float(res),
+                                    periodic_cells=np.asarray(cycles[old], dtype=np.int64)))
+    return GlobalResult(
+        labels=out_labels.reshape(grid.counts).astype(np.int64), attractors=tuple(attractors), grid=grid,
+        method=method.name, settings=method.to_dict(), params=params_to_dict(params), system=system.name,
+        state_names=tuple(system.state_names), n_sink=int((out_labels == SINK).sum()),
+        n_unresolved=int((out_labels == UNRESOLVED).sum()), runtime_s=float(runtime), version=__version__,
+        mean_periods=float(mean_periods),
+    )

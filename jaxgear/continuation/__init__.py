@@ -1,0 +1,11 @@
+"""Continuation of periodic orbits in one parameter (pseudo-arclength), with bifurcations.
+
+- :mod:`._arclength` — :func:`continue_orbit`, :func:`switch_branch` (the algorithm);
+- :mod:`._branch` — :class:`Branch`, :class:`BifurcationPoint` (the result).
+"""
+
+from ._arclength import continue_orbit, switch_branch
+from ._branch import BIFURCATION_KINDS, BRANCH_STATUS, BifurcationPoint, Branch, bifurcation_orbit
+
+__all__ = ["continue_orbit", "switch_branch", "Branch", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS",
+           "bifurcation_orbit"]

@@ -1,0 +1,53 @@
+"""Time integration of a :class:`~jaxgear.ForcedSystem`: strategies behind one interface.
+
+- :class:`RK4` — classical fixed-step RK4 (the paper's integrator);
+- :class:`Adaptive` — any diffrax solver with a PID step-size controller (reference).
+
+Every analysis takes an integrator object and uses only the operations of
+:class:`AbstractIntegrator`; :func:`default_integrator` is the one default.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+from ._adaptive import Adaptive
+from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, AbstractIntegrator, batch_field, check_steps_per_period
+from ._rk4 import RK4, rk4_step
+
+__all__ = ["AbstractIntegrator", "AbstractFixedStep", "RK4", "Adaptive", "default_integrator",
+           "integrator_from_dict", "resolve_integrator", "DEFAULT_STEPS_PER_PERIOD", "batch_field", "rk4_step", "check_steps_per_period"]
+
+
+def default_integrator(steps_per_period: int | None = None) -> AbstractFixedStep:
+    """The default integrator (the same for the library, the CLI and the README), with
+    ``steps_per_period`` fixed steps per forcing period (default
+    :data:`DEFAULT_STEPS_PER_PERIOD`)."""
+    return RK4(DEFAULT_STEPS_PER_PERIOD if steps_per_period is None else check_steps_per_period(steps_per_period))
+
+
+def integrator_from_dict(d: Mapping[str, Any]) -> AbstractIntegrator:
+    """Rebuild an integrator from :meth:`AbstractIntegrator.to_dict` (also the flat settings
+    of files written by jaxgear 0.1: ``{"integrator": "RK4", "steps_per_period": 200}``)."""
+    kind = d.get("type", d.get("integrator", "RK4"))
+    if kind == "RK4":
+        return RK4(int(d.get("steps_per_period") or DEFAULT_STEPS_PER_PERIOD))
+    if kind == "Adaptive":
+        import diffrax
+
+        solver = getattr(diffrax, str(d.get("solver", "Tsit5")))()
+        return Adaptive(solver=solver, rtol=float(d.get("rtol", 1e-10)), atol=float(d.get("atol", 1e-10)),
+                        max_steps=int(d.get("max_steps", 200_000)),
+                        search_steps_per_period=int(d.get("search_steps_per_period", 400)))
+    raise ValueError(f"unknown integrator type {kind!r}; known: RK4, Adaptive.")
+
+
+def resolve_integrator(integrator) -> AbstractIntegrator:
+    """``integrator``, or the default one for ``None``; ``ValueError`` for anything that is
+    not an integrator object."""
+    if integrator is None:
+        return default_integrator()
+    if not isinstance(integrator, AbstractIntegrator):
+        raise ValueError(f"integrator={integrator!r} must be an integrator object (jaxgear.RK4(...), "
+                         "jaxgear.Adaptive(...)) or None for the default.")
+    return integrator

@@ -1,0 +1,172 @@
+"""The integration strategy interface: what every analysis asks of an integrator.
+
+An integrator advances the forced system ``x' = f(t, x, params)`` (paper eq. 6) over
+whole forcing periods. Analyses never check which integrator they were given: they
+call these operations.
+
+- :meth:`AbstractIntegrator.advance` — a batch of states ``(dim, n)`` (struct of
+  arrays: each coordinate one contiguous vector) over ``periods`` forcing periods;
+- :meth:`AbstractIntegrator.trajectory` — the same, sampled for figures;
+- :meth:`AbstractIntegrator.flow` — one state ``(dim,)``, differentiable with
+  ``jax.jacfwd`` (monodromy matrices) and ``jax.grad`` (design);
+- :attr:`AbstractIntegrator.crossing_stepper` — the fixed-step integrator that brackets
+  and locates crossings of a Poincaré section.
+
+Times are in the system's own unit (dimensionless ``tau = omega_n t`` for the gear
+models); ``periods`` is a Python int (it sets the length of a compiled loop).
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._checks import check_int
+
+__all__ = ["AbstractIntegrator", "AbstractFixedStep", "DEFAULT_STEPS_PER_PERIOD", "batch_field",
+           "check_steps_per_period"]
+
+DEFAULT_STEPS_PER_PERIOD = 200
+"""Fixed steps per forcing period of the default integrator (the one place it is set)."""
+
+
+def check_steps_per_period(value, name: str = "steps_per_period") -> int:
+    """``value`` as an int >= 1, else ``ValueError`` naming ``name``, the value and the range."""
+    return check_int(value, name, 1)
+
+
+def batch_field(system, params, t, Y):
+    """The vector field on a batch ``Y (dim, n)``: ``dY/dt (dim, n)``.
+
+    ``t`` is a scalar (time-only terms, such as the mesh stiffness and errors of the gear
+    models, are then computed once for the whole batch) or an ``(n,)`` array (one time
+    per lane).
+    """
+    in_t = None if jnp.ndim(t) == 0 else 0
+    return jax.vmap(system.vector_field, in_axes=(in_t, 1, None), out_axes=1)(t, Y, params)
+
+
+class AbstractIntegrator(eqx.Module):
+    """An integration strategy for a :class:`~jaxgear.ForcedSystem` (see the module).
+
+    Concrete integrators are immutable configuration objects (hashable: they are static
+    arguments of compiled kernels) and serialise to a dict with :meth:`to_dict`.
+    """
+
+    name: ClassVar[str] = "abstract"
+
+    @abc.abstractmethod
+    def advance(self, system, params, Y, t0, periods: int):
+        """Advance ``Y (dim, n)`` from ``t0`` by ``periods`` forcing periods: ``(dim, n)``.
+
+        A lane that blew up is non-finite (never a silently wrong value).
+        """
+
+    @abc.abstractmethod
+    def trajectory(self, system, params, Y, t0, periods: int, samples_per_period: int):
+        """Samples for figures: times ``(m + 1,)`` and states ``(m + 1, dim, n)`` with
+        ``m = periods * samples_per_period``, from ``t0`` to ``t0 + periods * T``."""
+
+    def flow(self, system, params, x, t0, periods: int):
+        """``P^periods`` of one state ``x (dim,)``: ``(dim,)``, differentiable both ways."""
+        return self.advance(system, params, x[:, None], t0, periods)[:, 0]
+
+    @property
+    @abc.abstractmethod
+    def crossing_stepper(self) -> "AbstractFixedStep":
+        """The fixed-step integrator that brackets and locates section crossings."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The integrator's settings (JSON-able; :func:`integrator_from_dict` rebuilds it)."""
+        return {"type": self.name}
+
+
+class AbstractFixedStep(AbstractIntegrator):
+    """A one-step method with ``steps_per_period`` equal steps per forcing period.
+
+    Subclasses define :meth:`step`; advancing, sampling and section crossings are built
+    on it. ``h = T / steps_per_period`` in the system's time unit.
+    """
+
+    steps_per_period: eqx.AbstractVar[int]
+
+    @abc.abstractmethod
+    def step(self, system, params, t, Y, h):
+        """One step of size ``h`` from time ``t`` for a batch ``Y (dim, n)``.
+
+        ``t`` and ``h`` are scalars (one clock for the batch) or ``(n,)`` arrays (one
+        per lane, as when a section crossing is located inside a step).
+        """
+
+    @property
+    def crossing_stepper(self) -> "AbstractFixedStep":
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"type": self.name, "steps_per_period": int(self.steps_per_period)}
+
+    def advance(self, system, params, Y, t0, periods: int):
+        T = system.period(params)
+        n_steps = int(self.steps_per_period) * int(periods)
+        return self.advance_steps(system, params, Y, t0, n_steps, T / self.steps_per_period)
+
+    def advance_steps(self, system, params, Y, t0, n_steps: int, h):
+        """``n_steps`` steps of size ``h`` from ``t0`` on ``Y (dim, n)``, chunked when large.
+
+        A batch larger than :func:`chunk_lanes` is cut into equal chunks that run one
+        after the other, each through all its steps, inside the same computation: a
+        chunk's working set (the state and the stages) stays in the last-level cache
+        instead of streaming through main memory at every stage. Each lane's arithmetic
+        is unchanged, so the result is bit-for-bit that of the unchunked loop.
+        """
+        dim, n = Y.shape
+        chunk = chunk_lanes(dim)
+
+        def loop(Yb):
+            return jax.lax.fori_loop(0, n_steps, lambda i, Z: self.step(system, params, t0 + i * h, Z, h), Yb)
+
+        if n <= chunk:
+            return loop(Y)
+        n_chunks = -(-n // chunk)
+        per_chunk = -(-n // n_chunks)
+        size = min(n, -(-per_chunk // 8) * 8)  # equal chunks of whole SIMD vectors
+
+        def one_chunk(i, out):
+            start = jnp.minimum(i * size, n - size)
+            Yb = loop(jax.lax.dynamic_slice_in_dim(Y, start, size, axis=1))
+            return jax.lax.dynamic_update_slice_in_dim(out, Yb, start, axis=1)
+
+        return jax.lax.fori_loop(0, n_chunks, one_chunk, Y)
+
+    def trajectory(self, system, params, Y, t0, periods: int, samples_per_period: int):
+        T = system.period(params)
+        s = int(samples_per_period)
+        m = int(periods) * s
+        sub = -(-int(self.steps_per_period) // s)  # whole steps between samples
+        h = T / (sub * s)
+        ts = t0 + T * jnp.arange(m + 1) / s
+
+        def one_sample(Z, i):
+            t_start = t0 + i * sub * h
+            Z = jax.lax.fori_loop(0, sub, lambda j, W: self.step(system, params, t_start + j * h, W, h), Z)
+            return Z, Z
+
+        _, Ys = jax.lax.scan(one_sample, Y, jnp.arange(m))
+        return ts, jnp.concatenate([Y[None], Ys], axis=0)
+
+
+# Working set of one chunk of the step loop (state, three stages and the new state, 5
+# arrays of dim x chunk float64), sized for a shared last-level cache of >= 16 MiB.
+# Measured on a 2-core AMD EPYC (32 MiB L3), reduced model, 10^6 cells: 22.7 ns per
+# step per cell unchunked, 6.0 ns with chunks of 65,536-100,000 cells, 9.8 ns with
+# 32,768 (each stage is one multithreaded XLA loop whose start-up cost then shows).
+_CHUNK_BYTES = 16 * 2**20
+
+
+def chunk_lanes(dim: int) -> int:
+    """Largest number of lanes :meth:`AbstractFixedStep.advance_steps` runs in one piece."""
+    return max(4096, _CHUNK_BYTES // (5 * 8 * int(dim)))

@@ -1,0 +1,333 @@
+"""Many seeds, several periods, distinct orbits: :func:`find_periodic_orbits` and its result."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Mapping, Sequence
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._batching import chunks, pad_rows, progress_bar
+from .._checks import check_int, check_number
+from .._codec import array_field, items_field, result_type
+from .._format import format_table
+from .._matching import group_attractors, same_attractor
+from .._params import params_to_dict
+from .._poincare import sample_trajectory
+from .._status import Status, count_statuses
+from .._system import ForcedSystem, check_state_shape, check_system
+from .._version import __version__
+from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ._floquet import Instability, check_period
+from ._orbit import ShootResult, check_newton_options, shoot_kernel
+
+__all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
+
+NEWTON_STATUSES = (Status.CONVERGED, Status.NOT_CONVERGED, Status.SINGULAR, Status.DIVERGED)
+"""The outcomes a Newton run can have."""
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class PeriodicOrbit:
+    """One periodic orbit of the stroboscopic map (deduplicated), paper §4.1.
+
+    Attributes:
+        points: ``(m, dim)`` stroboscopic points ``x*, P(x*), ..., P^{m-1}(x*)`` (state
+            units) at times ``t0 + j T``, rotated so that the point with the smallest
+            first coordinate comes first.
+        period: minimal period ``m`` (forcing periods).
+        multipliers: ``(dim,)`` complex Floquet multipliers of ``P^m``, by decreasing modulus.
+        stable: all ``|multiplier| < 1``.
+        instability: ``"stable"``, ``"fold"``, ``"flip"`` or ``"neimark-sacker"``.
+        residual: ``||P^k(x*) - x*||`` of the best converged seed (state units).
+        n_seeds: how many seeds converged to this orbit.
+        t0: phase of the stroboscopic section (time of ``points[0]``, system time unit).
+        trajectory: ``(m * s + 1, dim)`` the orbit sampled ``s`` times per forcing period
+            from ``points[0]`` at ``t0`` over its ``m`` periods (for figures drawn without
+            integrating, e.g. from a loaded result), or ``None``.
+    """
+
+    points: np.ndarray = array_field(("point", "state"))
+    period: int = 1
+    multipliers: np.ndarray = array_field(("multiplier",), default_factory=lambda: np.zeros(0, complex))
+    stable: bool = False
+    instability: str = "unknown"
+    residual: float = float("nan")
+    n_seeds: int = 0
+    t0: float = 0.0
+    trajectory: np.ndarray | None = array_field(("sample", "state"), default=None)
+
+    @property
+    def max_multiplier(self) -> float:
+        """Largest Floquet multiplier modulus."""
+        return float(np.max(np.abs(self.multipliers)))
+
+    @property
+    def samples_per_period(self) -> int:
+        """Samples per forcing period of :attr:`trajectory` (0 when there is none)."""
+        if self.trajectory is None:
+            return 0
+        return (len(self.trajectory) - 1) // int(self.period)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (without the sampled trajectory)."""
+        return {
+            "period": int(self.period), "points": np.asarray(self.points).tolist(),
+            "multipliers_abs": np.abs(self.multipliers).tolist(),
+            "multipliers": [[float(z.real), float(z.imag)] for z in np.asarray(self.multipliers)],
+            "stable": bool(self.stable), "instability": self.instability,
+            "residual": float(self.residual), "n_seeds": int(self.n_seeds), "t0": float(self.t0),
+        }
+
+
+@result_type
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class OrbitSearch:
+    """Result of :func:`find_periodic_orbits` (paper §4.1): the distinct orbits and every shot.
+
+    Saves to netCDF with :meth:`save` (reload with :func:`jaxgear.load`; open with
+    ``xarray.open_dataset``).
+
+    Attributes:
+        orbits: distinct orbits found, sorted by period then first coordinate.
+        shots: ``{k: ShootResult}`` the per-seed results for each ``k`` tried (numpy
+            arrays, leading dimension the seeds).
+        status_counts: number of seeds per Newton status name, over all ``k``.
+        seeds: ``{k: (n_k, dim)}`` the seeds shot for each ``k``.
+        system: the system's name; state_names: its coordinate names;
+        section_index: its default section coordinate (or ``None``).
+        params: the full parameter set as a dict (canonical names for the gear models).
+        settings: the options of the search (tolerances, integrator, ``t0``, ...), JSON-able.
+        version: jaxgear version; runtime_s: wall time of the search (s).
+    """
+
+    orbits: tuple[PeriodicOrbit, ...] = items_field("orbit")
+    shots: dict[int, ShootResult] = dataclasses.field(default_factory=dict)
+    status_counts: dict[str, int] = dataclasses.field(default_factory=dict)
+    seeds: dict[int, np.ndarray] = dataclasses.field(default_factory=dict)
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    section_index: int | None = None
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+    runtime_s: float = float("nan")
+
+    @property
+    def n_seeds(self) -> int:
+        """Seed runs over all ``k``."""
+        return int(sum(np.asarray(r.status).size for r in self.shots.values()))
+
+    def table(self) -> str:
+        """Printable table: one row per orbit (period, stability, max |multiplier|, first point)."""
+        names = self.state_names or tuple(f"x{i + 1}" for i in range(self._dim()))
+        rows = [(i, f"P-{o.period}", "stable" if o.stable else f"unstable ({o.instability})",
+                 f"{o.max_multiplier:.4f}", "[" + ", ".join(f"{v:.4f}" for v in o.points[0]) + "]",
+                 f"{o.residual:.1e}", o.n_seeds) for i, o in enumerate(self.orbits)]
+        head = ("orbit", "period", "stability", "max |multiplier|", "point (" + ", ".join(names) + ")",
+                "residual", "seeds")
+        return format_table(rows, head)
+
+    def _dim(self) -> int:
+        for o in self.orbits:
+            return int(np.shape(o.points)[-1])
+        for X in self.seeds.values():
+            return int(np.shape(X)[-1])
+        return len(self.state_names)
+
+    def summary(self) -> dict[str, Any]:
+        """Everything but the per-seed arrays and trajectories, JSON-able."""
+        return dict(
+            jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
+            params=self.params, settings=self.settings, n_seeds=self.n_seeds,
+            status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
+            runtime_s=self.runtime_s, version=self.version,
+        )
+
+    # ---------------------------------------------------------------- I/O
+    def _coords(self) -> dict:
+        names = list(self.state_names) or [f"x{i + 1}" for i in range(self._dim())]
+        return {"state": ("state", names)}
+
+    def _attrs(self) -> dict:
+        return dict(title="jaxgear periodic orbits (shooting)",
+                    units="state units of the system; time in the system's unit (dimensionless for the gear "
+                          "models, model document §3)")
+
+    def save(self, path):
+        """Write the search to a netCDF file atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
+        return save_result(self, path)
+
+    def write_summary(self, path):
+        """Write :meth:`summary` as strict JSON."""
+        from .._io import write_json
+
+        return write_json(self.summary(), path)
+
+
+def _orbits_from_shots(res: ShootResult, dedup_tol: float, t0: float = 0.0) -> list[PeriodicOrbit]:
+    st = np.asarray(res.status).reshape(-1)
+    conv = np.flatnonzero(st == Status.CONVERGED)
+    if conv.size == 0:
+        return []
+    k = res.orbit.shape[-2]
+    dim = res.orbit.shape[-1]
+    orbit = np.asarray(res.orbit).reshape(-1, k, dim)[conv]
+    mper = np.asarray(res.min_period).reshape(-1)[conv]
+    lam = np.asarray(res.multipliers).reshape(-1, dim)[conv]
+    stab = np.asarray(res.stable).reshape(-1)[conv]
+    kind = np.asarray(res.instability).reshape(-1)[conv]
+    resid = np.asarray(res.residual).reshape(-1)[conv]
+    label = group_attractors([(orbit[i, : mper[i]], int(mper[i])) for i in range(len(conv))], dedup_tol)
+    out = []
+    for rep in np.unique(label):  # a handful of distinct orbits
+        members = np.flatnonzero(label == rep)
+        best = members[np.argmin(resid[members])]
+        m = int(mper[best])
+        pts = orbit[best, :m]
+        pts = np.roll(pts, -int(np.argmin(pts[:, 0])), axis=0)
+        out.append(PeriodicOrbit(points=pts, period=m, multipliers=lam[best],
+                                 stable=bool(stab[best]), instability=Instability(int(kind[best])).label,
+                                 residual=float(resid[best]), n_seeds=int(members.size), t0=float(t0)))
+    return out
+
+
+def _merge_orbits(orbits: Sequence[PeriodicOrbit], dedup_tol: float) -> list[PeriodicOrbit]:
+    merged: list[PeriodicOrbit] = []
+    for o in orbits:
+        for i, q in enumerate(merged):
+            if same_attractor(o.points, o.period, q.points, q.period, dedup_tol):
+                keep = o if o.residual < q.residual else q
+                merged[i] = dataclasses.replace(keep, n_seeds=o.n_seeds + q.n_seeds)
+                break
+        else:
+            merged.append(o)
+    merged.sort(key=lambda o: (o.period, float(o.points[0, 0])))
+    return merged
+
+
+def _with_trajectories(system, params, orbits: list[PeriodicOrbit], samples: int, integrator) -> list[PeriodicOrbit]:
+    """Attach to each orbit its trajectory over its ``m`` periods (one batched integration)."""
+    if not orbits or samples < 1:
+        return orbits
+    by_t0: dict[float, list[int]] = {}
+    for i, o in enumerate(orbits):
+        by_t0.setdefault(float(o.t0), []).append(i)
+    out = list(orbits)
+    for t0, idx in by_t0.items():
+        mmax = max(orbits[i].period for i in idx)
+        starts = np.stack([orbits[i].points[0] for i in idx])
+        _, states = sample_trajectory(system, params, starts, periods=mmax, samples_per_period=samples, t0=t0,
+                                      integrator=integrator)
+        states = np.asarray(states)
+        for j, i in enumerate(idx):
+            out[i] = dataclasses.replace(orbits[i], trajectory=states[j, : orbits[i].period * samples + 1])
+    return out
+
+
+def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | Sequence[int] = 1, t0=0.0,
+                         integrator: AbstractIntegrator | None = None, tol: float = 1e-10, max_iter: int = 40,
+                         max_norm: float = 1e6, period_tol: float = 1e-6, dedup_tol: float = 1e-6,
+                         chunk_size: int = 256, progress: bool = True,
+                         trajectory_samples: int = 200) -> OrbitSearch:
+    """Shoot from many seeds and return the distinct periodic orbits (paper §4.1, ref. [15]).
+
+    For every ``k`` and every seed, damped Newton on ``G(x) = P^k(x) - x = 0`` (the
+    k-fold stroboscopic map of paper eq. 6, full state) with the Jacobian from
+    ``jax.jacfwd`` (see :func:`periodic_orbit`); then the Floquet multipliers of each
+    converged orbit (its minimal period ``m``), and the converged seeds deduplicated
+    into distinct orbits. Seeds are processed in chunks of ``chunk_size`` (one compiled
+    shape per ``k``, ``vmap`` over the chunk): memory is bounded by the chunk, and the
+    result does not depend on ``chunk_size``. The system and parameters are checked
+    once on entry (:func:`~jaxgear.check_system`).
+
+    Args:
+        system: a :class:`~jaxgear.ForcedSystem` of state dimension ``dim``.
+        params: its parameter pytree (not batched), e.g. :func:`jaxgear.paper_params`.
+        seeds: ``(n, dim)`` array of states at phase ``t0`` (state units; shot for
+            every ``k`` in ``period``), or a mapping ``{k: (n_k, dim)}`` such as
+            :func:`seeds_from_result` returns.
+        period: ``k`` or a sequence of ``k`` (forcing periods; ignored when ``seeds``
+            is a mapping).
+        t0: phase of the stroboscopic section (system time unit; the gear models use
+            dimensionless time ``omega_n t``).
+        integrator: :class:`~jaxgear.RK4` (default 200 steps per period) or
+            :class:`~jaxgear.Adaptive`.
+        tol: convergence on ``||P^k(x) - x||`` (Euclidean, state units).
+        max_iter, max_norm, period_tol: as in :func:`periodic_orbit`.
+        dedup_tol: two converged seeds give the same orbit when a point of one lies
+            within ``dedup_tol * (1 + ||x||)`` of a point of the other (any cyclic
+            shift); an orbit found with several multiples of its period is reported
+            once, with its minimal period.
+        chunk_size: seeds per batch (>= 1).
+        progress: show a progress bar (tqdm, with time left); ``False`` silences it.
+        trajectory_samples: samples per forcing period of each orbit's stored
+            trajectory (:attr:`PeriodicOrbit.trajectory`, used by
+            :func:`jaxgear.plotting.plot_orbit` without integrating); 0 stores none.
+    Returns:
+        :class:`OrbitSearch`: ``orbits`` (distinct, sorted by period), ``shots``
+        ``{k: ShootResult}`` with leading shape ``(n_k,)``, ``status_counts``, the
+        seeds, the parameter set and the settings.
+    Raises:
+        ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
+            options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
+    """
+    start = time.perf_counter()
+    if isinstance(seeds, Mapping):
+        groups = {check_period(k): np.asarray(v, dtype=float) for k, v in seeds.items()}
+    else:
+        ks = [period] if isinstance(period, (int, np.integer)) else list(period)
+        if not ks:
+            raise ValueError("period must name at least one k >= 1.")
+        groups = {check_period(k): np.asarray(seeds, dtype=float) for k in ks}
+    if not groups:
+        raise ValueError("no seeds: give an (n, dim) array or a non-empty mapping {k: (n_k, dim)}.")
+    for k, X in groups.items():
+        if X.ndim != 2 or X.shape[1] != system.dim or len(X) == 0:
+            raise ValueError(f"seeds for period {k} must have shape (n, {system.dim}) with n >= 1 "
+                             f"({', '.join(system.state_names)}), got {X.shape}.")
+        check_state_shape(system, X)
+    check_newton_options(tol, max_iter, period_tol, max_norm)
+    check_int(chunk_size, "chunk_size", 1)
+    check_int(trajectory_samples, "trajectory_samples", 0)
+    check_number(dedup_tol, "dedup_tol", 0, strict_min=True)
+    integrator = resolve_integrator(integrator)
+    first = next(iter(groups.values()))[0]
+    check_system(system, params, first)
+
+    t0_arr = jnp.asarray(t0, jnp.float64)
+    shots: dict[int, ShootResult] = {}
+    found: list[PeriodicOrbit] = []
+    bar = progress_bar(sum(len(X) for X in groups.values()), "shooting", progress, unit="seed")
+    try:
+        for k, X in sorted(groups.items()):  # one jit per distinct k (and chunk shape)
+            size = min(int(chunk_size), len(X))
+            parts = []
+            for a, b in chunks(len(X), size):
+                res = shoot_kernel(system, params, jnp.asarray(pad_rows(X[a:b], size)), t0_arr, k, integrator,
+                                    float(tol), int(max_iter), float(max_norm), float(period_tol))
+                parts.append([np.asarray(f)[: b - a] for f in res])
+                bar.update(b - a)
+            res = ShootResult(*[np.concatenate(f, axis=0) for f in zip(*parts)])
+            shots[k] = res
+            found.extend(_orbits_from_shots(res, dedup_tol, float(t0)))
+    finally:
+        bar.close()
+    orbits = _with_trajectories(system, params, _merge_orbits(found, dedup_tol), int(trajectory_samples), integrator)
+    counts = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
+                            NEWTON_STATUSES)
+    settings: dict[str, Any] = dict(
+        periods=sorted(groups), t0=float(t0), integrator=integrator.to_dict(), tol=float(tol), max_iter=int(max_iter), max_norm=float(max_norm),
+        period_tol=float(period_tol), dedup_tol=float(dedup_tol), chunk_size=int(chunk_size),
+        trajectory_samples=int(trajectory_samples),
+    )
+    params_dict = params_to_dict(params)
+    return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
+                       state_names=tuple(system.state_names), section_index=system.section_index,
+                       params=params_dict, settings=settings, version=__version__,
+                       runtime_s=time.perf_counter() - start)
+

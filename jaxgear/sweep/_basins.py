@@ -1,0 +1,308 @@
+"""Basin shares across a parameter: the global analysis at every value, attractors matched.
+
+At each value :func:`~jaxgear.analyze_global` runs on the grid; the attractors of
+neighbouring values are matched by the Hausdorff distance of their stroboscopic point
+sets (:func:`jaxgear._matching.match_attractors`, the idea of global continuation of
+attractors), so each keeps a global identity; shares per value and global attractor,
+plus the sink.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._batching import progress_bar
+from .._cells import CellGrid
+from .._checks import check_number
+from .._codec import array_field, result_type
+from .._format import format_table
+from .._matching import match_attractors
+from .._params import param_targets, params_to_dict, with_param
+from .._system import ForcedSystem
+from .._version import __version__
+from ..analysis import AbstractGlobalMethod, analyze_global, default_method, method_from_name
+from ._bifurcation import read_only
+from ._checkpoint import Checkpoint
+from ._classify import period_label
+from ._values import check_values, coord_name, sorted_values
+
+__all__ = ["BasinSweep", "basin_sweep", "match_across_values"]
+
+
+def match_across_values(results, match_tol: float) -> list[np.ndarray]:
+    """Global id of every attractor of every value: ``[ (A_i,) int array ]``.
+
+    Attractors of value i are matched to those of value i-1
+    (:func:`jaxgear._matching.match_attractors`, pairs farther than ``match_tol`` not
+    matched); an unmatched attractor gets a new global id (numbered in order of first
+    appearance).
+    """
+    out, prev, nxt = [], [], 0  # prev: [(gid, points, period)]
+    for r in results:
+        cur = [(np.asarray(a.points), a.period) for a in r.attractors]
+        j = match_attractors([(p, k) for _, p, k in prev], cur, match_tol)
+        gid = np.array([prev[i][0] if i >= 0 else -1 for i in j], dtype=np.int64)
+        for i in range(len(cur)):
+            if gid[i] < 0:
+                gid[i] = nxt
+                nxt += 1
+        out.append(gid)
+        prev = [(int(g), p, k) for g, (p, k) in zip(gid, cur)]
+    return out
+
+
+@result_type
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class BasinSweep:
+    """Result of :func:`basin_sweep`: basin shares of globally identified attractors.
+
+    Attributes:
+        param, fields, values ``(V,)``.
+        shares: ``(V, G)`` share of the grid in the domain of global attractor g at each
+            value (0 where it does not exist); sink_share, unresolved_share: ``(V,)``.
+        period: ``(V, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
+        points: ``(V, G, K, dim)`` its stroboscopic points (NaN padded), n_points ``(V, G)``.
+        labels: ``(V, *grid.counts)`` int16: global attractor id of every cell, -1 sink,
+            -2 unresolved.
+        grid, method, match_tol, system, state_names, params (base), settings, version.
+    """
+
+    param: str
+    fields: tuple[str, ...]
+    values: np.ndarray = array_field(lambda b: (b.param_coord,))
+    shares: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
+    sink_share: np.ndarray = array_field(lambda b: (b.param_coord,))
+    unresolved_share: np.ndarray = array_field(lambda b: (b.param_coord,))
+    period: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
+    points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor", "point", "state"))
+    n_points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
+    labels: np.ndarray = array_field(lambda b: (b.param_coord,) + tuple(b.grid.axis_names))
+    grid: CellGrid = None  # type: ignore[assignment]
+    method: str = ""
+    match_tol: float = 0.0
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+
+    def __post_init__(self):
+        for f in ("values", "shares", "sink_share", "unresolved_share", "period", "points", "n_points", "labels"):
+            object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def n_attractors(self) -> int:
+        """Number of global attractors."""
+        return int(self.shares.shape[1])
+
+    @property
+    def present(self) -> np.ndarray:
+        """``(V, G)`` bool: the attractor exists at the value."""
+        return self.period >= 0
+
+    def attractor_label(self, g: int) -> str:
+        """``"P-4"`` or ``"P-4/P-8"`` when its period changes along the sweep."""
+        ks = []
+        for k in self.period[:, g].tolist():
+            if k >= 0 and (not ks or ks[-1] != k):
+                ks.append(k)
+        return "/".join(period_label(k) for k in ks) or "-"
+
+    def events(self, share_step: float = 0.05) -> list[dict]:
+        """Where attractors appear, vanish, change period, or their share moves by at least
+        ``share_step`` between neighbouring values."""
+        ev = []
+        pres = self.present
+        for g in range(self.n_attractors):
+            if pres[0, g]:
+                ev.append(dict(index=0, value=float(self.values[0]), id=g, event="present",
+                               detail=f"{period_label(int(self.period[0, g]))}, share {100 * self.shares[0, g]:.1f} %"))
+        for i in range(1, len(self.values)):
+            for g in range(self.n_attractors):
+                a, b = pres[i - 1, g], pres[i, g]
+                e = None
+                if b and not a:
+                    e = ("appears", f"{period_label(int(self.period[i, g]))}, share {100 * self.shares[i, g]:.1f} %")
+                elif a and not b:
+                    e = ("vanishes", f"was {period_label(int(self.period[i - 1, g]))}, share "
+                                     f"{100 * self.shares[i - 1, g]:.1f} %")
+                elif a and b and self.period[i, g] != self.period[i - 1, g]:
+                    e = ("period change", f"{period_label(int(self.period[i - 1, g]))} -> {period_label(int(self.period[i, g]))}")
+                elif a and b and abs(self.shares[i, g] - self.shares[i - 1, g]) >= share_step:
+                    e = ("share change", f"{100 * self.shares[i - 1, g]:.1f} % -> {100 * self.shares[i, g]:.1f} %")
+                if e:
+                    ev.append(dict(index=i, value=float(self.values[i]), id=g, event=e[0], detail=e[1]))
+        return ev
+
+    def table(self, share_step: float = 0.05) -> str:
+        """Printable table of the events (appear / vanish / period change / share change)."""
+        rows = [(f"{e['value']:.5g}", e["id"], self.attractor_label(e["id"]), e["event"], e["detail"])
+                for e in self.events(share_step)]
+        return format_table(rows, (self.param, "attractor", "label", "event", "detail"))
+
+    def shares_table(self) -> str:
+        """Shares (percent) of every global attractor and the sink at every value."""
+        unres = bool(np.any(self.unresolved_share > 0))
+        head = ((self.param,) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors))
+                + ("sink",) + (("unresolved",) if unres else ()))
+        rows = [(f"{v:.5g}",) + tuple(f"{100 * s:.1f}" if self.present[i, g] else "-"
+                                      for g, s in enumerate(self.shares[i])) + (f"{100 * self.sink_share[i]:.1f}",)
+                + ((f"{100 * self.unresolved_share[i]:.1f}",) if unres else ())
+                for i, v in enumerate(self.values)]
+        return format_table(rows, head)
+
+    def summary(self) -> dict[str, Any]:
+        return dict(kind="basins", param=self.param, fields=list(self.fields), values=self.values.tolist(),
+                    method=self.method, grid=self.grid.to_dict(), match_tol=self.match_tol, system=self.system,
+                    params=self.params, settings=self.settings, version=self.version,
+                    attractors=[dict(id=g, label=self.attractor_label(g),
+                                     first=float(self.values[self.present[:, g]][0]),
+                                     last=float(self.values[self.present[:, g]][-1]),
+                                     max_share=float(self.shares[:, g].max())) for g in range(self.n_attractors)],
+                    shares=self.shares.tolist(), sink_share=self.sink_share.tolist(),
+                    unresolved_share=self.unresolved_share.tolist(), events=self.events())
+
+    @property
+    def param_coord(self) -> str:
+        """Name of the parameter's coordinate in the saved file."""
+        return coord_name(self.param, list(self.state_names) + list(self.grid.axis_names)
+                          + ["attractor", "point", "state"])
+
+    def _coords(self) -> dict:
+        g = self.grid
+        c = self.param_coord
+        coords = {c: (c, np.asarray(self.values), {"long_name": self.param, "sets": ",".join(self.fields)}),
+                  "attractor": ("attractor", np.arange(self.n_attractors)),
+                  "state": ("state", list(self.state_names))}
+        for j, name in enumerate(g.axis_names):
+            coords[name] = (name, g.axis_centres(j), {"long_name": f"cell centre {name}"})
+        return coords
+
+    def _attrs(self) -> dict:
+        return dict(title="jaxgear basin shares across a parameter",
+                    labels_meaning="global attractor id of each cell; -1 sink, -2 unresolved")
+
+    def save(self, path):
+        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
+        return save_result(self, path)
+
+
+def _analyze_value(system, params, grid, method):
+    """The global analysis at one parameter value (a hook for progress and tests)."""
+    return analyze_global(system, params, grid, method, progress=False)
+
+
+def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
+                method: AbstractGlobalMethod | str | None = None, match_tol: float | None = None,
+                progress: bool = True, out=None, restart: bool = False) -> BasinSweep:
+    """Basin shares across a parameter, attractors continued from value to value.
+
+    At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
+    the method's grid; for the gear model the paper's region D). The attractors of
+    neighbouring values are matched by the Hausdorff distance of their stroboscopic
+    point sets (cyclic-shift invariant, the idea of global continuation of attractors):
+    greedily, closest pairs first, pairs farther than ``match_tol`` not matched (default:
+    5 % of the diagonal of the grid's box over its gridded axes). An attractor that
+    appears gets a new global id; one that vanishes keeps its id (it is not matched
+    again later).
+
+    Args:
+        param, values: as in :func:`~jaxgear.bifurcation_diagram`.
+        method: a global-analysis method object (default :class:`~jaxgear.Direct`) or
+            its name; it carries every option (integrator, ``max_period``, ...).
+        out: kill-and-resume folder: each value's :class:`~jaxgear.GlobalResult` is saved
+            to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``.
+    Returns:
+        :class:`BasinSweep`.
+    """
+    from .._io import load
+    from .._model import REDUCED
+    from .._presets import paper_params
+
+    if system is None:
+        system = REDUCED
+    if params is None:
+        if system is not REDUCED:
+            raise ValueError("pass the parameters of your system.")
+        params = paper_params()
+    if method is None:
+        method = default_method()
+    elif isinstance(method, str):
+        method = method_from_name(method)
+    elif not isinstance(method, AbstractGlobalMethod):
+        raise ValueError(f"method must be a global-analysis method object or name, got {type(method).__name__}.")
+    grid = method.default_grid(system) if grid is None else grid
+    if not isinstance(grid, CellGrid):
+        raise ValueError(f"grid must be a CellGrid, got {type(grid).__name__}.")
+    if grid.dim != system.dim:
+        raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
+    method.check(system, grid)
+    param_targets(params, param)
+    vals = sorted_values(values, param)
+    check_values(system, params, (param,), vals[:, None])
+    if match_tol is None:
+        match_tol = 0.05 * float(np.linalg.norm(np.asarray(grid.upper) - np.asarray(grid.lower)))
+    check_number(match_tol, "match_tol", 0, strict_min=True)
+    settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
+                    params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
+                    match_tol=float(match_tol), version=__version__)
+    ck = Checkpoint(out, "basins", settings, restart)
+    results = []
+    bar = progress_bar(len(vals), f"basins {param}", progress, unit="value")
+    for i, v in enumerate(vals):
+        part = f"value_{i:05d}.nc"
+        r = ck.load_result(part, load) if ck.has(part) else None
+        if r is None:
+            r = _analyze_value(system, with_param(params, param, v), grid, method)
+            if ck.dir is not None:
+                r.save(ck.path(part))
+        results.append(r)
+        bar.update(1)
+    bar.close()
+    sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
+                             float(match_tol), system, params_to_dict(params),
+                             {k: v for k, v in settings.items()
+                              if k not in ("values", "params", "system", "param", "grid", "match_tol")},
+                             __version__)
+    if out is not None:
+        sweep.save(Path(out) / "basins.nc")
+    return sweep
+
+
+def _assemble_basins(results, param, fields, vals, grid, method, match_tol, system, params_dict, settings, version):
+    gids = match_across_values(results, match_tol)
+    G = int(max([g.max(initial=-1) for g in gids] + [-1])) + 1
+    V = len(vals)
+    K = max([len(a.points) for r in results for a in r.attractors] + [1])
+    dim = system.dim
+    shares = np.zeros((V, G))
+    period = np.full((V, G), -1, dtype=np.int64)
+    points = np.full((V, G, K, dim), np.nan)
+    n_points = np.zeros((V, G), dtype=np.int64)
+    labels = np.empty((V, *grid.counts), dtype=np.int16)
+    sink = np.empty(V)
+    unres = np.empty(V)
+    for i, (r, g) in enumerate(zip(results, gids)):
+        lut = np.full(len(r.attractors) + 2, -1, dtype=np.int64)  # index local id + 2
+        lut[0], lut[1] = -2, -1
+        for a, gg in zip(r.attractors, g):
+            shares[i, gg] = a.share
+            period[i, gg] = a.period
+            pts = np.asarray(a.points)
+            points[i, gg, : len(pts)] = pts
+            n_points[i, gg] = len(pts)
+            lut[a.id + 2] = gg
+        labels[i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
+        sink[i] = r.n_sink / r.n_cells
+        unres[i] = r.n_unresolved / r.n_cells
+    return BasinSweep(param=param, fields=tuple(fields), values=vals, shares=shares, sink_share=sink,
+                      unresolved_share=unres, period=period, points=points, n_points=n_points, labels=labels,
+                      grid=grid, method=method, match_tol=match_tol, system=system.name,
+                      state_names=tuple(system.state_names), params=params_dict, settings=settings, version=version)

@@ -1,0 +1,350 @@
+"""Bifurcation diagrams: stroboscopic points against one parameter, classified by period.
+
+From several initial states per value, a transient is dropped, stroboscopic points are
+recorded and each (value, start) is classified as P-k (recurrence on the stroboscopic
+map, paper §3), aperiodic (no period up to ``max_period``: quasi-periodic or chaotic) or
+escaped. Values and starts are batched (``direction="independent"``), or the state is
+carried from one value to the next (``"up"``/``"down"``/``"both"``: a ``lax.scan`` over
+values), so hysteresis shows; ``"all"`` does both kinds.
+
+Parameters are named by a field of the parameter pytree or an alias (``b``,
+``kappa_amp``, ``e_amp``: both meshes) and set with :func:`jaxgear.with_param`; values
+enter the compiled kernels as array leaves, so nothing is recompiled per value. With
+``out=DIR`` every finished block is saved and an interrupted sweep resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._batching import progress_bar
+from .._checks import check_choice, check_int, check_number
+from .._codec import array_field, result_type
+from .._format import format_table
+from .._params import param_targets, params_to_dict, with_param
+from .._system import ForcedSystem, check_system
+from .._version import __version__
+from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ._checkpoint import Checkpoint
+from ._classify import ESCAPED, classify_sequences, group_starts, label_order, period_label
+from ._kernels import independent_points, sequential_points
+from ._values import check_starts, check_values, coord_name, sorted_values
+
+__all__ = ["BifurcationDiagram", "bifurcation_diagram", "DIRECTIONS", "check_common", "read_only"]
+
+DIRECTIONS = ("independent", "up", "down", "both", "all")
+
+
+def read_only(a) -> np.ndarray:
+    """``a`` as a numpy array that cannot be written to (results are immutable)."""
+    a = np.asarray(a)
+    a.setflags(write=False)
+    return a
+
+
+@result_type
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class BifurcationDiagram:
+    """Result of :func:`bifurcation_diagram` (a one-parameter sweep).
+
+    Attributes:
+        param: the swept name as given (a field or an alias); fields: the fields it sets.
+        values: ``(V,)`` parameter values, increasing.
+        directions: which sweeps: ``("independent",)``, ``("up",)``, ``("down",)``,
+            ``("up", "down")`` or ``("independent", "up", "down")``.
+        starts: ``(S, dim)`` initial states.
+        points: ``(D, V, S, R, dim)`` recorded stroboscopic points (state at forcing phase
+            0 of R successive periods after the transient), per direction, value, start.
+        period: ``(D, V, S)`` minimal period k of P-k, ``APERIODIC`` (0) or ``ESCAPED`` (-1).
+        attractor: ``(D, V, S)`` id of the distinct attractor reached, numbered per
+            (direction, value) in order of first start; -1 escaped.
+        system, state_names, params (the base parameter set, canonical names), settings
+        (transient, record, integrator, tolerances, ...), version.
+    """
+
+    param: str
+    fields: tuple[str, ...]
+    values: np.ndarray = array_field(lambda d: (d.param_coord,))
+    directions: tuple[str, ...] = ()
+    starts: np.ndarray = array_field(("start", "state"))
+    points: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start", "record", "state"))
+    period: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
+    attractor: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+
+    def __post_init__(self):
+        for f in ("values", "starts", "points", "period", "attractor"):
+            object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def param_coord(self) -> str:
+        """Name of the parameter's coordinate in the saved file (the parameter's name
+        unless it clashes with another dimension)."""
+        return coord_name(self.param, list(self.state_names) + ["direction", "start", "record", "state"])
+
+    def _d(self, direction: str | None) -> int:
+        if direction is None:
+            return 0
+        if direction not in self.directions:
+            raise ValueError(f"direction {direction!r} is not in this diagram; it has {self.directions}.")
+        return self.directions.index(direction)
+
+    def attractors_at(self, index: int, direction: str | None = None) -> list[dict]:
+        """Distinct attractors at ``values[index]``: label, period, number of starts, one point."""
+        d = self._d(direction)
+        ids, per, pts = self.attractor[d, index], self.period[d, index], self.points[d, index]
+        out = []
+        for a in range(int(ids.max(initial=-1)) + 1):
+            lanes = np.nonzero(ids == a)[0]
+            k = int(per[lanes[0]])
+            out.append(dict(id=a, period=k, label=period_label(k), starts=int(len(lanes)),
+                            point=pts[lanes[0], -1].tolist()))
+        n_esc = int((ids < 0).sum())
+        if n_esc:
+            out.append(dict(id=-1, period=ESCAPED, label="escaped", starts=n_esc, point=None))
+        return out
+
+    def transitions(self, direction: str | None = None) -> list[dict]:
+        """Where the set of attractor labels changes: ``[{before, after, from, to}, ...]``."""
+        d = self._d(direction)
+        sets = [tuple(sorted({a["label"] for a in self.attractors_at(i, self.directions[d])},
+                             key=label_order)) for i in range(len(self.values))]
+        order = range(len(self.values)) if self.directions[d] != "down" else range(len(self.values) - 1, -1, -1)
+        order = list(order)
+        out = []
+        for i, j in zip(order[:-1], order[1:]):
+            if sets[i] != sets[j]:
+                out.append({"before": float(self.values[i]), "after": float(self.values[j]),
+                            "from": list(sets[i]), "to": list(sets[j])})
+        return out
+
+    def _attractor_sets(self, d: int, i: int) -> list[tuple[int, np.ndarray]]:
+        ids, per, pts = self.attractor[d, i], self.period[d, i], self.points[d, i]
+        out = []
+        for a in range(int(ids.max(initial=-1)) + 1):
+            s = int(np.argmax(ids == a))
+            k = int(per[s])
+            out.append((k, pts[s, -k:] if k > 0 else pts[s, -1:]))
+        if np.any(ids < 0):
+            out.append((ESCAPED, np.zeros((0, pts.shape[-1]))))
+        return out
+
+    def differs(self, a: str = "up", b: str = "down") -> np.ndarray:
+        """``(V,)`` bool: the sweeps ``a`` and ``b`` end on different sets of attractors at
+        each value (same periods and point sets within ``merge_tol`` count as equal);
+        for ``"up"`` and ``"down"`` this marks the hysteresis."""
+        da, db = self._d(a), self._d(b)
+        tol = float(self.settings.get("merge_tol", 1e-3))
+        out = np.zeros(len(self.values), dtype=bool)
+        for i in range(len(self.values)):
+            A, B = self._attractor_sets(da, i), self._attractor_sets(db, i)
+
+            def same(x, y):
+                if x[0] != y[0]:
+                    return False
+                if x[0] <= 0:
+                    return True  # aperiodic sets, escape
+                scale = 1.0 + max(np.abs(x[1]).max(), np.abs(y[1]).max())
+                d = np.linalg.norm(x[1][:, None] - y[1][None], axis=-1)
+                return max(d.min(axis=0).max(), d.min(axis=1).max()) <= tol * scale
+
+            out[i] = not (all(any(same(x, y) for y in B) for x in A) and all(any(same(y, x) for x in A) for y in B))
+        return out
+
+    def table(self, full: bool = False) -> str:
+        """Printable table: runs of values with the same attractors (``full``: every value),
+        each attractor with its share of the starts."""
+        rows = []
+        S = len(self.starts)
+        for d, name in enumerate(self.directions):
+            runs = []
+            for i in range(len(self.values)):
+                atts = self.attractors_at(i, name)
+                labels = tuple(sorted({a["label"] for a in atts}, key=label_order))
+                cnt = {}
+                for a in atts:
+                    cnt[a["label"]] = cnt.get(a["label"], 0) + a["starts"]
+                if runs and not full and runs[-1][1] == labels:
+                    runs[-1][0].append(i)
+                    for k, c in cnt.items():
+                        runs[-1][2][k] += c
+                else:
+                    runs.append(([i], labels, dict(cnt)))
+            for idx, labels, cnt in runs:
+                lo, hi = self.values[idx[0]], self.values[idx[-1]]
+                rng = f"{lo:.5g}" if len(idx) == 1 else f"{lo:.5g} .. {hi:.5g}"
+                text = ", ".join(f"{lab} ({100 * cnt[lab] / (S * len(idx)):.0f} %)" for lab in labels)
+                rows.append((rng, len(idx), name, text))
+        head = (f"{self.param}", "values", "sweep", f"attractors (share of {S} starts)")
+        return format_table(rows, head)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able summary: settings, parameters and the attractors at every value."""
+        return dict(
+            kind="bifurcation", param=self.param, fields=list(self.fields), values=self.values.tolist(),
+            directions=list(self.directions), n_starts=int(len(self.starts)), system=self.system,
+            state_names=list(self.state_names), params=self.params, settings=self.settings, version=self.version,
+            transitions={d: self.transitions(d) for d in self.directions},
+            hysteresis=(self.values[self.differs()].tolist()
+                        if "up" in self.directions and "down" in self.directions else None),
+            attractors={d: [self.attractors_at(i, d) for i in range(len(self.values))] for d in self.directions},
+        )
+
+    def _coords(self) -> dict:
+        return {"direction": ("direction", list(self.directions)),
+                self.param_coord: (self.param_coord, np.asarray(self.values),
+                                   {"long_name": self.param, "sets": ",".join(self.fields)}),
+                "state": ("state", list(self.state_names))}
+
+    def _attrs(self) -> dict:
+        return dict(title="jaxgear bifurcation diagram",
+                    units="dimensionless: lengths in b_c, time in 1/omega_n (model document §3) for the gear models")
+
+    def save(self, path):
+        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
+        return save_result(self, path)
+
+
+def check_common(system, params, transient, record, max_period, tol, chunk_size):
+    """Defaults (the gear model and the paper preset) and the checks shared by the sweeps."""
+    from .._model import REDUCED
+    from .._presets import paper_params
+
+    if system is None:
+        system = REDUCED
+    if params is None:
+        if system is not REDUCED:
+            raise ValueError("pass the parameters of your system.")
+        params = paper_params()
+    check_int(transient, "transient", 0)
+    check_int(max_period, "max_period", 1)
+    check_int(chunk_size, "chunk_size", 1)
+    check_int(record, "record", 2 * int(max_period) + 1)
+    check_number(tol, "tol", 0, strict_min=True)
+    return system, params
+
+
+def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values, x0s, *, transient: int = 400,
+                        record: int = 64, direction: str = "independent", integrator: AbstractIntegrator | None = None,
+                        max_period: int = 16, tol: float = 1e-6, merge_tol: float = 1e-3,
+                        escape_bound: float = 1e6, chunk_size: int = 1024, progress: bool = True,
+                        out=None, restart: bool = False) -> BifurcationDiagram:
+    """Bifurcation diagram: stroboscopic points against one parameter, classified by period.
+
+    For each value of ``param`` and each initial state: ``transient`` forcing periods,
+    then ``record`` stroboscopic points (paper §3: the state at forcing phase 0 of
+    successive periods), classified as P-k (the smallest ``k <= max_period`` with
+    ``|x_j - x_(j-k)| <= tol (1 + |x_j|)`` over the last k+1 points), aperiodic (none:
+    quasi-periodic, chaotic or a slow transient) or escaped (non-finite, or a norm above
+    ``escape_bound``).
+
+    Args:
+        system, params: the :class:`ForcedSystem` and its parameter pytree (defaults: the
+            reduced gear model and the ``paper`` preset).
+        param: a field of ``params`` (for :class:`GearParams` any canonical name but
+            ``N``: ``b_sp``, ``kappa_sp_amp``, ``Omega``, ``c_sp``, ``f_D``, ``e_sp_amp``...)
+            or an alias (``b``, ``kappa_amp``, ``e_amp``: both meshes together);
+            per-planet fields are set for all planets.
+        values: the parameter values (sorted increasing, distinct).
+        x0s: initial states ``(S, dim)`` (or one ``(dim,)``).
+        direction: ``"independent"`` — every (value, start) from ``x0s``, all batched;
+            ``"up"`` — values in increasing order, each value starting from the state the
+            previous value ended in (the first from ``x0s``), so a branch is followed
+            until it vanishes; ``"down"`` — the same in decreasing order from ``x0s``;
+            ``"both"`` — the up and the down sweep, each from ``x0s`` (run together);
+            ``"all"`` — independent, up and down. A lane of a sweep that escapes
+            restarts from its ``x0`` at the next value.
+        integrator: default :func:`~jaxgear.integrate.default_integrator` (for a fixed-step
+            integrator the step is ``h = T/steps`` per value).
+        max_period, tol: period detection; merge_tol: relative distance under which two
+            starts reached the same attractor.
+        chunk_size: trajectories per compiled batch (values per block = chunk_size // S);
+            also the block written to ``out``.
+        out: folder for kill-and-resume (``DIR/parts``, ``DIR/manifest.json``) and the
+            final ``DIR/bifurcation.nc``; restart: discard a folder of other settings.
+    Returns:
+        :class:`BifurcationDiagram`.
+    """
+    system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
+    check_choice(direction, "direction", DIRECTIONS)
+    param_targets(params, param)
+    vals = sorted_values(values, param)
+    X0 = check_starts(system, x0s)
+    check_system(system, with_param(params, param, vals[0]), X0[0])
+    check_values(system, params, (param,), vals[:, None])
+    integrator = resolve_integrator(integrator)
+    check_number(merge_tol, "merge_tol", 0, strict_min=True)
+    check_number(escape_bound, "escape_bound", 0, strict_min=True)
+    S, V = len(X0), len(vals)
+    # passes: (name of its parts, directions it computes together)
+    passes = {"independent": [("independent", ("independent",))], "up": [("up", ("up",))],
+              "down": [("down", ("down",))], "both": [("both", ("up", "down"))],
+              "all": [("independent", ("independent",)), ("both", ("up", "down"))]}[direction]
+    dirs = tuple(d for _, ds in passes for d in ds)
+    blocks = {}
+    for name, ds in passes:
+        if name == "independent":
+            blocks[name] = max(1, min(V, int(chunk_size) // S))
+        else:  # sequential: the block only sets how often the sweep is saved
+            blocks[name] = max(1, min(V, int(chunk_size) // (S * len(ds)), -(-V // 8)))
+    settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
+                    starts=X0.tolist(), params=params_to_dict(params), transient=int(transient), record=int(record),
+                    direction=direction, integrator=integrator.to_dict(), max_period=int(max_period),
+                    tol=float(tol), merge_tol=float(merge_tol), escape_bound=float(escape_bound),
+                    block_values=blocks, version=__version__)
+    ck = Checkpoint(out, "bifurcation", settings, restart)
+    names = (param,)
+    R = int(record)
+    points = np.empty((len(dirs), V, S, R, system.dim))
+    bar = progress_bar(len(dirs) * V, f"sweep {param}", progress, unit="value")
+    jX0 = jnp.asarray(X0)
+    for name, ds in passes:
+        B, nd = blocks[name], len(ds)
+        rows = [dirs.index(d) for d in ds]
+        orders = [np.arange(V)[::-1] if d == "down" else np.arange(V) for d in ds]
+        carry = np.broadcast_to(X0, (nd, S, system.dim)).copy()
+        for bi, a in enumerate(range(0, V, B)):
+            b = min(a + B, V)
+            part = f"{name}_{bi:05d}.npz"
+            z = ck.load(part) if ck.has(part) else None
+            if z is not None:
+                pts, carry = z["points"], z["carry"]
+            else:
+                if name == "independent":
+                    pts = independent_points(system, params, names, vals[a:b, None], B, jX0, int(transient), R,
+                                             integrator)[:, None]
+                else:
+                    seq = np.stack([vals[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
+                    pts, carry = sequential_points(system, params, names, seq, B, jX0, carry, int(transient), R,
+                                                   integrator, float(escape_bound))
+                ck.save(part, points=pts, carry=carry)
+            for j in range(nd):
+                points[rows[j], orders[j][a:b]] = pts[:, j]
+            bar.update(nd * (b - a))
+    bar.close()
+    period = classify_sequences(points, int(max_period), float(tol), float(escape_bound))
+    M = int(max_period)
+    attractor = group_starts(points[..., -M:, :], period, float(merge_tol))
+    diagram = BifurcationDiagram(
+        param=param, fields=param_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
+        period=period, attractor=attractor, system=system.name, state_names=tuple(system.state_names),
+        params=params_to_dict(params), settings={k: v for k, v in settings.items()
+                                               if k not in ("values", "starts", "params", "system", "param")},
+        version=__version__,
+    )
+    if out is not None:
+        diagram.save(Path(out) / "bifurcation.nc")
+    return diagram
+
+

@@ -1,0 +1,89 @@
+"""Compiled kernels of the sweeps: many parameter values x many starts in one batch.
+
+States of a block are kept as ``(dim, B, S)``: ``B`` parameter values, ``S`` starts per
+value. Values are array leaves of the parameter pytree (nothing is recompiled per value)
+and the integrator object advances each value's ``(dim, S)`` batch under ``vmap``; when
+``Omega`` is swept every value has its own period and step.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._batching import pad_rows
+from ._values import apply_values
+
+__all__ = ["advance_values", "record_values", "independent_points", "sequential_points"]
+
+
+def advance_values(system, params, names, V, Y, periods: int, integrator):
+    """Advance ``Y (dim, B, S)`` by ``periods`` forcing periods, value j with parameters ``V[j]``."""
+
+    def one(v, y):
+        return integrator.advance(system, apply_values(params, names, v), y, jnp.asarray(0.0), periods)
+
+    return jax.vmap(one, in_axes=(0, 1), out_axes=1)(V, Y)
+
+
+def record_values(system, params, names, V, Y, transient, record, integrator):
+    """``transient`` periods, then ``record`` stroboscopic points: ``(B, S, R, dim)``."""
+    if transient > 0:
+        Y = advance_values(system, params, names, V, Y, transient, integrator)
+
+    def rec(Y, _):
+        Y = advance_values(system, params, names, V, Y, 1, integrator)
+        return Y, Y
+
+    _, Ys = jax.lax.scan(rec, Y, None, length=record)  # (R, dim, B, S)
+    return jnp.transpose(Ys, (2, 3, 0, 1))
+
+
+@eqx.filter_jit
+def _independent_kernel(system, params, names, V, X0, transient, record, integrator):
+    """Every (value, start) pair: ``V (B, m)``, ``X0 (S, dim)`` -> points ``(B, S, R, dim)``."""
+    Y = jnp.broadcast_to(X0.T[:, None, :], (X0.shape[1], V.shape[0], X0.shape[0]))
+    return record_values(system, params, names, V, Y, transient, record, integrator)
+
+
+@eqx.filter_jit
+def _scan_kernel(system, params, names, V, Y0, X0, transient, record, integrator, bound):
+    """Values in sequence with the state carried, for ``nd`` sweeps at once (up and down).
+
+    ``V (n, nd, m)``: at step i sweep d runs value ``V[i, d]``; ``Y0 (nd, S, dim)`` the
+    carried states. Returns points ``(n, nd, S, R, dim)`` and the state carried out of
+    each step ``(n, nd, S, dim)``: the last recorded point, or the start ``X0`` where the
+    lane escaped (so one unbounded value does not end the sweep for that start).
+    """
+
+    def body(Y, v):
+        pts = record_values(system, params, names, v, jnp.transpose(Y, (2, 0, 1)), transient, record, integrator)
+        last = pts[:, :, -1]
+        fin = jnp.all(jnp.isfinite(last), axis=-1)
+        ok = fin & (jnp.linalg.norm(jnp.where(fin[..., None], last, 0.0), axis=-1) <= bound)
+        nxt = jnp.where(ok[..., None], last, X0[None])
+        return nxt, (pts, nxt)
+
+    _, (pts, carry) = jax.lax.scan(body, Y0, V)
+    return pts, carry
+
+
+def independent_points(system, params, names, Vrows, size, X0, transient, record, integrator) -> np.ndarray:
+    """One block of parameter rows ``Vrows (n, m)``, every start from ``X0``, padded to
+    ``size`` rows (one compiled shape). Returns points ``(n, S, R, dim)``."""
+    n = len(Vrows)
+    V = jnp.asarray(pad_rows(np.asarray(Vrows, dtype=float), size))
+    pts = _independent_kernel(system, params, names, V, X0, transient, record, integrator)
+    return np.asarray(pts)[:n]
+
+
+def sequential_points(system, params, names, seq, size, X0, carry, transient, record, integrator, bound):
+    """One block of a sequential sweep: ``seq (n, nd, m)`` values in order, state carried
+    from ``carry (nd, S, dim)``; padded to ``size`` steps. Returns points ``(n, nd, S, R, dim)``
+    and the carried state after the block's last value ``(nd, S, dim)``."""
+    n = len(seq)
+    V = jnp.asarray(pad_rows(np.asarray(seq, dtype=float), size))
+    pts, car = _scan_kernel(system, params, names, V, jnp.asarray(carry), X0, transient, record, integrator, bound)
+    return np.asarray(pts)[:n], np.asarray(car)[n - 1]

@@ -1,0 +1,190 @@
+"""Two-parameter maps: the period reached from a fixed start, or the number of attractors."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._batching import progress_bar
+from .._checks import check_choice
+from .._codec import array_field, result_type
+from .._format import format_table
+from .._params import param_targets, params_to_dict
+from .._system import ForcedSystem, check_system
+from .._version import __version__
+from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ._bifurcation import check_common, read_only
+from ._checkpoint import Checkpoint
+from ._classify import classify_sequences, group_starts, label_order, period_label
+from ._kernels import independent_points
+from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
+
+__all__ = ["ParameterMap", "parameter_map"]
+
+
+@result_type
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ParameterMap:
+    """Result of :func:`parameter_map` (a grid of two parameters).
+
+    Attributes:
+        param_x, fields_x, values_x ``(nx,)``; param_y, fields_y, values_y ``(ny,)``.
+        starts: ``(S, dim)`` initial states (the same for every grid point).
+        quantity: ``"period"`` or ``"n_attractors"`` (what :attr:`data` and the figure show).
+        period: ``(ny, nx, S)`` period code reached from each start (k, 0 aperiodic, -1 escaped).
+        attractor: ``(ny, nx, S)`` distinct-attractor id per grid point (-1 escaped).
+        n_attractors: ``(ny, nx)`` number of distinct attractors reached (escape not counted).
+        last_point: ``(ny, nx, S, dim)`` the last recorded stroboscopic point.
+    """
+
+    param_x: str
+    fields_x: tuple[str, ...]
+    values_x: np.ndarray = array_field(lambda m: (m.coords_xy[0],))
+    param_y: str = ""
+    fields_y: tuple[str, ...] = ()
+    values_y: np.ndarray = array_field(lambda m: (m.coords_xy[1],))
+    starts: np.ndarray = array_field(("start", "state"))
+    quantity: str = "period"
+    period: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0], "start"))
+    attractor: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0], "start"))
+    n_attractors: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0]))
+    last_point: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0], "start", "state"))
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+
+    def __post_init__(self):
+        for f in ("values_x", "values_y", "starts", "period", "attractor", "n_attractors", "last_point"):
+            object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def data(self) -> np.ndarray:
+        """``(ny, nx)``: the period reached from the first start, or the number of attractors."""
+        return self.period[:, :, 0] if self.quantity == "period" else self.n_attractors
+
+    def table(self) -> str:
+        """Share of the grid per period (from the first start) and per number of attractors."""
+        n = self.period[:, :, 0].size
+        rows = []
+        for k in sorted(np.unique(self.period[:, :, 0]).tolist(), key=lambda k: label_order(period_label(k))):
+            c = int((self.period[:, :, 0] == k).sum())
+            rows.append(("period from start 0", period_label(k), c, f"{100 * c / n:.1f} %"))
+        for m in np.unique(self.n_attractors).tolist():
+            c = int((self.n_attractors == m).sum())
+            rows.append(("attractors reached", str(m), c, f"{100 * c / n:.1f} %"))
+        return format_table(rows, ("quantity", "value", "grid points", "share"))
+
+    def summary(self) -> dict[str, Any]:
+        return dict(kind="parameter_map", param_x=self.param_x, values_x=self.values_x.tolist(),
+                    param_y=self.param_y, values_y=self.values_y.tolist(), quantity=self.quantity,
+                    n_starts=int(len(self.starts)), system=self.system, params=self.params, settings=self.settings,
+                    version=self.version,
+                    period_counts={period_label(k): int((self.period[:, :, 0] == k).sum())
+                                   for k in np.unique(self.period[:, :, 0]).tolist()},
+                    n_attractors_counts={str(m): int((self.n_attractors == m).sum())
+                                         for m in np.unique(self.n_attractors).tolist()})
+
+    @property
+    def coords_xy(self) -> tuple[str, str]:
+        """Names of the two parameter coordinates in the saved file."""
+        taken = list(self.state_names) + ["start", "state"]
+        cx = coord_name(self.param_x, taken)
+        cy = coord_name(self.param_y, taken + [cx])
+        return cx, (f"{cy}_y" if cy == cx else cy)
+
+    def _coords(self) -> dict:
+        cx, cy = self.coords_xy
+        return {cx: (cx, np.asarray(self.values_x), {"long_name": self.param_x, "sets": ",".join(self.fields_x)}),
+                cy: (cy, np.asarray(self.values_y), {"long_name": self.param_y, "sets": ",".join(self.fields_y)}),
+                "state": ("state", list(self.state_names))}
+
+    def _attrs(self) -> dict:
+        return dict(title="jaxgear two-parameter map")
+
+    def save(self, path):
+        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
+        return save_result(self, path)
+
+
+def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y, x0s, *,
+                  quantity: str = "period", transient: int = 400, record: int | None = None,
+                  integrator: AbstractIntegrator | None = None, max_period: int = 16, tol: float = 1e-6, merge_tol: float = 1e-3,
+                  escape_bound: float = 1e6, chunk_size: int = 1024, progress: bool = True, out=None,
+                  restart: bool = False) -> ParameterMap:
+    """Two-parameter map: the period of the attractor reached from a fixed initial state
+    (``quantity="period"``: from ``x0s[0]``) or the number of distinct attractors reached
+    from several starts (``"n_attractors"``), on the grid ``values_y x values_x``.
+
+    Every (grid point, start) runs as in :func:`bifurcation_diagram` with
+    ``direction="independent"`` (``transient`` periods, then ``record`` points, default
+    ``2 max_period + 2``), all batched with ``vmap`` in blocks of ``chunk_size``
+    trajectories; both period codes and attractor counts are always computed. ``out``:
+    kill-and-resume folder and the final ``DIR/parameter_map.nc``.
+    """
+    if record is None:
+        record = 2 * int(max_period) + 2
+    system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
+    param_targets(params, param_x)
+    param_targets(params, param_y)
+    if set(param_targets(params, param_x)) & set(param_targets(params, param_y)):
+        raise ValueError(f"param_x={param_x!r} and param_y={param_y!r} set the same field.")
+    vx, vy = sorted_values(values_x, param_x), sorted_values(values_y, param_y)
+    X0 = check_starts(system, x0s)
+    names = (param_x, param_y)
+    VV = np.stack(np.meshgrid(vx, vy, indexing="xy"), axis=-1).reshape(-1, 2)  # (ny*nx, 2), y major
+    check_system(system, apply_values(params, names, VV[0]), X0[0])
+    check_values(system, params, names, VV)
+    check_choice(quantity, "quantity", ("period", "n_attractors"))
+    integrator = resolve_integrator(integrator)
+    S, n = len(X0), len(VV)
+    B = max(1, min(n, int(chunk_size) // S))
+    settings = dict(kind="parameter_map", system=system.name, param_x=param_x, values_x=vx.tolist(),
+                    param_y=param_y, values_y=vy.tolist(), starts=X0.tolist(), params=params_to_dict(params),
+                    transient=int(transient), record=int(record), integrator=integrator.to_dict(),
+                    max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
+                    escape_bound=float(escape_bound), block_points=int(B), version=__version__)
+    ck = Checkpoint(out, "parameter_map", settings, restart)
+    M = int(max_period)
+    period = np.empty((n, S), dtype=np.int64)
+    attractor = np.empty((n, S), dtype=np.int64)
+    last = np.empty((n, S, system.dim))
+    bar = progress_bar(n, f"map {param_x} x {param_y}", progress, unit="point")
+    jX0 = jnp.asarray(X0)
+    for bi, a in enumerate(range(0, n, B)):
+        b = min(a + B, n)
+        part = f"map_{bi:05d}.npz"
+        z = ck.load(part) if ck.has(part) else None
+        if z is None:
+            pts = independent_points(system, params, names, VV[a:b], B, jX0, int(transient), int(record),
+                                     integrator)
+            per = classify_sequences(pts, M, float(tol), float(escape_bound))
+            z = dict(period=per, attractor=group_starts(pts[..., -M:, :], per, float(merge_tol)), last=pts[:, :, -1])
+            ck.save(part, **z)
+        period[a:b], attractor[a:b], last[a:b] = z["period"], z["attractor"], z["last"]
+        bar.update(b - a)
+    bar.close()
+    ny, nx = len(vy), len(vx)
+    n_att = attractor.max(axis=1, initial=-1) + 1
+    pmap = ParameterMap(
+        param_x=param_x, fields_x=param_targets(params, param_x), values_x=vx, param_y=param_y,
+        fields_y=param_targets(params, param_y), values_y=vy, starts=X0, quantity=quantity,
+        period=period.reshape(ny, nx, S), attractor=attractor.reshape(ny, nx, S),
+        n_attractors=n_att.reshape(ny, nx).astype(np.int64), last_point=last.reshape(ny, nx, S, system.dim),
+        system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
+        settings={k: v for k, v in settings.items()
+                  if k not in ("values_x", "values_y", "starts", "params", "system", "param_x", "param_y")},
+        version=__version__,
+    )
+    if out is not None:
+        pmap.save(Path(out) / "parameter_map.nc")
+    return pmap
+
+
