@@ -54,6 +54,7 @@ from ._examples import (  # noqa: E402
 )
 from .integrate import (  # noqa: E402
     AbstractIntegrator as AbstractIntegrator,
+    KinkAwareRK4 as KinkAwareRK4,
     RK4 as RK4,
     Adaptive as Adaptive,
     default_integrator as default_integrator,

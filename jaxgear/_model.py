@@ -1,11 +1,11 @@
-"""Equations of motion of the planetary set (paper eq. 1-5, MODEL.md §2-§4).
+"""Equations of motion of the planetary set (paper eq. 1-5, model document §2-§4).
 
 Two :class:`~jaxgear.ForcedSystem` instances:
 
 - :data:`REDUCED` — the reduced 2-DOF model of paper §4.1, state
-  ``x = (x1, x2, x3, x4) = (X_sp, X_sp', X_sc, X_sc')`` (MODEL.md §4);
+  ``x = (x1, x2, x3, x4) = (X_sp, X_sp', X_sc, X_sc')`` (model document §4);
 - :func:`nplanet_system` — the general model with N planets (N+1 DOF), state
-  ``(X_sp1, X_sp1', ..., X_spN, X_spN', X_sc, X_sc')`` (MODEL.md §2, dimensionless).
+  ``(X_sp1, X_sp1', ..., X_spN, X_spN', X_sc, X_sc')`` (model document §2, dimensionless).
 
 Both are pure functions of ``(t, x, params)`` with ``params`` a :class:`GearParams`;
 time is the dimensionless ``tau = omega_n t`` and lengths are in units of ``b_c``.
@@ -22,6 +22,10 @@ from ._system import ForcedSystem
 
 __all__ = [
     "backlash",
+    "stiffness_wave",
+    "reduced_switching",
+    "nplanet_switching",
+    "gear_time_breaks",
     "mesh_excitation",
     "reduced_vector_field",
     "nplanet_vector_field",
@@ -48,16 +52,30 @@ def gear_period(p: GearParams):
     return 2.0 * jnp.pi / p.Omega
 
 
+def stiffness_wave(angle, contact_ratio, shape: str):
+    """Unit mesh-stiffness variation at phase ``angle`` (rad): ``sin(angle)`` (paper eq. 1),
+    or the rectangular wave of single and double tooth contact whose first harmonic it is
+    (paper §2.1): ``(pi / (2 sin(pi d))) (1_double - d)`` with ``d = contact_ratio - 1``
+    the fraction of the mesh period in double contact, centred where the sine peaks."""
+    if shape == "sine":
+        return jnp.sin(angle)
+    d = contact_ratio - 1.0
+    u = jnp.mod(angle - 0.5 * jnp.pi + jnp.pi * d, 2.0 * jnp.pi)  # 0 where double contact starts
+    double = u < 2.0 * jnp.pi * d
+    return (jnp.pi / (2.0 * jnp.sin(jnp.pi * d))) * (jnp.where(double, 1.0, 0.0) - d)
+
+
 def mesh_excitation(t, p: GearParams):
-    """Time-varying stiffness and errors (paper eq. 1-2, MODEL.md §4) at time ``t``.
+    """Time-varying stiffness and errors (paper eq. 1-2, model document §4) at time ``t``.
 
     Returns ``k_sp, k_rp, e_sp, e_sp', e_sp'', e_rp, e_rp'`` (each scalar or per-planet).
     These depend on time only, so under ``vmap`` over states they are computed once
-    and shared by every state.
+    and shared by every state. ``p.mesh_shape`` selects the sine stiffness or the
+    rectangular wave (:func:`stiffness_wave`).
     """
     W = p.Omega
-    k_sp = p.kappa_sp_mean + p.kappa_sp_amp * jnp.sin(W * t + p.phi_sp)
-    k_rp = p.kappa_rp_mean + p.kappa_rp_amp * jnp.sin(W * t + p.phi_rp)
+    k_sp = p.kappa_sp_mean + p.kappa_sp_amp * stiffness_wave(W * t + p.phi_sp, p.contact_ratio_sp, p.mesh_shape)
+    k_rp = p.kappa_rp_mean + p.kappa_rp_amp * stiffness_wave(W * t + p.phi_rp, p.contact_ratio_rp, p.mesh_shape)
     a_sp = W * t + p.beta_sp
     a_rp = W * t + p.beta_rp + p.gamma_sr
     s_sp, c_sp = jnp.sin(a_sp), jnp.cos(a_sp)
@@ -70,13 +88,13 @@ def mesh_excitation(t, p: GearParams):
 
 
 def reduced_vector_field(t, x, p: GearParams):
-    """Reduced 2-DOF model (MODEL.md §4): identical planets, ``x = (X_sp, X_sp', X_sc, X_sc')``.
+    """Reduced 2-DOF model (model document §4): identical planets, ``x = (X_sp, X_sp', X_sc, X_sc')``.
 
     ``x1' = x2``, ``x2' = -(N + mu_p) g_sp + (mu_p - N mu_c) g_rp + mu_s f_D + mu_c f_L - e_sp''``,
     ``x3' = x4``, ``x4' = -N (mu_s + 2 mu_c) g_sp - 2 N mu_c g_rp + mu_s f_D + 2 mu_c f_L``,
     with the mesh forces ``g`` of paper eq. (3) and (5).
 
-    Dimensionless (MODEL.md §3): ``t`` is ``tau = omega_n t``, ``x1 = X_sp`` and
+    Dimensionless (model document §3): ``t`` is ``tau = omega_n t``, ``x1 = X_sp`` and
     ``x3 = X_sc`` are relative displacements in ``b_c``, ``x2``, ``x4`` their rates;
     ``x`` has shape ``(4,)``. Returns ``dx/dtau``, shape ``(4,)``.
     """
@@ -95,7 +113,7 @@ def reduced_vector_field(t, x, p: GearParams):
 
 
 def nplanet_vector_field(t, x, p: GearParams):
-    """General N-planet model (MODEL.md §2 in dimensionless form), N+1 DOF.
+    """General N-planet model (model document §2 in dimensionless form), N+1 DOF.
 
     State ``(X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc)``; per-planet stiffness,
     errors, backlash, damping, phases and planet masses (``mu_p`` per planet):
@@ -122,12 +140,48 @@ def nplanet_vector_field(t, x, p: GearParams):
     return jnp.concatenate([pos_vel, jnp.stack([Vsc, acc_sc])])
 
 
+def reduced_switching(t, x, p: GearParams):
+    """Switching functions of the reduced model: ``x1 -+ b_sp`` and ``X_rp -+ b_rp``, where
+    the backlash function of paper eq. (3) has its kinks (model document §8)."""
+    _, _, e_sp, _, _, e_rp, _ = mesh_excitation(t, p)
+    X_rp = x[2] - x[0] - e_sp - e_rp
+    return jnp.stack([x[0] - p.b_sp, x[0] + p.b_sp, X_rp - p.b_rp, X_rp + p.b_rp])
+
+
+def nplanet_switching(t, x, p: GearParams):
+    """Switching functions of the N-planet model: ``X_spi -+ b_sp`` and ``X_rpi -+ b_rp`` for
+    every planet ``i`` (``4N`` functions)."""
+    N = p.N
+    X = x[0: 2 * N: 2]
+    _, _, e_sp, _, _, e_rp, _ = mesh_excitation(t, p)
+    X_rp = x[2 * N] - X - e_sp - e_rp
+    b_sp = jnp.broadcast_to(p.b_sp, (N,))
+    b_rp = jnp.broadcast_to(p.b_rp, (N,))
+    return jnp.concatenate([X - b_sp, X + b_sp, X_rp - b_rp, X_rp + b_rp])
+
+
+def gear_time_breaks(p: GearParams):
+    """Phases in ``[0, 1)`` of the forcing period where the rectangular stiffness wave jumps
+    (two per mesh: double contact starts and ends); none for the sine."""
+    if p.mesh_shape == "sine":
+        return jnp.zeros((0,))
+    out = []
+    for phi, eps in ((p.phi_sp, p.contact_ratio_sp), (p.phi_rp, p.contact_ratio_rp)):
+        d = eps - 1.0
+        for edge in (0.5 * jnp.pi - jnp.pi * d, 0.5 * jnp.pi + jnp.pi * d):
+            out.append(jnp.ravel(jnp.mod((edge - phi) / (2.0 * jnp.pi), 1.0)))
+    return jnp.concatenate(out)
+
+
 REDUCED = ForcedSystem(
     vector_field=reduced_vector_field,
     period=gear_period,
     state_names=("x1", "x2", "x3", "x4"),
     section_index=3,
     name="planetary-reduced",
+    switching=reduced_switching,
+    time_breaks=gear_time_breaks,
+    native="reduced",
 )
 """The reduced 2-DOF model of paper §4.1; Σ = {x4 = 0} is its default section."""
 
@@ -137,7 +191,7 @@ def nplanet_system(N: int) -> ForcedSystem:
     """The general model with ``N`` planets (paper eq. 5) as a :class:`ForcedSystem`.
 
     State names ``X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc`` (shape ``(2N + 2,)``,
-    dimensionless: displacements in ``b_c``, time ``tau = omega_n t``, MODEL.md §3);
+    dimensionless: displacements in ``b_c``, time ``tau = omega_n t``, model document §3);
     the default section is ``{V_sc = 0}``, the N-planet counterpart of Σ = {x4 = 0}.
     Raises ``ValueError`` for ``N < 1``.
     """
@@ -150,13 +204,15 @@ def nplanet_system(N: int) -> ForcedSystem:
         state_names=names,
         section_index=2 * N + 1,
         name=f"planetary-{N}-planets",
+        switching=nplanet_switching,
+        time_breaks=gear_time_breaks,
     )
 
 
 def reduced_to_nplanet(x, N: int):
     """Reduced state(s) ``(..., 4)`` -> N-planet state(s) ``(..., 2N+2)`` with identical planets.
 
-    Every planet gets ``(x1, x2)``; the carrier ``(x3, x4)`` (MODEL.md §4: the reduced
+    Every planet gets ``(x1, x2)``; the carrier ``(x3, x4)`` (model document §4: the reduced
     model is the N-planet model of paper eq. 5 on its symmetric subspace). Same units.
     """
     x = jnp.asarray(x)

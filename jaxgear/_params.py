@@ -27,6 +27,9 @@ __all__ = [
     "PARAM_NAMES",
     "PER_PLANET_NAMES",
     "PARAM_MEANINGS",
+    "OPTIONAL_DEFAULTS",
+    "MESH_SHAPES",
+    "rectangular_peak",
     "PARAM_ALIASES",
     "param_names",
     "param_targets",
@@ -48,13 +51,21 @@ PARAM_NAMES = (
     "e_sp_amp", "e_rp_amp", "beta_sp", "beta_rp", "gamma_sr",
     "b_sp", "b_rp", "c_sp", "c_rp",
     "f_D", "f_L", "Omega",
+    "contact_ratio_sp", "contact_ratio_rp",
 )
+"""Canonical names of the numeric dimensionless parameters (model document §4), in the
+order they are written out."""
 # Names that may hold one value per planet (arrays of length N).
 PER_PLANET_NAMES = (
     "mu_p", "kappa_sp_mean", "kappa_sp_amp", "kappa_rp_mean", "kappa_rp_amp",
     "phi_sp", "phi_rp", "e_sp_amp", "e_rp_amp", "beta_sp", "beta_rp", "gamma_sr",
-    "b_sp", "b_rp", "c_sp", "c_rp",
+    "b_sp", "b_rp", "c_sp", "c_rp", "contact_ratio_sp", "contact_ratio_rp",
 )
+# Names that files written before they existed leave out, with the value they had then.
+OPTIONAL_DEFAULTS = {"contact_ratio_sp": 1.5, "contact_ratio_rp": 1.5, "mesh_shape": "sine"}
+MESH_SHAPES = ("sine", "rectangular")
+"""Shapes of the mesh-stiffness variation: the first harmonic (paper eq. 1) or the
+rectangular wave of single and double tooth contact it comes from (paper §2.1)."""
 PARAM_MEANINGS = {
     "N": "number of planets",
     "mu_s": "m_eq1/m_s",
@@ -78,6 +89,9 @@ PARAM_MEANINGS = {
     "f_D": "F_D/(k_msp1 b_c) (driving force)",
     "f_L": "F_L/(k_msp1 b_c) (load force)",
     "Omega": "omega/omega_n (mesh frequency)",
+    "contact_ratio_sp": "sun-planet contact ratio (rectangular stiffness only)",
+    "contact_ratio_rp": "ring-planet contact ratio (rectangular stiffness only)",
+    "mesh_shape": "mesh-stiffness shape: sine (first harmonic) or rectangular",
 }
 
 
@@ -129,10 +143,15 @@ class GearParams(eqx.Module):
     f_D: Any = eqx.field(converter=_f64)
     f_L: Any = eqx.field(converter=_f64)
     Omega: Any = eqx.field(converter=_f64)
+    contact_ratio_sp: Any = eqx.field(converter=_f64, default=OPTIONAL_DEFAULTS["contact_ratio_sp"])
+    contact_ratio_rp: Any = eqx.field(converter=_f64, default=OPTIONAL_DEFAULTS["contact_ratio_rp"])
+    mesh_shape: str = eqx.field(static=True, default="sine")
 
     def __check_init__(self):
-        if not isinstance(self.N, (int, np.integer)) or self.N < 1:
-            raise ValueError(f"parameter N={self.N} is out of range: the number of planets must be an integer >= 1.")
+        if not isinstance(self.N, (int, np.integer)) or isinstance(self.N, bool) or self.N < 1:
+            raise ValueError(f"parameter N={self.N!r} is out of range: the number of planets must be an integer >= 1.")
+        if self.mesh_shape not in MESH_SHAPES:
+            raise ValueError(f"parameter mesh_shape={self.mesh_shape!r} must be one of {', '.join(MESH_SHAPES)}.")
         leaves = {n: getattr(self, n) for n in PARAM_NAMES if n != "N"}
         if not all(_is_concrete(v) for v in leaves.values()):
             return  # traced values (inside jit/vmap/grad): checked when built concretely
@@ -156,9 +175,14 @@ class GearParams(eqx.Module):
         for mesh in ("sp", "rp"):
             mean = np.asarray(leaves[f"kappa_{mesh}_mean"])
             amp = np.asarray(leaves[f"kappa_{mesh}_amp"])
-            require(bool(np.all(np.abs(amp) <= mean)), f"kappa_{mesh}_amp", amp,
-                     f"|kappa_{mesh}_amp| must not exceed kappa_{mesh}_mean={fmt_value(mean)}, "
-                     "else the mesh stiffness becomes negative")
+            eps = np.asarray(leaves[f"contact_ratio_{mesh}"])
+            require(bool(np.all((eps > 1) & (eps < 2))), f"contact_ratio_{mesh}", eps,
+                    "must lie in (1, 2): one or two tooth pairs in contact")
+            peak = rectangular_peak(eps) if self.mesh_shape == "rectangular" else 1.0
+            require(bool(np.all(np.abs(amp) * peak <= mean)), f"kappa_{mesh}_amp", amp,
+                    f"|kappa_{mesh}_amp| must not exceed kappa_{mesh}_mean={fmt_value(mean)}"
+                    + (f" / {fmt_value(peak)} for the rectangular wave" if self.mesh_shape == "rectangular" else "")
+                    + ", else the mesh stiffness becomes negative")
 
     # ----------------------------------------------------------------- helpers
     @property
@@ -176,32 +200,37 @@ class GearParams(eqx.Module):
         return True
 
     def replace(self, **changes) -> "GearParams":
-        """A copy with some canonical names changed (validated again)."""
+        """A copy with some canonical names (or ``mesh_shape``) changed (validated again)."""
         d = self.to_dict()
-        unknown = set(changes) - set(PARAM_NAMES)
+        unknown = set(changes) - set(PARAM_NAMES) - {"mesh_shape"}
         if unknown:
-            raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {', '.join(PARAM_NAMES)}")
+            raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {', '.join(PARAM_NAMES)}, mesh_shape")
         d.update(changes)
         return GearParams.from_dict(d)
 
     def to_dict(self) -> dict[str, Any]:
-        """Canonical names -> Python floats (or lists for per-planet arrays)."""
+        """Canonical names -> Python floats (or lists for per-planet arrays), and ``mesh_shape``."""
         out: dict[str, Any] = {"N": int(self.N)}
         for n in PARAM_NAMES[1:]:
             a = np.asarray(getattr(self, n))
             out[n] = float(a) if a.ndim == 0 else a.tolist()
+        out["mesh_shape"] = self.mesh_shape
         return out
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "GearParams":
-        """Build from a mapping with the canonical names (all required)."""
-        missing = [n for n in PARAM_NAMES if n not in d]
+        """Build from a mapping with the canonical names (those of :data:`OPTIONAL_DEFAULTS`
+        may be missing, as in files written before they existed)."""
+        known = set(PARAM_NAMES) | {"mesh_shape"}
+        missing = [n for n in PARAM_NAMES if n not in d and n not in OPTIONAL_DEFAULTS]
         if missing:
             raise ValueError(f"missing parameter(s): {', '.join(missing)}")
-        unknown = set(d) - set(PARAM_NAMES)
+        unknown = set(d) - known
         if unknown:
-            raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {', '.join(PARAM_NAMES)}")
-        return cls(**{n: (int(d[n]) if n == "N" else d[n]) for n in PARAM_NAMES})
+            raise ValueError(f"unknown parameter(s) {sorted(unknown)}; known: {', '.join(sorted(known))}")
+        values = {n: d.get(n, OPTIONAL_DEFAULTS.get(n)) for n in known}
+        values["N"] = int(values["N"]) if float(values["N"]) == int(values["N"]) else values["N"]
+        return cls(**values)
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict())
@@ -227,6 +256,7 @@ class GearParams(eqx.Module):
         """A readable table of the dimensionless set."""
         rows = [(n, fmt_value(getattr(self, n)) if n != "N" else str(self.N), PARAM_MEANINGS[n])
                 for n in PARAM_NAMES]
+        rows.append(("mesh_shape", self.mesh_shape, PARAM_MEANINGS["mesh_shape"]))
         return format_table(rows, ("name", "value", "meaning"))
 
 
@@ -349,6 +379,15 @@ def get_param(params, name: str) -> float:
         raise ValueError(f"parameter {name!r} sets {', '.join(targets)}, which differ "
                          f"({', '.join(f'{v:.6g}' for v in vals)}); name one of them.")
     return vals[0]
+
+
+def rectangular_peak(contact_ratio):
+    """Largest value of the unit rectangular mesh-stiffness wave of contact ratio ``eps``
+    relative to its first harmonic (model document §2): the wave ``(pi / (2 sin(pi d)))
+    (1_double - d)``, ``d = eps - 1``, has first harmonic ``sin`` and extremes
+    ``pi (1 - d) / (2 sin(pi d))`` and ``-pi d / (2 sin(pi d))``."""
+    d = np.asarray(contact_ratio, dtype=float) - 1.0
+    return np.pi * np.maximum(d, 1.0 - d) / (2.0 * np.sin(np.pi * d))
 
 
 def params_to_dict(params) -> dict:

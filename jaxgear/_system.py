@@ -28,9 +28,21 @@ class ForcedSystem(eqx.Module):
         section_index: coordinate ``i`` of the default hyperplane section
             ``{x_i = 0}`` (the paper's Σ = {x4 = 0} is index 3), or ``None``.
         name: a short label used in results and figures.
+        switching: ``switching(t, x, params) -> (m,)``, or ``None``: functions whose zero
+            sets are where the vector field has a kink (its derivative jumps, as at the
+            backlash boundaries ``|X| = b``) or a jump. The kink-aware integrator splits
+            every step at their crossings, which keeps its fourth order and gives exact
+            monodromy matrices through those surfaces.
+        time_breaks: ``time_breaks(params) -> (q,)``, or ``None``: phases in ``[0, 1)``
+            (fractions of the forcing period) at which the vector field jumps or kinks
+            in time (a rectangular mesh-stiffness wave); steps are split there exactly.
+        field_jumps: ``True`` when the vector field itself (not only its derivative)
+            jumps across a switching surface; the integrator then evaluates every stage
+            of a split step on the side of the surface that sub-step lies on.
 
     Times and states are in the user's units (the gear models are dimensionless:
-    time ``tau = omega_n t``, lengths in ``b_c``, MODEL.md §3).
+    time ``tau = omega_n t``, lengths in ``b_c``, model document §3). Systems without
+    switching functions behave as smooth systems.
     """
 
     vector_field: Callable[[Any, Any, Any], Any] = eqx.field(static=True)
@@ -38,12 +50,19 @@ class ForcedSystem(eqx.Module):
     state_names: tuple[str, ...] = eqx.field(static=True)
     section_index: int | None = eqx.field(static=True, default=None)
     name: str = eqx.field(static=True, default="system")
+    switching: Callable[[Any, Any, Any], Any] | None = eqx.field(static=True, default=None)
+    time_breaks: Callable[[Any], Any] | None = eqx.field(static=True, default=None)
+    field_jumps: bool = eqx.field(static=True, default=False)
+    native: Any = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         if not callable(self.vector_field):
             raise TypeError("ForcedSystem.vector_field must be callable f(t, x, params).")
         if not callable(self.period):
             raise TypeError("ForcedSystem.period must be callable period(params) -> T.")
+        for name in ("switching", "time_breaks"):
+            if getattr(self, name) is not None and not callable(getattr(self, name)):
+                raise TypeError(f"ForcedSystem.{name} must be callable or None.")
         if len(self.state_names) < 1:
             raise ValueError("ForcedSystem.state_names must name at least one coordinate.")
         if self.section_index is not None and not 0 <= self.section_index < len(self.state_names):
@@ -56,6 +75,11 @@ class ForcedSystem(eqx.Module):
     def dim(self) -> int:
         """Number of state coordinates."""
         return len(self.state_names)
+
+    @property
+    def is_piecewise(self) -> bool:
+        """True when the system declares switching surfaces or time breaks."""
+        return self.switching is not None or self.time_breaks is not None
 
 
 def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, batched: bool | None = None) -> None:
@@ -112,7 +136,7 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
             f"{name}: the vector field must return shape ({system.dim},) for a state "
             f"of shape ({system.dim},) ({', '.join(system.state_names)}); it returned {dx.shape}."
         )
-    val = np.asarray(system.vector_field(0.0, x, params))
+    val = np.asarray(jax.jit(lambda xx, pp: system.vector_field(0.0, xx, pp))(x, params))
     if not np.all(np.isfinite(val)):
         raise ValueError(
             f"{name}: the vector field is not finite at t=0, x={np.asarray(x).tolist()}: "

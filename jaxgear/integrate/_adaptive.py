@@ -10,7 +10,6 @@ import jax
 import jax.numpy as jnp
 
 from ._base import AbstractFixedStep, AbstractIntegrator
-from ._rk4 import RK4
 
 __all__ = ["Adaptive"]
 
@@ -54,7 +53,7 @@ class Adaptive(AbstractIntegrator):
         ys = sol.ys if ts is not None else sol.ys[-1]
         return jnp.where(ok, ys, jnp.nan)
 
-    def advance(self, system, params, Y, t0, periods: int):
+    def advance(self, system, params, Y, t0, periods: int, n_active=None):
         t1 = t0 + periods * system.period(params)
         return jax.vmap(lambda y: self.solve(system, params, y, t0, t1), in_axes=1, out_axes=1)(Y)
 
@@ -72,7 +71,9 @@ class Adaptive(AbstractIntegrator):
 
     @property
     def crossing_stepper(self) -> AbstractFixedStep:
-        return RK4(int(self.search_steps_per_period))
+        from ._kink import KinkAwareRK4
+
+        return KinkAwareRK4(int(self.search_steps_per_period))
 
     def to_dict(self) -> dict[str, Any]:
         return {"type": self.name, "solver": type(self.solver).__name__, "rtol": float(self.rtol),

@@ -60,10 +60,12 @@ class AbstractIntegrator(eqx.Module):
     name: ClassVar[str] = "abstract"
 
     @abc.abstractmethod
-    def advance(self, system, params, Y, t0, periods: int):
+    def advance(self, system, params, Y, t0, periods: int, n_active=None):
         """Advance ``Y (dim, n)`` from ``t0`` by ``periods`` forcing periods: ``(dim, n)``.
 
-        A lane that blew up is non-finite (never a silently wrong value).
+        A lane that blew up is non-finite (never a silently wrong value). ``n_active``
+        (a traced int, optional): only lanes ``[0, n_active)`` matter, the others may be
+        returned unchanged (the compiled CPU kernel skips them; others compute all).
         """
 
     @abc.abstractmethod
@@ -109,13 +111,18 @@ class AbstractFixedStep(AbstractIntegrator):
     def to_dict(self) -> dict[str, Any]:
         return {"type": self.name, "steps_per_period": int(self.steps_per_period)}
 
-    def advance(self, system, params, Y, t0, periods: int):
+    def advance(self, system, params, Y, t0, periods: int, n_active=None):
+        """``periods`` forcing periods of ``steps_per_period`` steps each. The step times of
+        every period are ``t0 + i h`` (``i < steps_per_period``): the forcing is
+        ``T``-periodic, so each period repeats the same stage times (and a compiled
+        kernel can tabulate them once)."""
         T = system.period(params)
-        n_steps = int(self.steps_per_period) * int(periods)
-        return self.advance_steps(system, params, Y, t0, n_steps, T / self.steps_per_period)
+        return self.advance_steps(system, params, Y, t0, int(self.steps_per_period), T / self.steps_per_period,
+                                  int(periods))
 
-    def advance_steps(self, system, params, Y, t0, n_steps: int, h):
-        """``n_steps`` steps of size ``h`` from ``t0`` on ``Y (dim, n)``, chunked when large.
+    def advance_steps(self, system, params, Y, t0, n_steps: int, h, repeats: int = 1):
+        """``repeats`` times ``n_steps`` steps of size ``h`` from ``t0`` on ``Y (dim, n)``
+        (each repeat from the same ``t0``), chunked when large.
 
         A batch larger than :func:`chunk_lanes` is cut into equal chunks that run one
         after the other, each through all its steps, inside the same computation: a
@@ -126,8 +133,11 @@ class AbstractFixedStep(AbstractIntegrator):
         dim, n = Y.shape
         chunk = chunk_lanes(dim)
 
-        def loop(Yb):
+        def one_pass(_, Yb):
             return jax.lax.fori_loop(0, n_steps, lambda i, Z: self.step(system, params, t0 + i * h, Z, h), Yb)
+
+        def loop(Yb):
+            return jax.lax.fori_loop(0, int(repeats), one_pass, Yb) if repeats > 1 else one_pass(0, Yb)
 
         if n <= chunk:
             return loop(Y)

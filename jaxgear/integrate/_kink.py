@@ -1,0 +1,346 @@
+"""Kink-aware fixed-step RK4: steps split at the crossings of a system's switching surfaces.
+
+A piecewise-smooth vector field (the backlash of the gear models: kinks at ``|X| = b``)
+costs a classical RK4 step that straddles a kink two orders of accuracy. Here every
+step is first taken as a plain RK4 step (the *trial*); for a lane whose switching
+functions ``s(t, x)`` change sign over it, or whose step contains a known time break,
+the crossing is located on the cubic Hermite interpolant of the switching function
+(values and time derivatives at both ends of the trial step; a known break is exact),
+and the step is redone as sub-steps that end and start on the surface. States then
+converge at fourth order and, because the crossing time enters the result as a
+differentiable function of the state, ``jax.jacfwd`` through the steps converges to
+the monodromy matrix of the flow, saltation included (identity where the field only
+kinks).
+
+The lanes that need a split (a few per cent per step) are gathered into a compact
+buffer in large batches and selected from a whole-batch computation in small ones,
+without leaving ``jit`` and without restarting the integrator; the compiled CPU kernel
+for the gear models (:mod:`jaxgear.integrate._native`) does the same lane by lane.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._checks import check_choice, check_int
+from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, batch_field, check_steps_per_period
+from ._rk4 import rk4_step
+
+__all__ = ["KinkAwareRK4", "kink_step", "trial_step", "BREAK_TOL"]
+
+DENSE_MAX = 1024
+"""Batches up to this size split every lane that needs it with one select over the batch
+(reverse-mode differentiable, fused); larger batches gather those lanes first."""
+COMPACT_FRACTION = 8
+"""Large batches gather up to ``n / COMPACT_FRACTION`` lanes that need a split (a few per
+cent do per step); a step with more splits them all with a select."""
+
+BREAK_TOL = 1e-10
+"""A known time break within ``BREAK_TOL * T`` of a step's end lies on that end: no split,
+and the step's stage times are kept that far inside the step (model document §8)."""
+
+_HERMITE_ITERS = 12
+_EPS = 2.220446049250313e-16
+_NUDGE = 1e-12  # side forcing for fields that jump: distance from the surface, relative
+
+
+def _sides(S):
+    return jnp.where(S >= 0, 1.0, -1.0)
+
+
+def _has_breaks(system, params) -> bool:
+    """Whether the system has known time breaks for these parameters (a static property:
+    the number of breaks is the shape of ``time_breaks(params)``)."""
+    return system.time_breaks is not None and jax.eval_shape(system.time_breaks, params).shape[0] > 0
+
+
+def _switching(system, params, t, Y):
+    """Switching functions on a batch: ``(m, n)`` (``m = 0`` without any)."""
+    if system.switching is None:
+        return jnp.zeros((0, Y.shape[1]), Y.dtype)
+    in_t = None if jnp.ndim(t) == 0 else 0
+    return jax.vmap(system.switching, in_axes=(in_t, 1, None), out_axes=1)(t, Y, params)
+
+
+def _switching_rate(system, params, t, Y, F):
+    """Time derivative of the switching functions along the flow, ``ds/dt = s_t + s_x f``: ``(m, n)``."""
+    if system.switching is None:
+        return jnp.zeros((0, Y.shape[1]), Y.dtype)
+    tt = jnp.broadcast_to(t, (Y.shape[1],))
+
+    def one(ti, y, f):
+        return jax.jvp(lambda a, b: system.switching(a, b, params), (ti, y), (jnp.ones_like(ti), f))[1]
+
+    return jax.vmap(one, in_axes=(0, 1, 1), out_axes=1)(tt, Y, F)
+
+
+def _break_fraction(system, params, t, h):
+    """Where a known time break falls inside each step, as a fraction ``theta`` of the step
+    (``(n,)`` or scalar; ``1`` when none lies strictly inside, more than ``BREAK_TOL * T``
+    from either end)."""
+    if not _has_breaks(system, params):
+        return jnp.ones_like(t + h)
+    phases = jnp.asarray(system.time_breaks(params))
+    T = system.period(params)
+    tol = BREAK_TOL * T
+    t, h = jnp.asarray(t), jnp.asarray(h)
+    shape = jnp.broadcast_shapes(t.shape, h.shape)
+    wait = jnp.mod(phases.reshape((-1,) + (1,) * len(shape)) - t / T, 1.0) * T  # time to each break
+    inside = (wait > tol) & (wait < h - tol)
+    return jnp.min(jnp.where(inside, wait / h, 1.0), axis=0)
+
+
+def _field(system, params, t, Y, t_lo=None, t_hi=None, sides=None):
+    """The vector field on a batch, with stage times kept inside ``[t_lo, t_hi]`` (systems
+    with time breaks) and states moved onto the side ``sides`` of each switching surface
+    they lie within round-off of (systems whose field jumps)."""
+    if t_lo is not None:
+        t = jnp.clip(t, t_lo, t_hi)
+    if sides is not None and system.field_jumps and system.switching is not None:
+        Y = _force_sides(system, params, t, Y, sides)
+    return batch_field(system, params, t, Y)
+
+
+def _force_sides(system, params, t, Y, sides):
+    """Move each lane a round-off distance onto its side of every switching surface it sits
+    on (``|s| <= 1e-6 (1 + |s|)`` on the wrong side), without changing derivatives."""
+    tt = jnp.broadcast_to(t, (Y.shape[1],))
+
+    def one(ti, y, sd):
+        s = system.switching(ti, y, params)
+        G = jax.jacfwd(lambda z: system.switching(ti, z, params))(y)  # (m, dim)
+        wrong = (jnp.sign(s) != sd) & (jnp.abs(s) <= 1e-6 * (1.0 + jnp.abs(s)))
+        target = sd * _NUDGE * (1.0 + jnp.abs(y).max())
+        step = jnp.where(wrong, target - s, 0.0) / jnp.maximum(jnp.sum(G * G, axis=1), 1e-300)
+        return y + jax.lax.stop_gradient(G.T @ step)
+
+    return jax.vmap(one, in_axes=(0, 1, 1), out_axes=1)(tt, Y, sides)
+
+
+def _rk4(system, params, t, Y, h, window=False, sides=None, k1=None):
+    """One RK4 step; returns ``(Y_new, k1)``. ``window``: keep stage times inside the step
+    (by ``BREAK_TOL * T``); ``sides``: evaluate every stage on those sides of the surfaces."""
+    if window:
+        tol = jnp.minimum(BREAK_TOL * system.period(params), 0.25 * jnp.abs(h))
+        lo, hi = t + tol, t + h - tol
+    else:
+        lo = hi = None
+    f = lambda tt, Z: _field(system, params, tt, Z, lo, hi, sides)  # noqa: E731
+    h2 = 0.5 * h
+    if k1 is None:
+        k1 = f(t, Y)
+    k2 = f(t + h2, Y + h2 * k1)
+    k3 = f(t + h2, Y + h2 * k2)
+    k4 = f(t + h, Y + h * k3)
+    return Y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4), k1
+
+
+def trial_step(system, params, t, Y, h):
+    """The plain step every lane takes first: ``(Y_new, k1, s_start, s_end, theta_break)``."""
+    window = _has_breaks(system, params)
+    Y1, k1 = _rk4(system, params, t, Y, h, window=window)
+    S0 = _switching(system, params, t, Y)
+    S1 = _switching(system, params, t + h, Y1)
+    return Y1, k1, S0, S1, _break_fraction(system, params, t, h)
+
+
+def _hermite_root(s0, s1, d0, d1):
+    """Root in ``(0, 1)`` of the cubic Hermite interpolant through ``(0, s0, d0)`` and
+    ``(1, s1, d1)`` (``d`` scaled by the step), given ``s0 s1 < 0``: safeguarded Newton
+    from the secant point, to round-off. Shapes broadcast; the gradient is that of the
+    root (one Newton step at the converged point carries it)."""
+
+    def p(th):
+        t2, t3 = th * th, th * th * th
+        return ((2 * t3 - 3 * t2 + 1) * s0 + (t3 - 2 * t2 + th) * d0 + (-2 * t3 + 3 * t2) * s1
+                + (t3 - t2) * d1)
+
+    def dp(th):
+        t2 = th * th
+        return (6 * t2 - 6 * th) * s0 + (3 * t2 - 4 * th + 1) * d0 + (-6 * t2 + 6 * th) * s1 + (3 * t2 - 2 * th) * d1
+
+    sg = jax.lax.stop_gradient
+    a0, a1, b0, b1 = sg(s0), sg(s1), sg(d0), sg(d1)
+
+    def pc(th):
+        t2, t3 = th * th, th * th * th
+        return ((2 * t3 - 3 * t2 + 1) * a0 + (t3 - 2 * t2 + th) * b0 + (-2 * t3 + 3 * t2) * a1 + (t3 - t2) * b1)
+
+    def dpc(th):
+        t2 = th * th
+        return (6 * t2 - 6 * th) * a0 + (3 * t2 - 4 * th + 1) * b0 + (-6 * t2 + 6 * th) * a1 + (3 * t2 - 2 * th) * b1
+
+    denom = a0 - a1
+    th = jnp.clip(jnp.where(denom != 0, a0 / jnp.where(denom != 0, denom, 1.0), 0.5), 0.0, 1.0)
+    lo, hi = jnp.zeros_like(th), jnp.ones_like(th)
+    sgn0 = jnp.sign(a0)
+
+    def body(_, c):
+        th, lo, hi = c
+        v = pc(th)
+        same = jnp.sign(v) == sgn0
+        lo = jnp.where(same, th, lo)
+        hi = jnp.where(same, hi, th)
+        d = dpc(th)
+        nt = th - v / jnp.where(d != 0, d, 1.0)
+        # converged: the Newton correction is at round-off; keep th (a bracket end that
+        # round-off moved onto th would otherwise reject the step and bisect away)
+        done = (v == 0) | ((d != 0) & (jnp.abs(nt - th) <= 4.0 * _EPS))
+        ok = (nt > lo) & (nt < hi) & (d != 0)
+        nt = jnp.where(ok, nt, 0.5 * (lo + hi))
+        return jnp.where(done, th, nt), lo, hi
+
+    th, _, _ = jax.lax.fori_loop(0, _HERMITE_ITERS, body, (th, lo, hi))
+    th = sg(th)
+    d = dp(th)
+    return th - p(th) / jnp.where(d != 0, d, 1.0)
+
+
+def _first_crossing(system, params, t, Y, Y1, h, k1, S0, S1, sides, th_break):
+    """The earliest event of a trial step, per lane: ``(theta, which)`` with ``which`` the
+    index of the crossed switching function, or ``-1`` for a time break / no event."""
+    n = Y.shape[1]
+    if S0.shape[0]:
+        cross = (_sides(S1) != sides) & jnp.isfinite(S1) & jnp.isfinite(S0)
+        F1 = batch_field(system, params, t + h, Y1)
+        D0 = _switching_rate(system, params, t, Y, k1) * h
+        D1 = _switching_rate(system, params, t + h, Y1, F1) * h
+        th = _hermite_root(S0, S1, D0, D1)
+        th = jnp.where(cross, jnp.clip(th, 0.0, 1.0), 2.0)
+        j = jnp.argmin(th, axis=0)
+        th_s = jnp.take_along_axis(th, j[None], axis=0)[0]
+    else:
+        th_s = jnp.full((n,), 2.0)
+        j = jnp.zeros((n,), jnp.int32)
+    use_break = th_break < th_s
+    theta = jnp.where(use_break, th_break, th_s)
+    which = jnp.where(use_break | (th_s > 1.0), -1, j)
+    return jnp.minimum(theta, 1.0), which
+
+
+def _split(system, params, t, Y, h, k1, th, which, sides, max_splits):
+    """Lanes whose trial step holds an event: sub-step to it, flip the crossed surface's
+    side, then the rest of the step (split again, up to ``max_splits`` events)."""
+    window = _has_breaks(system, params)
+    jumps = system.field_jumps
+    tt = jnp.broadcast_to(t, th.shape)
+    hh = jnp.broadcast_to(h, th.shape)
+    for i in range(max_splits):
+        h1 = th * hh
+        Ym, _ = _rk4(system, params, tt, Y, h1, window=window, sides=sides if jumps else None,
+                     k1=k1 if (i == 0 and not jumps and not window) else None)
+        flip = (jnp.arange(sides.shape[0])[:, None] == which[None]) & (which[None] >= 0)
+        sides = jnp.where(flip, -sides, sides)
+        tt, hh, Y = tt + h1, hh - h1, Ym
+        Y1, k1 = _rk4(system, params, tt, Y, hh, window=window, sides=sides if jumps else None)
+        if i == max_splits - 1:
+            return Y1
+        S1 = _switching(system, params, tt + hh, Y1)
+        S0 = _switching(system, params, tt, Y)
+        th_break = _break_fraction(system, params, tt, hh)
+        th, which = _first_crossing(system, params, tt, Y, Y1, hh, k1, S0, S1, sides, th_break)
+        more = th < 1.0
+        th = jnp.where(more, th, 1.0)
+        if i == max_splits - 2:  # the last split: lanes without a further event keep the trial
+            final, _ = _rk4(system, params, tt, Y, th * hh, window=window, sides=sides if jumps else None)
+            flip = (jnp.arange(sides.shape[0])[:, None] == which[None]) & (which[None] >= 0) & more[None]
+            sides2 = jnp.where(flip, -sides, sides)
+            rest, _ = _rk4(system, params, tt + th * hh, final, (1.0 - th) * hh, window=window,
+                           sides=sides2 if jumps else None)
+            return jnp.where(more[None], rest, Y1)
+    return Y1
+
+
+def kink_step(system, params, t, Y, h, max_splits: int = 2):
+    """One kink-aware step of size ``h`` from ``t`` for a batch ``Y (dim, n)`` (see the module).
+
+    ``t`` and ``h`` are scalars or ``(n,)``. Lanes without an event inside the step get the
+    plain RK4 step. The split is computed for the whole batch with a select (one fused
+    computation per stage, what accelerators want) and skipped when no lane of the batch
+    needs it.
+    """
+    Y1, k1, S0, S1, th_break = trial_step(system, params, t, Y, h)
+    sides = _sides(S0) if S0.shape[0] else S0
+    n = Y.shape[1]
+    if S0.shape[0]:
+        need = jnp.any((_sides(S1) != sides) & jnp.isfinite(S1) & jnp.isfinite(S0), axis=0)
+    else:
+        need = jnp.zeros((n,), bool)
+    need = need | (th_break < 1.0)
+
+    lanes = (Y, k1, jnp.broadcast_to(t, (n,)), jnp.broadcast_to(h, (n,)), S0, S1, Y1, sides,
+             jnp.broadcast_to(th_break, (n,)))
+
+    def split(Ys, ks, ts, hs, S0s, S1s, Y1s, sds, bs):
+        th, which = _first_crossing(system, params, ts, Ys, Y1s, hs, ks, S0s, S1s, sds, bs)
+        return _split(system, params, ts, Ys, hs, ks, th, which, sds, max_splits)
+
+    def dense(_):
+        return jnp.where(need[None], split(*lanes), Y1)
+
+    if n <= DENSE_MAX:
+        return jax.lax.cond(jnp.any(need), dense, lambda _: Y1, None)
+    K = -(-n // COMPACT_FRACTION)
+
+    def compact(_):
+        idx = jnp.nonzero(need, size=K, fill_value=n)[0]  # n: an empty slot, dropped on scatter
+        res = split(*(jnp.take(a, idx, axis=-1, mode="clip") for a in lanes))
+        return Y1.at[:, idx].set(res, mode="drop")
+
+    count = jnp.sum(need)
+    branch = jnp.where(count == 0, 0, jnp.where(count <= K, 1, 2))
+    return jax.lax.switch(branch, [lambda _: Y1, compact, dense], None)
+
+
+class KinkAwareRK4(AbstractFixedStep):
+    """RK4 with ``steps_per_period`` fixed steps, each split at the crossings of the system's
+    switching surfaces and at its known time breaks (see the module).
+
+    For a system without switching functions or time breaks this is classical RK4. For
+    the gear models states converge at fourth order and Floquet multipliers from
+    ``jax.jacfwd`` at (at least) third order, where plain RK4 gives second and first
+    (model document §8).
+
+    Attributes:
+        steps_per_period: fixed steps per forcing period (>= 1).
+        max_splits: events handled inside one step (1-3; a further event in the same
+            step is stepped over as plain RK4 would).
+        backend: ``"auto"`` — the compiled CPU kernel for the built-in gear models when
+            one is available (:mod:`jaxgear.integrate._native`), the pure-JAX steps
+            otherwise and always for derivatives and GPUs; ``"jax"`` — always the
+            pure-JAX steps (the reference).
+    """
+
+    name: ClassVar[str] = "KinkAwareRK4"
+    steps_per_period: int = eqx.field(static=True, default=DEFAULT_STEPS_PER_PERIOD)
+    max_splits: int = eqx.field(static=True, default=2)
+    backend: str = eqx.field(static=True, default="auto")
+
+    def __check_init__(self):
+        check_steps_per_period(self.steps_per_period)
+        check_int(self.max_splits, "max_splits", 1, 3)
+        check_choice(self.backend, "backend", ("auto", "jax"))
+
+    def step(self, system, params, t, Y, h):
+        if not system.is_piecewise:
+            return rk4_step(system, params, t, Y, h)
+        return kink_step(system, params, t, Y, h, int(self.max_splits))
+
+    def advance(self, system, params, Y, t0, periods: int, n_active=None):
+        if self.backend == "auto" and system.native is not None:
+            from ._native import native_advance
+
+            return native_advance(self, system, params, Y, t0, int(periods), n_active)
+        return super().advance(system, params, Y, t0, periods)
+
+    def flow(self, system, params, x, t0, periods: int):
+        # the pure-JAX steps: differentiable both ways (monodromy matrices, implicit gradients)
+        return AbstractFixedStep.advance(self, system, params, x[:, None], t0, periods)[:, 0]
+
+    def to_dict(self):
+        return {"type": self.name, "steps_per_period": int(self.steps_per_period),
+                "max_splits": int(self.max_splits), "backend": self.backend}

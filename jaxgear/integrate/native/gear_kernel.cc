@@ -1,0 +1,639 @@
+// Kink-aware RK4 for the reduced 2-DOF planetary gear model, as an XLA FFI custom call.
+//
+// The same arithmetic as jaxgear's pure-JAX path (jaxgear/integrate/_kink.py with the
+// vector field of jaxgear/_model.py), written for the CPU: lanes in blocks of struct-of-
+// arrays that stay in cache for all steps of a call, the time-only terms of the vector
+// field (mesh stiffness, transmission errors) tabulated once per stage time and shared
+// by every lane with the same parameters, the trial step vectorised over a block, and
+// the few lanes whose step holds a backlash crossing or a known time break split one
+// by one. Blocks run in parallel (OpenMP).
+//
+// Built by jaxgear/integrate/_native.py on first use; the pure-JAX path stays the
+// reference (for derivatives, GPUs, and machines without a C++ compiler).
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "xla/ffi/api/ffi.h"
+
+namespace ffi = xla::ffi;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr int kBlock = 256;
+constexpr int kHermiteIters = 12;
+constexpr double kEps = 2.220446049250313e-16;
+constexpr double kBreakTol = 1e-10;  // BREAK_TOL of _kink.py
+
+// Packed parameter row (the order of _native.PARAM_ORDER).
+enum P {
+  N_, MU_S, MU_P, MU_C, KSM, KSA, KRM, KRA, PHI_SP, PHI_RP, ESA, ERA, BETA_SP, BETA_RP,
+  GAMMA_SR, B_SP, B_RP, C_SP, C_RP, F_D, F_L, OMEGA, CR_SP, CR_RP, NPARAM
+};
+
+struct Model {
+  double p[NPARAM];
+  int shape;  // 0 sine, 1 rectangular
+  double T;
+  double breaks[4];  // phases in [0, 1) of the rectangular wave's jumps
+  int n_breaks;
+};
+
+struct Terms {  // time-only terms at one time
+  double ksp, krp, E, dE, L1;
+};
+
+inline double floor_mod(double x, double m) { return x - m * std::floor(x / m); }
+
+inline double wave(double angle, double cr, int shape) {
+  if (shape == 0) return std::sin(angle);
+  const double d = cr - 1.0;
+  const double u = floor_mod(angle - 0.5 * kPi + kPi * d, 2.0 * kPi);
+  const double dbl = u < 2.0 * kPi * d ? 1.0 : 0.0;
+  return (kPi / (2.0 * std::sin(kPi * d))) * (dbl - d);
+}
+
+inline Terms terms(const Model& m, double t) {
+  const double* p = m.p;
+  const double W = p[OMEGA];
+  Terms q;
+  q.ksp = p[KSM] + p[KSA] * wave(W * t + p[PHI_SP], p[CR_SP], m.shape);
+  q.krp = p[KRM] + p[KRA] * wave(W * t + p[PHI_RP], p[CR_RP], m.shape);
+  const double a_sp = W * t + p[BETA_SP];
+  const double a_rp = W * t + p[BETA_RP] + p[GAMMA_SR];
+  const double s_sp = std::sin(a_sp), c_sp = std::cos(a_sp);
+  const double e_sp = p[ESA] * s_sp;
+  const double de_sp = p[ESA] * W * c_sp;
+  const double dde_sp = -p[ESA] * W * W * s_sp;
+  const double e_rp = p[ERA] * std::sin(a_rp);
+  const double de_rp = p[ERA] * W * std::cos(a_rp);
+  q.E = e_sp + e_rp;
+  q.dE = de_sp + de_rp;
+  q.L1 = p[MU_S] * p[F_D] + p[MU_C] * p[F_L] - dde_sp;
+  return q;
+}
+
+// Time terms at an arbitrary time inside a step, without new trigonometric calls: the
+// sines and cosines of the four phase angles at the step's start are tabulated, and the
+// angle added since then, W (t - t_start) <= W h, is small (angle addition with short
+// series, exact to round-off).
+struct Clock {
+  double t;         // step start
+  double ang[4];    // W t + phi_sp, W t + phi_rp, W t + beta_sp, W t + beta_rp + gamma_sr
+  double sn[4], cs[4];
+};
+
+// Time terms already computed during one lane's split (the same times recur: a sub-step's
+// end is the next one's start, and the step's own stage times are tabulated).
+struct TermCache {
+  double t[12];
+  Terms q[12];
+  int n = 0;
+};
+
+inline Clock make_clock(const Model& m, double t) {
+  const double* p = m.p;
+  const double W = p[OMEGA];
+  Clock c;
+  c.t = t;
+  c.ang[0] = W * t + p[PHI_SP];
+  c.ang[1] = W * t + p[PHI_RP];
+  c.ang[2] = W * t + p[BETA_SP];
+  c.ang[3] = W * t + p[BETA_RP] + p[GAMMA_SR];
+  for (int k = 0; k < 4; ++k) {
+    c.sn[k] = std::sin(c.ang[k]);
+    c.cs[k] = std::cos(c.ang[k]);
+  }
+  return c;
+}
+
+inline void small_sincos(double x, double* s, double* c) {
+  if (std::fabs(x) > 0.2) {
+    *s = std::sin(x);
+    *c = std::cos(x);
+    return;
+  }
+  const double x2 = x * x;
+  *s = x * (1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 + x2 * (-1.0 / 39916800))))));
+  *c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320 + x2 * (-1.0 / 3628800 +
+                                                                                      x2 * (1.0 / 479001600))))));
+}
+
+inline Terms terms_at(const Model& m, const Clock& ck, double t) {
+  const double* p = m.p;
+  (void)0;
+  const double W = p[OMEGA];
+  const double x = W * (t - ck.t);
+  double sx, cx;
+  small_sincos(x, &sx, &cx);
+  double S[4], C[4];
+  for (int k = 0; k < 4; ++k) {
+    S[k] = ck.sn[k] * cx + ck.cs[k] * sx;
+    C[k] = ck.cs[k] * cx - ck.sn[k] * sx;
+  }
+  Terms q;
+  if (m.shape == 0) {
+    q.ksp = p[KSM] + p[KSA] * S[0];
+    q.krp = p[KRM] + p[KRA] * S[1];
+  } else {
+    q.ksp = p[KSM] + p[KSA] * wave(ck.ang[0] + x, p[CR_SP], 1);
+    q.krp = p[KRM] + p[KRA] * wave(ck.ang[1] + x, p[CR_RP], 1);
+  }
+  const double e_sp = p[ESA] * S[2];
+  const double de_sp = p[ESA] * W * C[2];
+  const double dde_sp = -p[ESA] * W * W * S[2];
+  q.E = e_sp + p[ERA] * S[3];
+  q.dE = de_sp + p[ERA] * W * C[3];
+  q.L1 = p[MU_S] * p[F_D] + p[MU_C] * p[F_L] - dde_sp;
+  return q;
+}
+
+inline Terms terms_cached(const Model& m, const Clock& ck, TermCache& cache, double t) {
+  for (int i = 0; i < cache.n; ++i)
+    if (cache.t[i] == t) return cache.q[i];
+  const Terms q = terms_at(m, ck, t);
+  if (cache.n < 12) {
+    cache.t[cache.n] = t;
+    cache.q[cache.n++] = q;
+  }
+  return q;
+}
+
+inline double backlash(double X, double b) { return X >= b ? X - b : (X <= -b ? X + b : 0.0); }
+
+struct Coef {  // state-independent coefficients of the reduced field
+  double a2sp, a2rp, a4sp, a4rp, L2, b_sp, b_rp, c_sp, c_rp;
+};
+
+inline Coef coef(const Model& m) {
+  const double* p = m.p;
+  const double N = p[N_];
+  Coef c;
+  c.a2sp = -(N + p[MU_P]);
+  c.a2rp = p[MU_P] - N * p[MU_C];
+  c.a4sp = -N * (p[MU_S] + 2.0 * p[MU_C]);
+  c.a4rp = -2.0 * N * p[MU_C];
+  c.L2 = p[MU_S] * p[F_D] + 2.0 * p[MU_C] * p[F_L];
+  c.b_sp = p[B_SP];
+  c.b_rp = p[B_RP];
+  c.c_sp = p[C_SP];
+  c.c_rp = p[C_RP];
+  return c;
+}
+
+inline void field(const Coef& c, const Terms& q, const double* x, double* dx) {
+  const double X_rp = x[2] - x[0] - q.E;
+  const double V_rp = x[3] - x[1] - q.dE;
+  const double g_sp = q.ksp * backlash(x[0], c.b_sp) + c.c_sp * x[1];
+  const double g_rp = q.krp * backlash(X_rp, c.b_rp) + c.c_rp * V_rp;
+  dx[0] = x[1];
+  dx[1] = c.a2sp * g_sp + c.a2rp * g_rp + q.L1;
+  dx[2] = x[3];
+  dx[3] = c.a4sp * g_sp + c.a4rp * g_rp + c.L2;
+}
+
+inline void switching(const Coef& c, double E, const double* x, double* s) {
+  const double X_rp = x[2] - x[0] - E;
+  s[0] = x[0] - c.b_sp;
+  s[1] = x[0] + c.b_sp;
+  s[2] = X_rp - c.b_rp;
+  s[3] = X_rp + c.b_rp;
+}
+
+inline void switching_rate(double dE, const double* f, double* d) {
+  d[0] = d[1] = f[0];
+  d[2] = d[3] = f[2] - f[0] - dE;
+}
+
+inline double side(double s) { return s >= 0.0 ? 1.0 : -1.0; }
+
+inline double sgn(double v) { return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }
+
+// Fraction of the step [t, t + h] at which the first known time break lies (1: none).
+inline double break_fraction(const Model& m, double t, double h) {
+  if (m.n_breaks == 0) return 1.0;
+  const double tol = kBreakTol * m.T;
+  double best = 1.0;
+  for (int j = 0; j < m.n_breaks; ++j) {
+    const double wait = floor_mod(m.breaks[j] - t / m.T, 1.0) * m.T;
+    if (wait > tol && wait < h - tol) best = std::min(best, wait / h);
+  }
+  return best;
+}
+
+// One RK4 step on one lane at arbitrary times (stage times kept inside the step when the
+// model has time breaks). k1_in: the first stage when already known, else nullptr.
+inline void rk4_lane(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, const double* y,
+                     double h, const double* k1_in, double* out, double* k1_out) {
+  const bool window = m.n_breaks > 0;
+  double lo = 0, hi = 0;
+  if (window) {
+    const double tol = std::min(kBreakTol * m.T, 0.25 * std::fabs(h));
+    lo = t + tol;
+    hi = t + h - tol;
+  }
+  auto tm = [&](double s) { return window ? std::min(std::max(s, lo), hi) : s; };
+  double k1[4], k2[4], k3[4], k4[4], z[4];
+  const double h2 = 0.5 * h;
+  if (k1_in) {
+    for (int i = 0; i < 4; ++i) k1[i] = k1_in[i];
+  } else {
+    field(c, terms_cached(m, ck, tc, tm(t)), y, k1);
+  }
+  for (int i = 0; i < 4; ++i) z[i] = y[i] + h2 * k1[i];
+  const Terms qm = terms_cached(m, ck, tc, tm(t + h2));
+  field(c, qm, z, k2);
+  for (int i = 0; i < 4; ++i) z[i] = y[i] + h2 * k2[i];
+  field(c, qm, z, k3);
+  for (int i = 0; i < 4; ++i) z[i] = y[i] + h * k3[i];
+  field(c, terms_cached(m, ck, tc, tm(t + h)), z, k4);
+  for (int i = 0; i < 4; ++i) out[i] = y[i] + (h / 6.0) * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+  if (k1_out)
+    for (int i = 0; i < 4; ++i) k1_out[i] = k1[i];
+}
+
+// Root in (0, 1) of the cubic Hermite interpolant (as _kink._hermite_root).
+inline double hermite_root(double s0, double s1, double d0, double d1) {
+  auto p = [&](double th) {
+    const double t2 = th * th, t3 = t2 * th;
+    return (2 * t3 - 3 * t2 + 1) * s0 + (t3 - 2 * t2 + th) * d0 + (-2 * t3 + 3 * t2) * s1 + (t3 - t2) * d1;
+  };
+  auto dp = [&](double th) {
+    const double t2 = th * th;
+    return (6 * t2 - 6 * th) * s0 + (3 * t2 - 4 * th + 1) * d0 + (-6 * t2 + 6 * th) * s1 + (3 * t2 - 2 * th) * d1;
+  };
+  const double denom = s0 - s1;
+  double th = denom != 0 ? s0 / denom : 0.5;
+  th = std::min(std::max(th, 0.0), 1.0);
+  double lo = 0.0, hi = 1.0;
+  const double sg0 = sgn(s0);
+  for (int it = 0; it < kHermiteIters; ++it) {
+    const double v = p(th);
+    if (sgn(v) == sg0) lo = th; else hi = th;
+    const double d = dp(th);
+    double nt = th - v / (d != 0 ? d : 1.0);
+    const bool done = v == 0 || (d != 0 && std::fabs(nt - th) <= 4.0 * kEps);
+    if (!(nt > lo && nt < hi && d != 0)) nt = 0.5 * (lo + hi);
+    if (done) break;  // later iterations would keep th: the same result as the fixed count
+    th = nt;
+  }
+  const double d = dp(th);
+  return th - p(th) / (d != 0 ? d : 1.0);
+}
+
+// The earliest event of a trial step of one lane (as _kink._first_crossing).
+inline void first_crossing(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, double h,
+                           const double* y, const double* y1,
+                           const double* k1, const double* S0, const double* S1, const double* sides, double thb,
+                           double* theta, int* which) {
+  double th_s = 2.0;
+  int j = 0;
+  bool any = false;
+  for (int i = 0; i < 4; ++i)
+    if (side(S1[i]) != sides[i] && std::isfinite(S1[i]) && std::isfinite(S0[i])) any = true;
+  if (any) {
+    double F1[4], D0[4], D1[4];
+    const Terms qe = terms_cached(m, ck, tc, t + h);
+    field(c, qe, y1, F1);
+    switching_rate(terms_cached(m, ck, tc, t).dE, k1, D0);
+    switching_rate(qe.dE, F1, D1);
+    for (int i = 0; i < 4; ++i) {
+      double th = 2.0;
+      if (side(S1[i]) != sides[i] && std::isfinite(S1[i]) && std::isfinite(S0[i])) {
+        th = hermite_root(S0[i], S1[i], D0[i] * h, D1[i] * h);
+        th = std::min(std::max(th, 0.0), 1.0);
+      }
+      if (th < th_s) {
+        th_s = th;
+        j = i;
+      }
+    }
+  }
+  const bool use_break = thb < th_s;
+  double th = use_break ? thb : th_s;
+  *which = (use_break || th_s > 1.0) ? -1 : j;
+  *theta = std::min(th, 1.0);
+}
+
+// A lane whose trial step holds an event (as _kink._split).
+inline void split_lane(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, double h,
+                       const double* y, const double* k1,
+                       double th, int which, double* sides, int max_splits, double* out) {
+  const bool window = m.n_breaks > 0;
+  double tt = t, hh = h, Y[4], K1[4];
+  for (int i = 0; i < 4; ++i) {
+    Y[i] = y[i];
+    K1[i] = k1[i];
+  }
+  for (int it = 0; it < max_splits; ++it) {
+    const double h1 = th * hh;
+    double Ym[4];
+    rk4_lane(m, c, ck, tc, tt, Y, h1, (it == 0 && !window) ? K1 : nullptr, Ym, nullptr);
+    if (which >= 0) sides[which] = -sides[which];
+    tt = tt + h1;
+    hh = hh - h1;
+    double Y1[4];
+    rk4_lane(m, c, ck, tc, tt, Ym, hh, nullptr, Y1, K1);
+    if (it == max_splits - 1) {
+      for (int i = 0; i < 4; ++i) out[i] = Y1[i];
+      return;
+    }
+    double S0[4], S1[4];
+    switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
+    switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
+    const double thb = break_fraction(m, tt, hh);
+    double th2;
+    int which2;
+    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, thb, &th2, &which2);
+    const bool more = th2 < 1.0;
+    if (it == max_splits - 2) {
+      if (!more) {
+        for (int i = 0; i < 4; ++i) out[i] = Y1[i];
+        return;
+      }
+      double fin[4];
+      rk4_lane(m, c, ck, tc, tt, Ym, th2 * hh, nullptr, fin, nullptr);
+      rk4_lane(m, c, ck, tc, tt + th2 * hh, fin, (1.0 - th2) * hh, nullptr, out, nullptr);
+      return;
+    }
+    for (int i = 0; i < 4; ++i) Y[i] = Ym[i];
+    th = more ? th2 : 1.0;
+    which = more ? which2 : -1;
+  }
+}
+
+struct Table {  // per parameter row: the time-only terms at every stage time of one period
+  int steps;
+  std::vector<Terms> stage;  // [steps][3]
+  std::vector<double> E0, E1, thb;  // E at a step's start and end, break fraction per step
+  std::vector<Clock> clock;         // trigonometry at each step's start
+};
+
+Table tabulate(const Model& m, double t0, double h, int steps) {
+  Table tb;
+  tb.steps = steps;
+  tb.stage.resize(3 * steps);
+  tb.E0.resize(steps);
+  tb.E1.resize(steps);
+  tb.thb.resize(steps);
+  tb.clock.resize(steps);
+  const bool window = m.n_breaks > 0;
+  const double tol = window ? std::min(kBreakTol * m.T, 0.25 * std::fabs(h)) : 0.0;
+  for (int i = 0; i < steps; ++i) {
+    const double t = t0 + i * h;
+    double ts[3] = {t, t + 0.5 * h, t + h};
+    if (window)
+      for (double& s : ts) s = std::min(std::max(s, t + tol), t + h - tol);
+    for (int s = 0; s < 3; ++s) tb.stage[3 * i + s] = terms(m, ts[s]);
+    tb.E0[i] = terms(m, t).E;
+    tb.E1[i] = terms(m, t + h).E;
+    tb.thb[i] = break_fraction(m, t, h);
+    tb.clock[i] = make_clock(m, t);
+  }
+  return tb;
+}
+
+Model make_model(const double* row, int shape) {
+  Model m;
+  for (int i = 0; i < NPARAM; ++i) m.p[i] = row[i];
+  m.shape = shape;
+  m.T = 2.0 * kPi / m.p[OMEGA];
+  m.n_breaks = 0;
+  if (shape == 1) {
+    const double pairs[2][2] = {{m.p[PHI_SP], m.p[CR_SP]}, {m.p[PHI_RP], m.p[CR_RP]}};
+    for (auto& pr : pairs) {
+      const double d = pr[1] - 1.0;
+      const double edges[2] = {0.5 * kPi - kPi * d, 0.5 * kPi + kPi * d};
+      for (double e : edges) m.breaks[m.n_breaks++] = floor_mod((e - pr[0]) / (2.0 * kPi), 1.0);
+    }
+  }
+  return m;
+}
+
+// The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
+// lanes: x (4 x L) -> x1, with k1 kept for the lanes that split. Stage s > 1 starts from
+// x + w k_{s-1}; the position components of k_s are the stage's own velocities.
+inline void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
+                          double (*x)[kBlock], double (*x1)[kBlock], double (*k1)[kBlock], double E0, double E1,
+                          bool brk, unsigned char* need) {
+  alignas(64) double kp[4][kBlock], acc[4][kBlock];
+  const double h2 = 0.5 * h, h6 = h / 6.0;
+  const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
+  const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
+#pragma omp simd
+  for (int j = 0; j < L; ++j) {
+    const double z0 = x[0][j], z1 = x[1][j], z2 = x[2][j], z3 = x[3][j];
+    const double X = z2 - z0 - q0.E, V = z3 - z1 - q0.dE;
+    const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
+    const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
+    const double gsp = q0.ksp * fsp + csp * z1, grp = q0.krp * frp + crp * V;
+    const double v1 = a2sp * gsp + a2rp * grp + q0.L1, v3 = a4sp * gsp + a4rp * grp + L2;
+    k1[0][j] = kp[0][j] = acc[0][j] = z1;
+    k1[1][j] = kp[1][j] = acc[1][j] = v1;
+    k1[2][j] = kp[2][j] = acc[2][j] = z3;
+    k1[3][j] = kp[3][j] = acc[3][j] = v3;
+  }
+  for (int st = 1; st < 4; ++st) {
+    const Terms& q = st == 3 ? q2 : q1;
+    const double w = st == 3 ? h : h2;
+    const double m = st == 3 ? 1.0 : 2.0;
+#pragma omp simd
+    for (int j = 0; j < L; ++j) {
+      const double z0 = x[0][j] + w * kp[0][j], z1 = x[1][j] + w * kp[1][j];
+      const double z2 = x[2][j] + w * kp[2][j], z3 = x[3][j] + w * kp[3][j];
+      const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
+      const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
+      const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
+      const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+      const double v1 = a2sp * gsp + a2rp * grp + q.L1, v3 = a4sp * gsp + a4rp * grp + L2;
+      kp[0][j] = z1;
+      kp[1][j] = v1;
+      kp[2][j] = z3;
+      kp[3][j] = v3;
+      acc[0][j] += m * z1;
+      acc[1][j] += m * v1;
+      acc[2][j] += m * z3;
+      acc[3][j] += m * v3;
+    }
+  }
+  // the new state, and whether the step holds an event (a switching function changes sign)
+#pragma omp simd
+  for (int j = 0; j < L; ++j) {
+    const double y0 = x[0][j] + h6 * acc[0][j], y1 = x[1][j] + h6 * acc[1][j];
+    const double y2 = x[2][j] + h6 * acc[2][j], y3 = x[3][j] + h6 * acc[3][j];
+    x1[0][j] = y0;
+    x1[1][j] = y1;
+    x1[2][j] = y2;
+    x1[3][j] = y3;
+    const double X0 = x[2][j] - x[0][j] - E0, X1 = y2 - y0 - E1;
+    const bool fin = (y0 - y0 == 0.0) & (X1 - X1 == 0.0) & (x[0][j] - x[0][j] == 0.0) & (X0 - X0 == 0.0);
+    const bool cr = ((x[0][j] - bsp >= 0) != (y0 - bsp >= 0)) | ((x[0][j] + bsp >= 0) != (y0 + bsp >= 0)) |
+                    ((X0 - brp >= 0) != (X1 - brp >= 0)) | ((X0 + brp >= 0) != (X1 + brp >= 0));
+    need[j] = (cr & fin) | brk;
+  }
+}
+
+// Advance one block of lanes [a, b) by `periods` periods.
+void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, const int32_t* lane_row,
+               const std::vector<Model>& models, const std::vector<Coef>& coefs, const std::vector<Table>& tables,
+               double t0, int periods, int steps, int max_splits) {
+  const int L = static_cast<int>(b - a);
+  alignas(64) double xa[4][kBlock], xb[4][kBlock], k1[4][kBlock];
+  double (*x)[kBlock] = xa;
+  double (*x1)[kBlock] = xb;
+  int row[kBlock];
+  for (int j = 0; j < L; ++j) {
+    for (int i = 0; i < 4; ++i) x[i][j] = Y[i * n + a + j];
+    row[j] = lane_row ? lane_row[a + j] : 0;
+  }
+  bool uniform = true;
+  for (int j = 1; j < L; ++j) uniform &= row[j] == row[0];
+  alignas(64) unsigned char need[kBlock];
+  for (int per = 0; per < periods; ++per) {
+    for (int s = 0; s < steps; ++s) {
+      if (uniform) {
+        const int r = row[0];
+        const Table& tb = tables[r];
+        const double h = models[r].T / steps;
+        trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, L, x, x1, k1,
+                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
+      } else {
+        // lanes with different parameter rows: one lane at a time
+        for (int j = 0; j < L; ++j) {
+          const int r = row[j];
+          const Model& m = models[r];
+          const Table& tb = tables[r];
+          const double h = m.T / steps;
+          double y[4], y1[4], kl[4];
+          for (int i = 0; i < 4; ++i) y[i] = x[i][j];
+          double acc4[4], z[4], dz[4];
+          field(coefs[r], tb.stage[3 * s], y, kl);
+          for (int i = 0; i < 4; ++i) { acc4[i] = kl[i]; z[i] = y[i] + 0.5 * h * kl[i]; }
+          field(coefs[r], tb.stage[3 * s + 1], z, dz);
+          for (int i = 0; i < 4; ++i) { acc4[i] += 2.0 * dz[i]; z[i] = y[i] + 0.5 * h * dz[i]; }
+          field(coefs[r], tb.stage[3 * s + 1], z, dz);
+          for (int i = 0; i < 4; ++i) { acc4[i] += 2.0 * dz[i]; z[i] = y[i] + h * dz[i]; }
+          field(coefs[r], tb.stage[3 * s + 2], z, dz);
+          for (int i = 0; i < 4; ++i) { acc4[i] += dz[i]; y1[i] = y[i] + (h / 6.0) * acc4[i]; }
+          double S0[4], S1[4];
+          switching(coefs[r], tb.E0[s], y, S0);
+          switching(coefs[r], tb.E1[s], y1, S1);
+          bool nd = tb.thb[s] < 1.0;
+          for (int i = 0; i < 4; ++i)
+            if (side(S1[i]) != side(S0[i]) && std::isfinite(S1[i]) && std::isfinite(S0[i])) nd = true;
+          need[j] = nd;
+          for (int i = 0; i < 4; ++i) { x1[i][j] = y1[i]; k1[i][j] = kl[i]; }
+        }
+      }
+      // lanes with an event: split them one by one
+      for (int j = 0; j < L; ++j) {
+        if (!need[j]) continue;
+        const int r = uniform ? row[0] : row[j];
+        const Model& m = models[r];
+        const Coef& c = coefs[r];
+        const Table& tb = tables[r];
+        const double h = m.T / steps;
+        const double t = t0 + s * h;
+        double y[4], y1[4], kl[4], S0[4], S1[4], sides[4], th, out4[4];
+        int which;
+        for (int i = 0; i < 4; ++i) {
+          y[i] = x[i][j];
+          y1[i] = x1[i][j];
+          kl[i] = k1[i][j];
+        }
+        switching(c, tb.E0[s], y, S0);
+        switching(c, tb.E1[s], y1, S1);
+        for (int i = 0; i < 4; ++i) sides[i] = side(S0[i]);
+        TermCache tc;
+        if (m.n_breaks == 0) {  // the step's own (unclipped) stage times are tabulated
+          tc.t[0] = t;
+          tc.q[0] = tb.stage[3 * s];
+          tc.t[1] = t + h;
+          tc.q[1] = tb.stage[3 * s + 2];
+          tc.n = 2;
+        }
+        first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which);
+        split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, sides, max_splits, out4);
+        for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+      }
+      std::swap(x, x1);
+    }
+  }
+  for (int j = 0; j < L; ++j)
+    for (int i = 0; i < 4; ++i) out[i * n + a + j] = x[i][j];
+}
+
+ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Buffer<ffi::S32> lane_row,
+                       ffi::Buffer<ffi::F64> t0_buf, ffi::Buffer<ffi::S32> n_active_buf,
+                       ffi::ResultBuffer<ffi::F64> out, int64_t periods, int64_t steps, int64_t max_splits,
+                       int64_t shape) {
+  // Y: (B..., 4, n); P: (B_P..., rows, NPARAM) with B_P in {1, B}; lane_row: (B_R..., n); t0: (B_T...,);
+  // n_active: (B_A...,). Leading batch dimensions come from vmap (expand_dims).
+  auto yd = Y.dimensions();
+  const int64_t rank = yd.size();
+  if (rank < 2 || yd[rank - 2] != 4) return ffi::Error::InvalidArgument("states must have shape (..., 4, n)");
+  const int64_t n = yd[rank - 1];
+  int64_t batch = 1;
+  for (int64_t i = 0; i < rank - 2; ++i) batch *= yd[i];
+  auto pd = P.dimensions();
+  const int64_t prank = pd.size();
+  if (prank < 2 || pd[prank - 1] != NPARAM) return ffi::Error::InvalidArgument("parameter rows must have 24 entries");
+  const int64_t rows = pd[prank - 2];
+  const int64_t pbatch = P.element_count() / (rows * NPARAM);
+  const int64_t rbatch = lane_row.element_count() / std::max<int64_t>(n, 1);
+  const int64_t tbatch = t0_buf.element_count();
+  const int64_t abatch = n_active_buf.element_count();
+  const double* y = Y.typed_data();
+  const double* pp = P.typed_data();
+  const int32_t* lr = lane_row.typed_data();
+  const double* t0s = t0_buf.typed_data();
+  const int32_t* nas = n_active_buf.typed_data();
+  double* o = out->typed_data();
+  const int nblocks = static_cast<int>((n + kBlock - 1) / kBlock);
+  for (int64_t bi = 0; bi < batch; ++bi) {
+    const double* pb = pp + (pbatch == 1 ? 0 : bi) * rows * NPARAM;
+    std::vector<Model> models(rows);
+    std::vector<Coef> coefs(rows);
+    std::vector<Table> tables(rows);
+    const double t0 = t0s[tbatch == 1 ? 0 : bi];
+    for (int64_t r = 0; r < rows; ++r) {
+      models[r] = make_model(pb + r * NPARAM, static_cast<int>(shape));
+      coefs[r] = coef(models[r]);
+      tables[r] = tabulate(models[r], t0, models[r].T / steps, static_cast<int>(steps));
+    }
+    const int32_t* rowp = lr + (rbatch == 1 ? 0 : bi) * n;
+    const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
+    const double* yb = y + bi * 4 * n;
+    double* ob = o + bi * 4 * n;
+    for (int64_t i = 0; i < 4; ++i)
+      for (int64_t j = n_act; j < n; ++j) ob[i * n + j] = yb[i * n + j];
+    const int nb = static_cast<int>((n_act + kBlock - 1) / kBlock);
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int blk = 0; blk < nb; ++blk) {
+      const int64_t a = static_cast<int64_t>(blk) * kBlock;
+      const int64_t b = std::min<int64_t>(a + kBlock, n_act);
+      run_block(yb, ob, n, a, b, rowp, models, coefs, tables, t0, static_cast<int>(periods),
+                static_cast<int>(steps), static_cast<int>(max_splits));
+    }
+    (void)nblocks;
+  }
+  return ffi::Error::Success();
+}
+
+}  // namespace
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(JaxgearReducedAdvance, AdvanceImpl,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::S32>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::S32>>()
+                                  .Ret<ffi::Buffer<ffi::F64>>()
+                                  .Attr<int64_t>("periods")
+                                  .Attr<int64_t>("steps")
+                                  .Attr<int64_t>("max_splits")
+                                  .Attr<int64_t>("shape"));
