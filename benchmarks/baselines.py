@@ -5,10 +5,17 @@ periods=1)``: the reduced 2-DOF gear model of MODEL.md §4 (paper §4.1) advance
 whole forcing periods ``T = 2 pi / Omega`` from ``t0``, in float64.
 
 - :func:`numba_blocked` — the strongest hand-written CPU style of
-  ``/work/shared/reference/BENCHMARK_NOTES.md``: struct-of-arrays, blocks of cells kept
+  the benchmark notes: struct-of-arrays, blocks of cells kept
   in cache for all time steps, time-only coefficients tabulated once per stage time and
   shared by all cells, the inner loop over the cells of a block vectorisable
   (``fastmath``, branch-free backlash), blocks spread over the cores with ``prange``.
+- :func:`numba_blocked_kink` — the same style for the *kink-aware* RK4 of jaxgear's
+  default integrator (``jaxgear.KinkAwareRK4``): the vectorised trial step of
+  :func:`numba_blocked`, a per-lane sign test of the four switching functions, and for
+  the few lanes whose step crosses a backlash kink the split of the compiled CPU kernel
+  (``jaxgear/integrate/native/gear_kernel.cc``) step for step: Hermite crossing,
+  sub-step to it, rest of the step, up to ``max_splits`` events per step. It is the
+  baseline of that kernel: the same algorithm and the same tricks.
 - :func:`numba_naive` — a straightforward ``prange`` loop, one cell at a time, with
   ``sin``/``cos`` recomputed at every stage (a weak baseline).
 - :func:`scipy_loop` — ``scipy.integrate.solve_ivp`` (RK45) in a Python loop.
@@ -245,6 +252,409 @@ def numba_naive(params, X, *, periods=1, t0=0.0, steps_per_period=200):
     h = 2.0 * math.pi / c[21] / steps_per_period
     Y = np.ascontiguousarray(np.asarray(X, dtype=np.float64).T)
     k["naive"](Y, c, float(t0), h, steps_per_period * int(periods))
+    return Y.T
+
+
+# --------------------------------------------------------------------------- numba, kink-aware
+# The kink-aware RK4 of jaxgear.KinkAwareRK4 for the reduced model (sine stiffness), as the
+# compiled CPU kernel computes it (jaxgear/integrate/native/gear_kernel.cc), in the style of
+# ``blocked``. Per step and block of lanes:
+#   1. the trial RK4 step of every lane (vectorised, tabulated time terms), with the sign
+#      test of the switching functions s = x1 -+ b_sp, X_rp -+ b_rp at both ends;
+#   2. each lane whose step changes a sign: the earliest crossing on the cubic Hermite
+#      interpolant of s (values and rates at both ends; safeguarded Newton with early stop),
+#      an RK4 sub-step to it, that surface's side flipped, an RK4 step over the rest, and the
+#      same once more for a further event (up to ``max_splits`` events). Time terms inside
+#      the step come from the step start's tabulated sines and cosines by angle addition
+#      (the kernel's ``Clock``/``terms_at``); the terms at a time met twice (a sub-step's end
+#      is the next one's start; the step's own start and end are in the table) are reused,
+#      which is what the kernel's per-lane ``TermCache`` does.
+# The first stage k1 of a split lane's trial step is recomputed there (one field evaluation
+# for a few per cent of the lanes) rather than stored for every lane at every step as the
+# kernel does; the values are the same. The split code takes scalars and tuples only: an
+# array argument costs numba two atomic reference-count updates per call, which would
+# dominate the few hundred flops of a split.
+# fastmath: every flag but ``nnan``/``ninf`` (they would drop the finiteness test of the
+# switching functions) and ``reassoc`` (not needed to vectorise the lane loop: it has no
+# reduction), so the rounding is the kernel's up to FMA contraction.
+KINK_FASTMATH = frozenset({"nsz", "arcp", "contract", "afn"})
+_KINK_KERNELS = {}
+_HERMITE_ITERS = 12
+_EPS = 2.220446049250313e-16
+
+
+def _build_kink_kernels(fastmath=KINK_FASTMATH):
+    key = fastmath if isinstance(fastmath, bool) else frozenset(fastmath)
+    if key in _KINK_KERNELS:
+        return _KINK_KERNELS[key]
+    from numba import njit, prange
+
+    fm = fastmath if isinstance(fastmath, bool) else set(fastmath)
+
+    @njit(inline="always", fastmath=fm)
+    def _bl(x, b):
+        return x - b if x >= b else (x + b if x <= -b else 0.0)
+
+    @njit(inline="always", fastmath=fm)
+    def _side(s):
+        return 1.0 if s >= 0.0 else -1.0
+
+    @njit(inline="always", fastmath=fm)
+    def _sgn(v):
+        return 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+
+    @njit(inline="always", fastmath=fm)
+    def _field(q, y, kc):
+        # q = (k_sp, k_rp, E, E', load1); kc = (a2sp, a2rp, a4sp, a4rp, load2, b_sp, b_rp, c_sp, c_rp)
+        X = y[2] - y[0] - q[2]
+        V = y[3] - y[1] - q[3]
+        gs = q[0] * _bl(y[0], kc[5]) + kc[7] * y[1]
+        gr = q[1] * _bl(X, kc[6]) + kc[8] * V
+        return (y[1], kc[0] * gs + kc[1] * gr + q[4], y[3], kc[2] * gs + kc[3] * gr + kc[4])
+
+    @njit(inline="always", fastmath=fm)
+    def _axpy(y, w, k):
+        return (y[0] + w * k[0], y[1] + w * k[1], y[2] + w * k[2], y[3] + w * k[3])
+
+    @njit(inline="always", fastmath=fm)
+    def _small_sincos(x):
+        if abs(x) > 0.2:
+            return math.sin(x), math.cos(x)
+        x2 = x * x
+        s = x * (1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880
+                                                                                      + x2 * (-1.0 / 39916800))))))
+        c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320 + x2 * (-1.0 / 3628800
+                                                                                             + x2 * (1.0 / 479001600))))))
+        return s, c
+
+    @njit(inline="always", fastmath=fm)
+    def _terms_at(tc, ck, t):
+        # time terms at t from the step start's clock ck = (t_start, sin x 4, cos x 4) of the
+        # angles Omega t + (phi_sp, phi_rp, beta_sp, beta_rp + gamma_sr), by angle addition;
+        # tc = (Omega, ksm, ksa, krm, kra, esa, era, mu_s f_D + mu_c f_L)
+        W = tc[0]
+        sx, cx = _small_sincos(W * (t - ck[0]))
+        S0 = ck[1] * cx + ck[5] * sx
+        S1 = ck[2] * cx + ck[6] * sx
+        S2 = ck[3] * cx + ck[7] * sx
+        S3 = ck[4] * cx + ck[8] * sx
+        C2 = ck[7] * cx - ck[3] * sx
+        C3 = ck[8] * cx - ck[4] * sx
+        e_sp = tc[5] * S2
+        de_sp = tc[5] * W * C2
+        dde_sp = -tc[5] * W * W * S2
+        return (tc[1] + tc[2] * S0, tc[3] + tc[4] * S1, e_sp + tc[6] * S3, de_sp + tc[6] * W * C3,
+                tc[7] - dde_sp)
+
+    @njit(inline="always", fastmath=fm)
+    def _terms(tc, ck, h, qa, qb, t):
+        # the step's own start ck[0] and end ck[0] + h are tabulated (qa, qb)
+        if t == ck[0]:
+            return qa
+        if t == ck[0] + h:
+            return qb
+        return _terms_at(tc, ck, t)
+
+    @njit(inline="always", fastmath=fm)
+    def _rk4_lane(kc, tc, ck, H, qa, qb, t, y, h, k1, q1):
+        """One RK4 step of one lane from t (terms q1 there, first stage k1): (y_new, terms at t + h)."""
+        h2 = 0.5 * h
+        qm = _terms(tc, ck, H, qa, qb, t + h2)
+        b = _field(qm, _axpy(y, h2, k1), kc)
+        c = _field(qm, _axpy(y, h2, b), kc)
+        q4 = _terms(tc, ck, H, qa, qb, t + h)
+        d = _field(q4, _axpy(y, h, c), kc)
+        h6 = h / 6.0
+        out = (y[0] + h6 * (k1[0] + 2.0 * (b[0] + c[0]) + d[0]), y[1] + h6 * (k1[1] + 2.0 * (b[1] + c[1]) + d[1]),
+               y[2] + h6 * (k1[2] + 2.0 * (b[2] + c[2]) + d[2]), y[3] + h6 * (k1[3] + 2.0 * (b[3] + c[3]) + d[3]))
+        return out, q4
+
+    @njit(inline="always", fastmath=fm)
+    def _switching(kc, E, y):
+        X = y[2] - y[0] - E
+        return (y[0] - kc[5], y[0] + kc[5], X - kc[6], X + kc[6])
+
+    @njit(inline="always", fastmath=fm)
+    def _hp(th, s0, s1, d0, d1):
+        t2 = th * th
+        t3 = t2 * th
+        return (2 * t3 - 3 * t2 + 1) * s0 + (t3 - 2 * t2 + th) * d0 + (-2 * t3 + 3 * t2) * s1 + (t3 - t2) * d1
+
+    @njit(inline="always", fastmath=fm)
+    def _hdp(th, s0, s1, d0, d1):
+        t2 = th * th
+        return (6 * t2 - 6 * th) * s0 + (3 * t2 - 4 * th + 1) * d0 + (-6 * t2 + 6 * th) * s1 + (3 * t2 - 2 * th) * d1
+
+    @njit(fastmath=fm)
+    def _hermite_root(s0, s1, d0, d1):
+        # root in (0, 1) of the cubic Hermite interpolant, s0 s1 < 0: safeguarded Newton from
+        # the secant point, stopped when the correction is at round-off
+        denom = s0 - s1
+        th = s0 / denom if denom != 0 else 0.5
+        if th < 0.0:  # noqa: PLR1730  (std::max/std::min of the kernel: a NaN stays NaN)
+            th = 0.0
+        if 1.0 < th:  # noqa: PLR1730
+            th = 1.0
+        lo, hi = 0.0, 1.0
+        sg0 = _sgn(s0)
+        for _ in range(_HERMITE_ITERS):
+            v = _hp(th, s0, s1, d0, d1)
+            if _sgn(v) == sg0:
+                lo = th
+            else:
+                hi = th
+            d = _hdp(th, s0, s1, d0, d1)
+            nt = th - v / (d if d != 0 else 1.0)
+            done = v == 0 or (d != 0 and abs(nt - th) <= 4.0 * _EPS)
+            if not (nt > lo and nt < hi and d != 0):
+                nt = 0.5 * (lo + hi)
+            if done:
+                break
+            th = nt
+        d = _hdp(th, s0, s1, d0, d1)
+        return th - _hp(th, s0, s1, d0, d1) / (d if d != 0 else 1.0)
+
+    @njit(inline="always", fastmath=fm)
+    def _crosses(s0, s1, side):
+        return _side(s1) != side and math.isfinite(s1) and math.isfinite(s0)
+
+    @njit(inline="always", fastmath=fm)
+    def _root(s0, s1, side, d0, d1, h):
+        if not _crosses(s0, s1, side):
+            return 2.0
+        th = _hermite_root(s0, s1, d0 * h, d1 * h)
+        if th < 0.0:  # noqa: PLR1730  (std::max/std::min of the kernel: a NaN stays NaN)
+            th = 0.0
+        if 1.0 < th:  # noqa: PLR1730
+            th = 1.0
+        return th
+
+    @njit(fastmath=fm)
+    def _first_crossing(kc, qs, qe, h, y1, k1, S0, S1, sd):
+        """(theta, which) of the earliest crossing in a step (terms qs, qe at its ends);
+        which = -1 for none."""
+        if not (_crosses(S0[0], S1[0], sd[0]) or _crosses(S0[1], S1[1], sd[1])
+                or _crosses(S0[2], S1[2], sd[2]) or _crosses(S0[3], S1[3], sd[3])):
+            return 1.0, -1
+        F1 = _field(qe, y1, kc)
+        Dx0, Dx1 = k1[0], F1[0]
+        DX0, DX1 = k1[2] - k1[0] - qs[3], F1[2] - F1[0] - qe[3]
+        th_s, j = 2.0, 0
+        th = _root(S0[0], S1[0], sd[0], Dx0, Dx1, h)
+        if th < th_s:
+            th_s, j = th, 0
+        th = _root(S0[1], S1[1], sd[1], Dx0, Dx1, h)
+        if th < th_s:
+            th_s, j = th, 1
+        th = _root(S0[2], S1[2], sd[2], DX0, DX1, h)
+        if th < th_s:
+            th_s, j = th, 2
+        th = _root(S0[3], S1[3], sd[3], DX0, DX1, h)
+        if th < th_s:
+            th_s, j = th, 3
+        if 1.0 < th_s:  # no crossing (the sine shape has no time breaks)
+            return 1.0, -1
+        return th_s, j
+
+    @njit(inline="always", fastmath=fm)
+    def _flip(sd, which):
+        return (-sd[0] if which == 0 else sd[0], -sd[1] if which == 1 else sd[1],
+                -sd[2] if which == 2 else sd[2], -sd[3] if which == 3 else sd[3])
+
+    @njit(fastmath=fm)
+    def _split_lane(kc, tc, ck, h, qa, qb, y, y1, k1, max_splits):
+        """A lane whose trial step (y -> y1, first stage k1) changes a sign: sub-step to the
+        crossing, flip, the rest; again for a further event, up to max_splits events."""
+        t = ck[0]
+        S0 = _switching(kc, qa[2], y)
+        S1 = _switching(kc, qb[2], y1)
+        sd = (_side(S0[0]), _side(S0[1]), _side(S0[2]), _side(S0[3]))
+        th, which = _first_crossing(kc, qa, qb, h, y1, k1, S0, S1, sd)
+        tt, hh, Y, K1, Q = t, h, y, k1, qa
+        for it in range(max_splits):
+            h1 = th * hh
+            if it > 0:
+                K1 = _field(Q, Y, kc)
+            Ym, Qm = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Y, h1, K1, Q)
+            if which >= 0:
+                sd = _flip(sd, which)
+            tt = tt + h1
+            hh = hh - h1
+            K1 = _field(Qm, Ym, kc)
+            Y1, Qe = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Ym, hh, K1, Qm)
+            if it == max_splits - 1:
+                return Y1
+            S1 = _switching(kc, Qe[2], Y1)
+            S0 = _switching(kc, Qm[2], Ym)
+            th2, which2 = _first_crossing(kc, Qm, Qe, hh, Y1, K1, S0, S1, sd)
+            more = th2 < 1.0
+            if it == max_splits - 2:
+                if not more:
+                    return Y1
+                fin, Qf = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Ym, th2 * hh, K1, Qm)
+                out, _ = _rk4_lane(kc, tc, ck, h, qa, qb, tt + th2 * hh, fin, (1.0 - th2) * hh,
+                                   _field(Qf, fin, kc), Qf)
+                return out
+            Y, Q = Ym, Qm
+            th = th2 if more else 1.0
+            which = which2 if more else -1
+        return Y1
+
+    @njit(parallel=True, fastmath=fm)
+    def blocked_kink(Y, tab, clock, kc, tc, h, periods, block, max_splits):
+        """Kink-aware RK4 over ``periods`` periods of ``tab.shape[0]`` steps, block by block;
+        Y (4, n) is updated in place. ``clock[i] = (t_i, sin x 4, cos x 4)`` at step i's start."""
+        a2sp, a2rp, a4sp, a4rp, load2, b_sp, b_rp, c_sp, c_rp = kc
+        n = Y.shape[1]
+        steps = tab.shape[0]
+        nb = (n + block - 1) // block
+        h2 = 0.5 * h
+        h6 = h / 6.0
+        for bi in prange(nb):
+            lo = bi * block
+            m = min(block, n - lo)
+            # two state buffers (start, end of the step), used alternately
+            xs = np.empty((2, 4, block))
+            need = np.zeros(block, np.uint8)
+            for j in range(m):
+                for r in range(4):
+                    xs[0, r, j] = Y[r, lo + j]
+            cur = 0
+            for _ in range(periods):
+                for i in range(steps):
+                    x1, x2, x3, x4 = xs[cur, 0], xs[cur, 1], xs[cur, 2], xs[cur, 3]
+                    n1, n2, n3, n4 = xs[1 - cur, 0], xs[1 - cur, 1], xs[1 - cur, 2], xs[1 - cur, 3]
+                    k0s, k0r, E0, dE0, L0 = tab[i, 0, 0], tab[i, 0, 1], tab[i, 0, 2], tab[i, 0, 3], tab[i, 0, 4]
+                    k1s, k1r, E1, dE1, L1 = tab[i, 1, 0], tab[i, 1, 1], tab[i, 1, 2], tab[i, 1, 3], tab[i, 1, 4]
+                    k2s, k2r, E2, dE2, L2 = tab[i, 2, 0], tab[i, 2, 1], tab[i, 2, 2], tab[i, 2, 3], tab[i, 2, 4]
+                    # 1. the trial step, vectorised over the block, and the sign test
+                    for j in range(m):
+                        y1 = x1[j]
+                        y2 = x2[j]
+                        y3 = x3[j]
+                        y4 = x4[j]
+                        X0 = y3 - y1 - E0
+                        gs = k0s * (max(y1 - b_sp, 0.0) + min(y1 + b_sp, 0.0)) + c_sp * y2
+                        gr = k0r * (max(X0 - b_rp, 0.0) + min(X0 + b_rp, 0.0)) + c_rp * (y4 - y2 - dE0)
+                        p1 = y2
+                        v1 = a2sp * gs + a2rp * gr + L0
+                        q1 = y4
+                        w1 = a4sp * gs + a4rp * gr + load2
+                        z1 = y1 + h2 * p1
+                        z2 = y2 + h2 * v1
+                        z3 = y3 + h2 * q1
+                        z4 = y4 + h2 * w1
+                        X = z3 - z1 - E1
+                        gs = k1s * (max(z1 - b_sp, 0.0) + min(z1 + b_sp, 0.0)) + c_sp * z2
+                        gr = k1r * (max(X - b_rp, 0.0) + min(X + b_rp, 0.0)) + c_rp * (z4 - z2 - dE1)
+                        p2 = z2
+                        v2 = a2sp * gs + a2rp * gr + L1
+                        q2 = z4
+                        w2 = a4sp * gs + a4rp * gr + load2
+                        z1 = y1 + h2 * p2
+                        z2 = y2 + h2 * v2
+                        z3 = y3 + h2 * q2
+                        z4 = y4 + h2 * w2
+                        X = z3 - z1 - E1
+                        gs = k1s * (max(z1 - b_sp, 0.0) + min(z1 + b_sp, 0.0)) + c_sp * z2
+                        gr = k1r * (max(X - b_rp, 0.0) + min(X + b_rp, 0.0)) + c_rp * (z4 - z2 - dE1)
+                        p3 = z2
+                        v3 = a2sp * gs + a2rp * gr + L1
+                        q3 = z4
+                        w3 = a4sp * gs + a4rp * gr + load2
+                        z1 = y1 + h * p3
+                        z2 = y2 + h * v3
+                        z3 = y3 + h * q3
+                        z4 = y4 + h * w3
+                        X = z3 - z1 - E2
+                        gs = k2s * (max(z1 - b_sp, 0.0) + min(z1 + b_sp, 0.0)) + c_sp * z2
+                        gr = k2r * (max(X - b_rp, 0.0) + min(X + b_rp, 0.0)) + c_rp * (z4 - z2 - dE2)
+                        p4 = z2
+                        v4 = a2sp * gs + a2rp * gr + L2
+                        q4 = z4
+                        w4 = a4sp * gs + a4rp * gr + load2
+                        # the kernel's accumulation order: ((k1 + 2 k2) + 2 k3) + k4
+                        o1 = y1 + h6 * (((p1 + 2.0 * p2) + 2.0 * p3) + p4)
+                        o2 = y2 + h6 * (((v1 + 2.0 * v2) + 2.0 * v3) + v4)
+                        o3 = y3 + h6 * (((q1 + 2.0 * q2) + 2.0 * q3) + q4)
+                        o4 = y4 + h6 * (((w1 + 2.0 * w2) + 2.0 * w3) + w4)
+                        n1[j] = o1
+                        n2[j] = o2
+                        n3[j] = o3
+                        n4[j] = o4
+                        X1 = o3 - o1 - E2
+                        fin = (o1 - o1 == 0.0) & (X1 - X1 == 0.0) & (y1 - y1 == 0.0) & (X0 - X0 == 0.0)
+                        cr = (((y1 - b_sp >= 0.0) != (o1 - b_sp >= 0.0)) | ((y1 + b_sp >= 0.0) != (o1 + b_sp >= 0.0))
+                              | ((X0 - b_rp >= 0.0) != (X1 - b_rp >= 0.0)) | ((X0 + b_rp >= 0.0) != (X1 + b_rp >= 0.0)))
+                        need[j] = cr & fin
+                    # 2. the few lanes with a crossing: split one by one
+                    ck = (clock[i, 0], clock[i, 1], clock[i, 2], clock[i, 3], clock[i, 4],
+                          clock[i, 5], clock[i, 6], clock[i, 7], clock[i, 8])
+                    qa = (k0s, k0r, E0, dE0, L0)
+                    qb = (k2s, k2r, E2, dE2, L2)
+                    for j in range(m):
+                        if need[j] == 0:
+                            continue
+                        y = (x1[j], x2[j], x3[j], x4[j])
+                        o = _split_lane(kc, tc, ck, h, qa, qb, y, (n1[j], n2[j], n3[j], n4[j]), _field(qa, y, kc),
+                                        max_splits)
+                        n1[j] = o[0]
+                        n2[j] = o[1]
+                        n3[j] = o[2]
+                        n4[j] = o[3]
+                    cur = 1 - cur
+            for j in range(m):
+                for r in range(4):
+                    Y[r, lo + j] = xs[cur, r, j]
+
+    _KINK_KERNELS[key] = blocked_kink
+    return blocked_kink
+
+
+def kink_tables(c: np.ndarray, t0: float, steps: int, h: float):
+    """What :func:`numba_blocked_kink` tabulates once per call: the stage terms of one period
+    ``(steps, 3, 5)`` (:func:`stage_table`) and the clock of every step start
+    ``t = t0 + i h``, ``(steps, 9)``: ``t`` and the sines and cosines of the four phase
+    angles ``Omega t + phi_sp``, ``Omega t + phi_rp``, ``Omega t + beta_sp``,
+    ``Omega t + beta_rp + gamma_sr``."""
+    W = c[21]
+    t = t0 + np.arange(steps, dtype=np.float64) * h
+    ang = np.stack([W * t + c[8], W * t + c[9], W * t + c[12], W * t + c[13] + c[14]], axis=1)
+    clock = np.concatenate([t[:, None], np.sin(ang), np.cos(ang)], axis=1)
+    return stage_table(c, t0, steps, h), np.ascontiguousarray(clock)
+
+
+def kink_constants(c: np.ndarray):
+    """The state-independent coefficients ``kc`` and the time-term constants ``tc`` of
+    :func:`numba_blocked_kink` (the compiled kernel's ``Coef`` and ``terms``)."""
+    N, mu_s, mu_p, mu_c = (float(v) for v in c[:4])
+    ksm, ksa, krm, kra = (float(v) for v in c[4:8])
+    esa, era = float(c[10]), float(c[11])
+    b_sp, b_rp, c_sp, c_rp, f_D, f_L, W = (float(v) for v in c[15:22])
+    kc = (-(N + mu_p), mu_p - N * mu_c, -N * (mu_s + 2.0 * mu_c), -2.0 * N * mu_c, mu_s * f_D + 2.0 * mu_c * f_L,
+          b_sp, b_rp, c_sp, c_rp)
+    tc = (W, ksm, ksa, krm, kra, esa, era, mu_s * f_D + mu_c * f_L)
+    return kc, tc
+
+
+def numba_blocked_kink(params, X, *, periods=1, t0=0.0, steps_per_period=200, block=512, max_splits=2):
+    """Blocked, tabulated, vectorised numba *kink-aware* RK4: ``X (n, 4) -> (n, 4)``.
+
+    The same map as ``jaxgear.stroboscopic_map(jaxgear.REDUCED, params, X, periods=periods,
+    integrator=jaxgear.KinkAwareRK4(steps_per_period, max_splits=max_splits))`` for the
+    sine mesh stiffness and identical planets (see the section comment above).
+    """
+    if getattr(params, "mesh_shape", "sine") != "sine":
+        raise ValueError("numba_blocked_kink supports the sine mesh stiffness only.")
+    if not 1 <= int(max_splits) <= 3:
+        raise ValueError(f"max_splits={max_splits} must be 1, 2 or 3.")
+    kern = _build_kink_kernels()
+    c = constants(params)
+    h = 2.0 * math.pi / c[21] / steps_per_period
+    tab, clock = kink_tables(c, float(t0), int(steps_per_period), h)
+    kc, tc = kink_constants(c)
+    Y = np.ascontiguousarray(np.asarray(X, dtype=np.float64).T)
+    kern(Y, tab, clock, kc, tc, h, int(periods), int(block), int(max_splits))
     return Y.T
 
 
