@@ -1,26 +1,35 @@
 """Benchmark suite of jaxgear: plain script, figures printed, nothing asserted.
 
-    python benchmarks/run.py            # full run (~5-10 min on 2 cores)
-    python benchmarks/run.py --quick    # ~1-2 min version
+    python benchmarks/run.py            # full run (~20 min on 2 cores)
+    python benchmarks/run.py --quick    # ~5 min (no cell-label agreement, n <= 400, fewer sizes)
     python benchmarks/run.py --json out.json
 
 Measures, in one run on one machine (compile time reported apart from execution:
 ``compile = first call - steady state``, ``steady state = min(timeit.repeat(...))``):
 
-1. the stroboscopic map of the 90,000 paper-grid cell centres (region D of paper eq. 10,
-   50 x 30 x 60 cells on x4 = 0) over one forcing period, classical RK4, 200 steps per
-   period, float64 — ``jaxgear.stroboscopic_map``;
-2. the same map in baselines written for the benchmark (``benchmarks/baselines.py``):
-   numba blocked/tabulated/vectorised (strongest CPU style), numba naive per-cell,
-   ``scipy.integrate.solve_ivp`` (RK45) in a Python loop, diffrax Tsit5 vmapped;
-3. the whole global analysis per method (``jaxgear.analyze_global``, if present);
-4. a bifurcation-diagram workload (200 Omega x 8 states x 500 periods, ``jax.vmap``
-   over parameters) and batched Newton shooting (``jaxgear.find_periodic_orbits``,
-   if present);
-5. time and peak resident memory against the number of cells (fresh subprocess per
-   size), jaxgear's kernel before/after chunking and numba.
+1. the kernel: the stroboscopic map of the 90,000 paper-grid cell centres (region D of
+   paper eq. 10, 50 x 30 x 60 cells on x4 = 0) over one forcing period, 200 steps per
+   period, float64, with the default integrator ``jaxgear.KinkAwareRK4(200)`` (the
+   compiled CPU kernel), its pure-JAX path, plain ``jaxgear.RK4(200)``, and the numba
+   baselines of ``benchmarks/baselines.py`` written for the benchmark (blocked,
+   tabulated, vectorised: plain RK4 and kink-aware); the *kernel ratio* = default
+   integrator / numba kink-aware;
+2. other CPU styles of the same map: numba naive per-cell, ``scipy.integrate.solve_ivp``
+   (RK45) in a Python loop, diffrax Tsit5 vmapped;
+3. the whole job: ``jaxgear analyze`` (the command line, a fresh process: cold with an
+   empty compilation cache, then warm), with and without figures, and the in-process
+   ``jaxgear.analyze_global()``; wall time, CPU utilisation, and the *whole-job ratio*
+   = wall time / numba kink-aware time of item 1 ("numba-periods");
+4. convergence at the defaults: the paper preset's unstable P-1 and stable P-4 by
+   shooting with ``KinkAwareRK4(n)`` and ``RK4(n)``, n = 100 ... 3200 steps per period,
+   and (full run) the agreement of the cell labels of the default analysis at n and 2n;
+5. the global analysis per method (``jaxgear.Direct``, ``jaxgear.PoincareCellMap``,
+   ``jaxgear.StroboscopicCellMap``);
+6. a bifurcation-diagram workload (200 values x 8 states x 500 periods) and batched
+   Newton shooting (``jaxgear.find_periodic_orbits``);
+7. time and peak resident memory against the number of cells (fresh subprocess per size).
 
-Prints a table (its LAST line is the ratio jaxgear / numba-blocked for item 1) and
+Prints a table whose LAST line is the headline, the whole-job ratio of item 3, and
 writes every figure plus a machine description to a JSON file.
 """
 
@@ -31,9 +40,12 @@ import json
 import math
 import os
 import platform
+import re
 import resource
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import timeit
 
@@ -44,12 +56,23 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
 
-STEPS = 200  # RK4 steps per forcing period (jaxgear's default, paper §4.1)
+STEPS = 200  # steps per forcing period (jaxgear's default, paper §4.1)
+P1_SEED = (5.579052, -0.619948, 10.674853, -0.253884)  # the paper preset's unstable P-1
+P4_SEED = (5.8576, -0.6063, 12.1897, -0.9568)  # and its stable P-4
+TARGET_KERNEL_RATIO = 1.5
+TARGET_WHOLE_JOB_RATIO = 100.0
 
 
 # =========================================================================== helpers
+def usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
 def machine_info() -> dict:
-    """CPU model, cores, caches, library versions, load average."""
+    """CPU model, cores, caches, library versions, C++ compiler, load average."""
     info = {"python": platform.python_version(), "platform": platform.platform()}
     try:
         with open("/proc/cpuinfo") as fh:
@@ -60,10 +83,7 @@ def machine_info() -> dict:
     except OSError:
         info["cpu"] = platform.processor()
     info["logical_cpus"] = os.cpu_count()
-    try:
-        info["usable_cpus"] = len(os.sched_getaffinity(0))
-    except AttributeError:
-        pass
+    info["usable_cpus"] = usable_cores()
     try:
         out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
         for line in out.splitlines():
@@ -79,16 +99,28 @@ def machine_info() -> dict:
             info["mem_total_GiB"] = round(int(fh.readline().split()[1]) / 2**20, 1)
     except OSError:
         pass
+    cxx = os.environ.get("CXX") or shutil.which("g++") or shutil.which("c++") or shutil.which("clang++")
+    if cxx:
+        try:
+            info["cxx"] = subprocess.run([cxx, "--version"], capture_output=True, text=True,
+                                         timeout=10).stdout.splitlines()[0]
+        except (OSError, subprocess.SubprocessError, IndexError):
+            info["cxx"] = None
     import diffrax
     import jax
     import jaxlib
     import scipy
 
+    import jaxgear
+    from jaxgear.integrate._native import native_available
+
+    info["jaxgear"] = jaxgear.__version__
     info["jax"] = jax.__version__
     info["jaxlib"] = jaxlib.__version__
     info["diffrax"] = diffrax.__version__
     info["scipy"] = scipy.__version__
     info["numpy"] = np.__version__
+    info["native_kernel"] = bool(native_available())
     try:
         import numba
 
@@ -110,23 +142,35 @@ def loadavg():
 
 def measure(fn, repeat: int) -> dict:
     """First call (compile + run) and steady state ``min(timeit.repeat(fn, number=1))``."""
+    return measure_result(fn, repeat)[0]
+
+
+def measure_result(fn, repeat: int):
+    """:func:`measure`, and what the first call returned (no extra call for the result)."""
     t = time.perf_counter()
-    fn()
+    out = fn()
     first = time.perf_counter() - t
     steady = min(timeit.repeat(fn, number=1, repeat=repeat)) if repeat > 0 else first
-    return {"first_s": first, "steady_s": steady, "compile_s": max(first - steady, 0.0), "repeats": repeat}
+    return {"first_s": first, "steady_s": steady, "compile_s": max(first - steady, 0.0), "repeats": repeat}, out
 
 
-def ns_per_step(seconds: float, n_cells: int, periods: int = 1, steps: int = STEPS) -> float:
+def ns_per_step(seconds: float, n_cells: int, periods: float = 1, steps: int = STEPS) -> float:
     return seconds / (n_cells * periods * steps) * 1e9
 
 
-def paper_centres(counts=(50, 30, 60)) -> np.ndarray:
-    """The cell centres of the paper's region D (eq. 10) on x4 = 0: ``(n, 4)``, x1 slowest."""
-    bounds = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0))
-    axes = [lo + (hi - lo) / c * (np.arange(c) + 0.5) for (lo, hi), c in zip(bounds, counts)]
-    g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    return np.concatenate([g, np.zeros((len(g), 1))], axis=1)
+def max_diff(A, B) -> dict:
+    """Largest difference of two ``(n, dim)`` results: absolute, and relative to
+    ``max(|B|, 1)`` (states are O(1-50); a plain relative error is meaningless at zero)."""
+    A, B = np.asarray(A), np.asarray(B)
+    d = np.abs(A - B)
+    return {"abs": float(np.max(d)), "rel": float(np.max(d / np.maximum(np.abs(B), 1.0)))}
+
+
+def paper_centres() -> np.ndarray:
+    """The cell centres of the paper's region D (eq. 10) on x4 = 0: ``(90000, 4)``."""
+    import jaxgear
+
+    return jaxgear.CellGrid.paper().centres()
 
 
 def random_states(n: int, seed: int = 0) -> np.ndarray:
@@ -142,42 +186,17 @@ def _block(x):
     return jax.block_until_ready(x)
 
 
+def _have_numba() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 # =========================================================================== item 1
-def bench_strobe(X, repeat, R):
-    """Item 1: jaxgear.stroboscopic_map of all cells over one period."""
-    import jax
-    import jax.numpy as jnp
-
-    import jaxgear
-
-    p = jaxgear.paper_params()
-    Xj = jnp.asarray(X)
-    n = len(X)
-    jax.clear_caches()
-    fn = lambda: _block(jaxgear.stroboscopic_map(jaxgear.REDUCED, p, Xj, periods=1))  # noqa: E731
-    m = measure(fn, repeat)
-    m["ns_per_step_cell"] = ns_per_step(m["steady_s"], n)
-    m["n_cells"] = n
-    R["strobe_jaxgear"] = m
-    Y = np.asarray(fn())
-    R["_Y_jaxgear"] = Y
-    m["non_finite"] = int((~np.isfinite(Y).all(axis=1)).sum())
-
-    # The same map in chunks of 16,384 cells (analyze_global's default chunk_size),
-    # one call per chunk: the cost of cutting the batch small on this machine.
-    C = 16384
-    Xp = np.concatenate([X, np.repeat(X[:1], (-n) % C, axis=0)])
-    parts = [jnp.asarray(Xp[i:i + C]) for i in range(0, len(Xp), C)]
-    fc = lambda: [_block(jaxgear.stroboscopic_map(jaxgear.REDUCED, p, q, periods=1)) for q in parts]  # noqa: E731
-    mc = measure(fc, max(1, repeat - 2))
-    mc["ns_per_step_cell"] = ns_per_step(mc["steady_s"], n)
-    mc["chunk"] = C
-    R["strobe_jaxgear_chunks16k"] = mc
-
-
-# =========================================================================== item 2
-def bench_baselines(X, repeat, R, scipy_sample, diffrax_sample):
-    """Item 2: numba (blocked, naive), solve_ivp loop, diffrax vmap; agreement checks."""
+def bench_kernel(X, repeat, R):
+    """Item 1: one period of the paper grid, jaxgear's integrators and the numba baselines."""
     import jax
     import jax.numpy as jnp
 
@@ -185,61 +204,106 @@ def bench_baselines(X, repeat, R, scipy_sample, diffrax_sample):
     import jaxgear
 
     p = jaxgear.paper_params()
+    Xj = jnp.asarray(X)
     n = len(X)
-    Yj = R["_Y_jaxgear"]
-    rng = np.random.default_rng(1)
+    out = {}
+    Ys = {}
 
-    try:
+    def strobe(integrator):
+        return lambda: _block(jaxgear.stroboscopic_map(jaxgear.REDUCED, p, Xj, periods=1, integrator=integrator))
+
+    jax.clear_caches()
+    for key, integrator, rep in (("default", jaxgear.KinkAwareRK4(STEPS), repeat),
+                                 ("kink_jax", jaxgear.KinkAwareRK4(STEPS, backend="jax"), 1),
+                                 ("rk4", jaxgear.RK4(STEPS), repeat)):
+        m, Y = measure_result(strobe(integrator), rep)
+        Ys[key] = np.asarray(Y)
+        m["integrator"] = repr(integrator)
+        m["non_finite"] = int((~np.isfinite(Ys[key]).all(axis=1)).sum())
+        out[key] = m
+
+    if _have_numba():
         import numba
-    except ImportError:
-        numba = None
-    if numba is not None:
-        fb = lambda: B.numba_blocked(p, X, block=512)  # noqa: E731
-        m = measure(fb, repeat)
-        m["ns_per_step_cell"] = ns_per_step(m["steady_s"], n)
-        Yb = fb()
-        m["max_abs_diff_vs_jaxgear"] = float(np.max(np.abs(Yb - Yj)))
-        m["threads"] = numba.get_num_threads()
-        m["block"] = 512
-        R["strobe_numba_blocked"] = m
 
-        nt = numba.get_num_threads()
-        numba.set_num_threads(1)
-        m1 = measure(fb, repeat)
-        numba.set_num_threads(nt)
-        m1["ns_per_step_cell"] = ns_per_step(m1["steady_s"], n)
-        R["strobe_numba_blocked_1thread"] = m1
-
-        fnv = lambda: B.numba_naive(p, X)  # noqa: E731
-        m = measure(fnv, max(1, repeat // 2))
-        m["ns_per_step_cell"] = ns_per_step(m["steady_s"], n)
-        m["max_abs_diff_vs_jaxgear"] = float(np.max(np.abs(fnv() - Yj)))
-        R["strobe_numba_naive"] = m
+        for key, fn in (("numba_blocked", lambda: B.numba_blocked(p, X, block=512)),
+                        ("numba_blocked_kink", lambda: B.numba_blocked_kink(p, X, block=512))):
+            m, Y = measure_result(fn, repeat)
+            Ys[key] = np.asarray(Y)
+            m["threads"] = numba.get_num_threads()
+            m["block"] = 512
+            out[key] = m
+            nt = numba.get_num_threads()
+            numba.set_num_threads(1)
+            m1 = measure(fn, max(1, repeat - 2))
+            numba.set_num_threads(nt)
+            out[key + "_1thread"] = m1
     else:
-        R["strobe_numba_blocked"] = {"skipped": "numba is not installed"}
+        out["numba_blocked"] = out["numba_blocked_kink"] = {"skipped": "numba is not installed"}
+
+    for m in out.values():
+        if "steady_s" in m:
+            m["ns_per_step_cell"] = ns_per_step(m["steady_s"], n)
+    diffs = {"kink_jax_vs_default": max_diff(Ys["kink_jax"], Ys["default"]),
+             "rk4_vs_default": max_diff(Ys["rk4"], Ys["default"])}
+    if "numba_blocked_kink" in Ys:
+        diffs["default_vs_numba_kink"] = max_diff(Ys["default"], Ys["numba_blocked_kink"])
+        diffs["numba_kink_vs_kink_jax"] = max_diff(Ys["numba_blocked_kink"], Ys["kink_jax"])
+        diffs["numba_plain_vs_rk4"] = max_diff(Ys["numba_blocked"], Ys["rk4"])
+        out["kernel_ratio"] = out["default"]["steady_s"] / out["numba_blocked_kink"]["steady_s"]
+    out["diffs"] = diffs
+    out["n_cells"] = n
+    R["kernel"] = out
+    R["_Y"] = Ys
+
+
+# =========================================================================== item 2
+def bench_other_styles(X, repeat, R, scipy_sample, diffrax_sample):
+    """Item 2: numba naive, solve_ivp loop, diffrax vmap, each against the default integrator
+    and plain RK4 of item 1."""
+    import jax.numpy as jnp
+
+    import baselines as B
+    import jaxgear
+
+    p = jaxgear.paper_params()
+    n = len(X)
+    Yk, Yr = R["_Y"]["default"], R["_Y"]["rk4"]
+    rng = np.random.default_rng(1)
+    out = {}
+
+    if _have_numba():
+        fnv = lambda: B.numba_naive(p, X)  # noqa: E731
+        m, Yv = measure_result(fnv, max(1, repeat // 2))
+        m["ns_per_step_cell"] = ns_per_step(m["steady_s"], n)
+        m["max_abs_diff_vs_rk4"] = float(np.max(np.abs(Yv - Yr)))
+        out["numba_naive"] = m
+    else:
+        out["numba_naive"] = {"skipped": "numba is not installed"}
 
     # solve_ivp, a sample of cells, extrapolated to all cells.
     idx = np.sort(rng.choice(n, size=min(scipy_sample, n), replace=False))
     t = time.perf_counter()
     Ys = B.scipy_loop(p, X[idx], rtol=1e-8, atol=1e-8)
     ts = time.perf_counter() - t
-    R["strobe_scipy"] = {
+    out["scipy"] = {
         "sample": int(len(idx)), "sample_s": ts, "steady_s": ts * n / len(idx), "compile_s": 0.0,
         "extrapolated": True, "rtol": 1e-8, "atol": 1e-8, "method": "RK45",
-        "max_abs_diff_vs_jaxgear_rk4": float(np.max(np.abs(Ys - Yj[idx]))),
+        "max_abs_diff_vs_kink": float(np.max(np.abs(Ys - Yk[idx]))),
+        "max_abs_diff_vs_rk4": float(np.max(np.abs(Ys - Yr[idx]))),
     }
-    R["strobe_scipy"]["ns_per_step_cell"] = ns_per_step(R["strobe_scipy"]["steady_s"], n)
+    out["scipy"]["ns_per_step_cell"] = ns_per_step(out["scipy"]["steady_s"], n)
 
     # diffrax Tsit5 vmapped, a sample (same for every call), extrapolated.
     idx_d = np.sort(rng.choice(n, size=min(diffrax_sample, n), replace=False))
     run = B.make_diffrax_vmap(rtol=1e-8, atol=1e-8)
     Xd = jnp.asarray(X[idx_d])
     fd = lambda: _block(run(p, Xd, 0.0, 1))  # noqa: E731
-    m = measure(fd, max(1, repeat // 2))
-    Yd, nsteps = (np.asarray(a) for a in fd())
+    m, out_d = measure_result(fd, max(1, repeat // 2))
+    Yd, nsteps = (np.asarray(a) for a in out_d)
     m.update(sample=int(len(idx_d)), sample_s=m["steady_s"], extrapolated=len(idx_d) < n,
              mean_accepted_steps=float(np.mean(nsteps)), max_steps_in_batch=int(np.max(nsteps)),
-             max_abs_diff_vs_jaxgear_rk4=float(np.max(np.abs(Yd - Yj[idx_d]))))
+             max_abs_diff_vs_kink=float(np.max(np.abs(Yd - Yk[idx_d]))),
+             max_abs_diff_vs_rk4=float(np.max(np.abs(Yd - Yr[idx_d]))))
     m["steady_s"] = m["sample_s"] * n / len(idx_d)
     m["ns_per_step_cell"] = ns_per_step(m["steady_s"], n)
     common = np.intersect1d(idx, idx_d)
@@ -248,25 +312,210 @@ def bench_baselines(X, repeat, R, scipy_sample, diffrax_sample):
         b = Yd[np.searchsorted(idx_d, common)]
         m["max_abs_diff_vs_scipy_common_cells"] = float(np.max(np.abs(a - b)))
         m["common_cells"] = int(len(common))
-    R["strobe_diffrax"] = m
-    del jax
+    out["diffrax"] = m
+    R["styles"] = out
 
 
 # =========================================================================== item 3
-def bench_global_analysis(R, quick: bool, repeat_cheap: bool):
-    """Item 3: the whole global analysis per method (``jaxgear.analyze_global``).
+_DONE = re.compile(r"done in ([0-9.]+) s \(mean ([0-9.]+) periods per cell\)")
 
-    Skipped with a note while ``jaxgear.analyze_global`` does not exist. One cold call
-    per method (compile included); in a full run the cheaper methods are called a
-    second time for their steady-state figure.
+
+def _run_cli(args: list[str], env: dict, timeout: float) -> dict:
+    """One ``jaxgear ...`` in a fresh process: wall time, CPU time of the process and its
+    children (``RUSAGE_CHILDREN`` deltas), and the analysis time it prints."""
+    # ``python -m jaxgear`` runs the console script's entry point (jaxgear.cli.main) of the
+    # checkout being benchmarked, whatever ``jaxgear`` on PATH points to.
+    cmd = [sys.executable, "-m", "jaxgear", *args]
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=ROOT, check=False)
+    wall = time.perf_counter() - t
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    row = {"args": args[:1] + [a for a in args[1:] if a.startswith("--") and a != "--out"], "wall_s": wall,
+           "cpu_s": cpu, "cpu_cores": cpu / wall, "utilisation": cpu / wall / usable_cores(),
+           "returncode": proc.returncode}
+    m = _DONE.search(proc.stdout)
+    if m:
+        row["analysis_s"], row["mean_periods"] = float(m.group(1)), float(m.group(2))
+    if proc.returncode != 0:
+        row["error"] = (proc.stderr or proc.stdout)[-500:]
+    return row
+
+
+def bench_whole_job(R, X):
+    """Item 3: ``jaxgear analyze`` as a user runs it, and ``analyze_global()`` in-process.
+
+    The command runs cold (an empty ``$JAXGEAR_CACHE_DIR``: the C++ kernel is built and
+    every XLA computation compiled) and then warm (the compiled kernel and the XLA
+    compilation cache kept there); then warm with ``--no-figures``. In-process: the first
+    call of ``jaxgear.analyze_global()`` in this process (compilation included, no
+    persistent cache) and a second call (steady state).
+
+    The unit, one numba-period, is the numba kink-aware map of the grid over one period:
+    measured again between the runs here (the machine is shared, its load drifts) and
+    taken as the least of those and item 1's steady state (conservative: a baseline timed
+    while the machine was busy would flatter the ratio).
     """
     import jaxgear
 
-    if not hasattr(jaxgear, "analyze_global"):
-        R["global_analysis"] = {"skipped": "jaxgear.analyze_global does not exist in this tree"}
-        return
+    baseline = []
+
+    def remeasure():
+        if _have_numba():
+            import baselines as B
+
+            p = jaxgear.paper_params()
+            baseline.append(measure(lambda: B.numba_blocked_kink(p, X, block=512), 2)["steady_s"])
+
+    cache = tempfile.mkdtemp(prefix="jaxgear-bench-cache-")
+    outdir = tempfile.mkdtemp(prefix="jaxgear-bench-out-")
+    env = dict(os.environ, JAXGEAR_CACHE_DIR=cache)
+    env["PYTHONPATH"] = ROOT + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    out = {"load_start": loadavg()}
+    try:
+        for key, extra in (("cold", []), ("warm", []), ("warm_no_figures", ["--no-figures"])):
+            remeasure()
+            out[key] = _run_cli(["analyze", "--out", outdir, "--quiet", *extra], env, timeout=1800)
+            print(f"  jaxgear analyze {key}: {out[key]['wall_s']:.1f} s wall", flush=True)
+        out["cache_MB"] = sum(os.path.getsize(os.path.join(d, f)) for d, _, fs in os.walk(cache) for f in fs) / 2**20
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+        shutil.rmtree(outdir, ignore_errors=True)
+
+    for key in ("in_process_first", "in_process_second"):
+        remeasure()
+        ru0 = resource.getrusage(resource.RUSAGE_SELF)
+        t = time.perf_counter()
+        res = jaxgear.analyze_global(progress=False)
+        wall = time.perf_counter() - t
+        ru1 = resource.getrusage(resource.RUSAGE_SELF)
+        cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+        out[key] = {"wall_s": wall, "cpu_s": cpu, "cpu_cores": cpu / wall, "utilisation": cpu / wall / usable_cores(),
+                    "mean_periods": float(res.mean_periods),
+                    "attractors": [{"period": int(a.period), "share": round(float(a.share), 4)} for a in res.attractors]}
+        print(f"  analyze_global() {key[11:]} call: {wall:.1f} s", flush=True)
+    remeasure()
+    out["load_end"] = loadavg()
+    item1 = R.get("kernel", {}).get("numba_blocked_kink", {}).get("steady_s")
+    out["numba_kink_period_s_measured"] = ([item1] if item1 else []) + baseline
+    nbk = min(out["numba_kink_period_s_measured"]) if out["numba_kink_period_s_measured"] else None
+    out["numba_kink_period_s"] = nbk
+    if nbk:
+        for row in out.values():
+            if isinstance(row, dict) and "wall_s" in row:
+                row["numba_periods"] = row["wall_s"] / nbk
+    out["cores"] = usable_cores()
+    R["whole_job"] = out
+
+
+# =========================================================================== item 4
+def _leading(lam) -> complex:
+    """The leading multiplier (the one of a complex pair with positive imaginary part)."""
+    lam = np.asarray(lam)
+    lead = lam[0]
+    if len(lam) > 1 and abs(lam[1] - np.conj(lead)) <= 1e-12 * (1 + abs(lead)) and lead.imag < 0:
+        lead = lam[1]
+    return complex(lead)
+
+
+def _fd_multiplier(system, params, x, k, integrator, eps=1e-6) -> complex:
+    """Leading eigenvalue of the central-difference Jacobian of ``P^k`` at ``x`` (the map as
+    computed: compiled kernel for KinkAwareRK4), a check on the ``jax.jacfwd`` multipliers."""
+    import jax.numpy as jnp
+
+    import jaxgear
+
+    dim = len(x)
+    Xs = np.concatenate([x + eps * np.eye(dim), x - eps * np.eye(dim)])
+    Y = np.asarray(jaxgear.stroboscopic_map(system, params, jnp.asarray(Xs), periods=k, integrator=integrator))
+    M = ((Y[:dim] - Y[dim:]) / (2 * eps)).T
+    lam = np.linalg.eigvals(M)
+    return _leading(lam[np.argsort(-np.abs(lam), kind="stable")])
+
+
+def bench_convergence(R, ns):
+    """Item 4a: the P-1 and P-4 of the paper preset by shooting at n steps per period,
+    KinkAwareRK4 and RK4, each n seeded from the previous point."""
+    import jaxgear
+
+    p = jaxgear.paper_params()
+    out = {}
+    for name, k, seed in (("P-1", 1, P1_SEED), ("P-4", 4, P4_SEED)):
+        for cls in (jaxgear.KinkAwareRK4, jaxgear.RK4):
+            rows = []
+            x = np.asarray(seed, dtype=float)
+            for n in ns:
+                integ = cls(n)
+                t = time.perf_counter()
+                r = jaxgear.periodic_orbit(jaxgear.REDUCED, p, x, period=k, integrator=integ)
+                wall = time.perf_counter() - t
+                pt = np.asarray(r.point, dtype=float)
+                row = {"n": n, "status": str(jaxgear.Status(int(r.status)).name), "iterations": int(r.iterations),
+                       "residual": float(r.residual), "min_period": int(r.min_period), "s": wall,
+                       "point": pt.tolist()}
+                if np.all(np.isfinite(pt)):
+                    lam = np.asarray(r.multipliers)
+                    l1 = _leading(lam)
+                    lf = _fd_multiplier(jaxgear.REDUCED, p, pt, k, integ)
+                    row.update(multipliers=[[float(z.real), float(z.imag)] for z in lam],
+                               lead=[l1.real, l1.imag], lead_abs=abs(l1), stable=bool(r.stable),
+                               lead_fd=[lf.real, lf.imag])
+                    if rows and "lead" in rows[-1]:
+                        prev = rows[-1]
+                        row["d_state"] = float(np.max(np.abs(pt - np.asarray(prev["point"]))))
+                        row["d_lead"] = abs(l1 - complex(*prev["lead"]))
+                        row["d_lead_fd"] = abs(lf - complex(*prev["lead_fd"]))
+                        for d in ("d_state", "d_lead", "d_lead_fd"):
+                            if d in prev and prev[d] > 0 and row[d] > 0:
+                                row["order_" + d[2:]] = math.log2(prev[d] / row[d])
+                    x = pt
+                rows.append(row)
+            out[f"{name}/{cls.__name__}"] = rows
+            print(f"  {name} {cls.__name__}: " + ", ".join(f"n={r['n']} {r['s']:.1f}s" for r in rows), flush=True)
+    R["convergence"] = out
+
+
+def bench_label_agreement(R, ns=(100, 200, 400)):
+    """Item 4b: the default analysis (``Direct``) of the paper grid at each n; the fraction
+    of cells with the same label at n and 2n (attractors matched by their points)."""
+    import jaxgear
+    from jaxgear._matching import match_attractors
+
+    res = {}
+    out = {"runs": {}}
+    for n in ns:
+        t = time.perf_counter()
+        r = jaxgear.analyze_global(method=jaxgear.Direct(integrator=jaxgear.KinkAwareRK4(n)), progress=False)
+        res[n] = r
+        out["runs"][n] = {"s": time.perf_counter() - t, "mean_periods": float(r.mean_periods),
+                          "attractors": [{"period": int(a.period), "share": round(float(a.share), 5)}
+                                         for a in r.attractors]}
+        print(f"  analysis at n={n}: {out['runs'][n]['s']:.1f} s", flush=True)
+    pairs = {}
+    for a, b in zip(ns[:-1], ns[1:]):
+        A, Bres = res[a], res[b]
+        idx = match_attractors([(x.points, x.period) for x in A.attractors],
+                               [(x.points, x.period) for x in Bres.attractors], max_distance=1e-2)
+        mapping = {x.id: (A.attractors[j].id if j >= 0 else -1000 - x.id) for x, j in zip(Bres.attractors, idx)}
+        la = np.asarray(A.labels)
+        lb = np.array([mapping.get(int(v), int(v)) for v in np.asarray(Bres.labels).ravel()]).reshape(la.shape)
+        pairs[f"{a}-{b}"] = {"agreement": float(np.mean(la == lb)), "differ": int(np.sum(la != lb)),
+                             "cells": int(la.size)}
+    out["pairs"] = pairs
+    R["label_agreement"] = out
+
+
+# =========================================================================== item 5
+def bench_global_analysis(R, quick: bool, repeat_cheap: bool):
+    """Item 5: the whole global analysis per method (``jaxgear.analyze_global``).
+
+    One cold call per method (compile included); in a full run each method is called a
+    second time for its steady-state figure.
+    """
     import warnings
 
+    import jaxgear
     from jaxgear import CellGrid
 
     if quick:
@@ -278,17 +527,16 @@ def bench_global_analysis(R, quick: bool, repeat_cheap: bool):
         strobe_grid = CellGrid.box([(-25, 25), (-10, 20), (-10, 50), (-10, 10)], (25, 15, 30, 10),
                                    names=jaxgear.REDUCED.state_names)
     out = {}
-    for method, grid, again in (("poincare-like", sec_grid, repeat_cheap),
-                                 ("stroboscopic", strobe_grid, repeat_cheap),
-                                 ("direct", sec_grid, repeat_cheap)):
-        row = {"cells": grid.n_cells, "grid": list(grid.counts)}
+    for method, grid in ((jaxgear.PoincareCellMap(), sec_grid), (jaxgear.StroboscopicCellMap(), strobe_grid),
+                         (jaxgear.Direct(), sec_grid)):
+        row = {"cells": grid.n_cells, "grid": list(grid.counts), "method": repr(method)}
         try:
             with warnings.catch_warnings(record=True) as w:
                 warnings.simplefilter("always")
                 t = time.perf_counter()
                 res = jaxgear.analyze_global(method=method, grid=grid, progress=False)
                 row["first_s"] = time.perf_counter() - t
-                if again:
+                if repeat_cheap:
                     t = time.perf_counter()
                     res = jaxgear.analyze_global(method=method, grid=grid, progress=False)
                     row["steady_s"] = time.perf_counter() - t
@@ -303,13 +551,13 @@ def bench_global_analysis(R, quick: bool, repeat_cheap: bool):
             row["ns_per_step_cell"] = ns_per_step(tsec, grid.n_cells, periods=max(res.mean_periods, 1e-12))
         except Exception as e:  # a benchmark reports, it does not stop
             row["error"] = f"{type(e).__name__}: {e}"[:300]
-        out[method] = row
+        out[method.name] = row
     R["global_analysis"] = out
 
 
-# =========================================================================== item 4
+# =========================================================================== item 6
 def bench_bifurcation(R, quick: bool):
-    """Item 4a: bifurcation diagram, 200 values x 8 initial states x 500 periods.
+    """Item 6a: bifurcation diagram, 200 values x 8 initial states x 500 periods.
 
     ``jaxgear.bifurcation_diagram`` (all values and starts batched in one kernel), swept
     in the half backlash ``b`` (the forcing period is shared by every value) and, in a
@@ -326,8 +574,7 @@ def bench_bifurcation(R, quick: bool):
     for name, values in (("b", np.linspace(0.25, 6.0, n_par)), ("Omega", np.linspace(0.6, 1.2, n_par)))[: 1 if quick else 2]:
         fn = lambda: jaxgear.bifurcation_diagram(jaxgear.REDUCED, p, name, values, X8, transient=periods - record,  # noqa: E731
                                                  record=record, direction="independent", progress=False)
-        m = measure(fn, 1)
-        d = fn()
+        m, d = measure_result(fn, 1)
         total = n_par * n_states
         m.update(n_params=n_par, n_states=n_states, periods=periods, param=name,
                  ns_per_step_state=ns_per_step(m["steady_s"], total, periods))
@@ -342,35 +589,25 @@ def bench_bifurcation(R, quick: bool):
 
 
 def bench_shooting(R, quick: bool):
-    """Item 4b: batched Newton shooting (``jaxgear.find_periodic_orbits``), if present.
-
-    Placeholder while the shooting module is not in this tree: records a note. When it
-    lands, this calls it on 64 random guesses for period-4 orbits of the paper preset.
-    """
+    """Item 6b: batched Newton shooting (``jaxgear.find_periodic_orbits``) from random
+    seeds for period-4 orbits of the paper preset."""
     import jaxgear
-
-    if not hasattr(jaxgear, "find_periodic_orbits"):
-        R["shooting"] = {"skipped": "jaxgear.find_periodic_orbits does not exist in this tree"}
-        return
-    import inspect
 
     p = jaxgear.paper_params()
     guesses = random_states(32 if quick else 256, seed=5)
     try:
         fn = lambda: jaxgear.find_periodic_orbits(jaxgear.REDUCED, p, guesses, period=4, progress=False)  # noqa: E731
-        m = measure(fn, 1)
-        res = fn()
+        m, res = measure_result(fn, 1)
         m["guesses"] = len(guesses)
         m["orbits"] = [{"period": int(o.period), "stable": bool(o.stable), "max_abs_multiplier": float(o.max_multiplier)}
                        for o in res.orbits]
         m["status_counts"] = {str(k): int(v) for k, v in dict(res.status_counts).items()}
         R["shooting"] = m
-    except TypeError as e:
-        R["shooting"] = {"skipped": f"adapt bench_shooting to the signature "
-                                    f"{inspect.signature(jaxgear.find_periodic_orbits)}: {e}"[:300]}
+    except Exception as e:  # a benchmark reports, it does not stop
+        R["shooting"] = {"error": f"{type(e).__name__}: {e}"[:300]}
 
 
-# =========================================================================== item 5
+# =========================================================================== item 7
 def peak_rss_mb() -> float:
     """Peak resident set size of this process (VmHWM), MB.
 
@@ -389,7 +626,6 @@ def peak_rss_mb() -> float:
 
 def _worker(kind: str, n: int, repeat: int) -> dict:
     """Run in a fresh process: one kernel on ``n`` cells, time and peak RSS."""
-    import jax
     import jax.numpy as jnp
 
     import jaxgear
@@ -397,30 +633,19 @@ def _worker(kind: str, n: int, repeat: int) -> dict:
     p = jaxgear.paper_params()
     X = random_states(n, seed=7)
     rss0 = peak_rss_mb()
-    if kind == "jaxgear":
+    if kind in ("jaxgear", "jaxgear-rk4"):
+        integrator = jaxgear.KinkAwareRK4(STEPS) if kind == "jaxgear" else jaxgear.RK4(STEPS)
         Xj = jnp.asarray(X)
-        fn = lambda: _block(jaxgear.stroboscopic_map(jaxgear.REDUCED, p, Xj, periods=1))  # noqa: E731
-    elif kind == "jaxgear-unchunked":
-        # The kernel before chunking: one fori_loop over the whole (4, n) batch.
-        from jaxgear.integrate import rk4_step
-
-        Yj = jnp.asarray(X.T.copy())
-
-        def unchunked(p, Y):
-            h = jaxgear.REDUCED.period(p) / STEPS
-            return jax.lax.fori_loop(0, STEPS, lambda i, Z: rk4_step(jaxgear.REDUCED, p, i * h, Z, h), Y)
-
-        f = jax.jit(unchunked)
-        fn = lambda: _block(f(p, Yj))  # noqa: E731
+        fn = lambda: _block(jaxgear.stroboscopic_map(jaxgear.REDUCED, p, Xj, periods=1, integrator=integrator))  # noqa: E731
     elif kind == "direct":
         # The whole direct global analysis on a paper-region grid of about n cells.
         from jaxgear import CellGrid
 
-        side = round((n / 1.0) ** (1 / 3))
+        side = round(n ** (1 / 3))
         grid = CellGrid.paper(counts=(side, side, side))
         m = {}
         t = time.perf_counter()
-        res = jaxgear.analyze_global(method="direct", grid=grid, progress=False)
+        res = jaxgear.analyze_global(method=jaxgear.Direct(), grid=grid, progress=False)
         m["first_s"] = m["steady_s"] = time.perf_counter() - t
         m["compile_s"] = float("nan")
         m["mean_periods"] = res.mean_periods
@@ -431,10 +656,10 @@ def _worker(kind: str, n: int, repeat: int) -> dict:
         m["rss_before_kernel_MB"] = rss0
         m["state_MB"] = X.nbytes / 2**20
         return m
-    elif kind == "numba-blocked":
+    elif kind == "numba-blocked-kink":
         import baselines as B
 
-        fn = lambda: B.numba_blocked(p, X, block=512)  # noqa: E731
+        fn = lambda: B.numba_blocked_kink(p, X, block=512)  # noqa: E731
     else:
         raise ValueError(kind)
     m = measure(fn, repeat)
@@ -446,7 +671,13 @@ def _worker(kind: str, n: int, repeat: int) -> dict:
 
 
 def bench_scaling(R, sizes, kinds):
-    """Item 5: time and peak memory against the number of cells, one subprocess each."""
+    """Item 7: time and peak memory against the number of cells, one subprocess each.
+
+    Kinds: the default integrator (compiled kernel), plain RK4 (XLA), the numba
+    kink-aware baseline, and the whole direct analysis. (Dropped: the RK4 loop before
+    chunking and plain numba — the default path is now the compiled kernel, which blocks
+    its lanes itself, and its baseline is the kink-aware numba kernel.)
+    """
     out = {}
     for kind in kinds:
         for n in sizes:
@@ -454,7 +685,7 @@ def bench_scaling(R, sizes, kinds):
             cmd = [sys.executable, os.path.abspath(__file__), "--worker", kind, "--n", str(n),
                    "--repeat", str(repeat)]
             t = time.perf_counter()
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
             wall = time.perf_counter() - t
             try:
                 m = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -473,49 +704,148 @@ def _fmt(x, spec=".3f", dash="-"):
     return dash if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
+def _cplx(z) -> str:
+    re_, im = z
+    return f"{re_:+.7f}" + (f"{im:+.7f}i" if abs(im) > 0 else "")
+
+
+def headline(R) -> str:
+    wj = R.get("whole_job", {})
+    w = wj.get("warm", {})
+    if "numba_periods" not in w:
+        return "whole job: jaxgear analyze = n/a numba-periods (" + (w.get("error", "numba missing")[-80:]) + ")"
+    return (f"whole job: jaxgear analyze = {w['numba_periods']:.0f} numba-periods (warm, {w['wall_s']:.1f} s wall, "
+            f"CPU {w['cpu_cores']:.2f}/{wj['cores']} cores; target <= {TARGET_WHOLE_JOB_RATIO:.0f})")
+
+
 def print_table(R) -> list[str]:
     L = []
     mi = R["machine"]
     L.append(f"jaxgear benchmark  ({'quick' if R['quick'] else 'full'} run, {R['date']})")
     L.append(f"machine: {mi.get('cpu')}, {mi.get('usable_cpus')} usable cores, L2 {mi.get('L2 cache')}, "
              f"L3 {mi.get('L3 cache')}, SIMD {'/'.join(mi.get('simd', []))}")
-    L.append(f"software: jax {mi['jax']}, numba {mi.get('numba')}, scipy {mi['scipy']}, diffrax {mi['diffrax']}; "
-             f"load average at start {_fmt((R['load_start'] or [None])[0], '.2f')}, "
-             f"end {_fmt((R['load_end'] or [None])[0], '.2f')}")
+    L.append(f"software: jaxgear {mi.get('jaxgear')}, jax {mi['jax']}, numba {mi.get('numba')}, scipy {mi['scipy']}, "
+             f"diffrax {mi['diffrax']}, {mi.get('cxx')}; compiled kernel {'on' if mi.get('native_kernel') else 'OFF'}")
+    L.append(f"load average at start {_fmt((R['load_start'] or [None])[0], '.2f')}, "
+             f"end {_fmt((R['load_end'] or [None])[0], '.2f')} (a shared machine: compare figures within one run)")
     L.append("")
-    L.append("1-2. stroboscopic map, paper grid (90,000 cells), 1 period, RK4 200 steps, float64")
-    hdr = f"  {'implementation':48s} {'compile s':>9s} {'run s':>9s} {'ns/step/cell':>12s}  note"
-    L.append(hdr)
+
+    K = R.get("kernel", {})
+    L.append(f"1. kernel: stroboscopic map, paper grid ({K.get('n_cells', 0):,d} cells), 1 period, {STEPS} steps, float64")
+    L.append(f"  {'implementation':52s} {'compile s':>9s} {'run s':>8s} {'ns/step/cell':>12s}")
     rows = [
-        ("jaxgear.stroboscopic_map", "strobe_jaxgear", ""),
-        ("jaxgear, 6 calls of 16,384 cells (cell-map chunk)", "strobe_jaxgear_chunks16k", ""),
-        ("numba parallel, blocked+tabulated+vectorised", "strobe_numba_blocked", "diff"),
-        ("  same, 1 thread", "strobe_numba_blocked_1thread", ""),
-        ("numba parallel, naive per-cell prange", "strobe_numba_naive", "diff"),
-        ("scipy solve_ivp RK45 loop (rtol=atol=1e-8)", "strobe_scipy", "sample"),
-        ("diffrax Tsit5 vmap (rtol=atol=1e-8)", "strobe_diffrax", "sample"),
+        ("default: KinkAwareRK4(200), compiled CPU kernel", "default"),
+        ("KinkAwareRK4(200, backend='jax'), pure JAX", "kink_jax"),
+        ("RK4(200), plain (XLA)", "rk4"),
+        ("numba blocked+tabulated+vectorised, plain RK4", "numba_blocked"),
+        ("  same, 1 thread", "numba_blocked_1thread"),
+        ("numba blocked+tabulated+vectorised, kink-aware", "numba_blocked_kink"),
+        ("  same, 1 thread", "numba_blocked_kink_1thread"),
     ]
-    for label, key, note in rows:
-        m = R.get(key)
-        if not m or "skipped" in m:
-            L.append(f"  {label:48s} {'skipped':>9s}  {m.get('skipped', '') if m else ''}")
+    for label, key in rows:
+        m = K.get(key)
+        if not m or "steady_s" not in m:
+            L.append(f"  {label:52s} {'skipped':>9s}  {(m or {}).get('skipped', '')}")
             continue
-        txt = ""
-        if note == "diff":
-            txt = f"max |diff| vs jaxgear {m['max_abs_diff_vs_jaxgear']:.1e}"
-        elif note == "sample":
-            txt = (f"{m['sample']} cells in {m['sample_s']:.2f} s, x{R['strobe_jaxgear']['n_cells'] / m['sample']:.0f}; "
-                   f"|diff| vs RK4-200 {m['max_abs_diff_vs_jaxgear_rk4']:.1e}")
+        L.append(f"  {label:52s} {_fmt(m.get('compile_s'), '.2f'):>9s} {m['steady_s']:8.3f} {m['ns_per_step_cell']:12.2f}")
+    D = K.get("diffs", {})
+    names = (("default_vs_numba_kink", "compiled kernel vs numba kink-aware"),
+             ("numba_kink_vs_kink_jax", "numba kink-aware vs pure-JAX kink-aware"),
+             ("kink_jax_vs_default", "pure-JAX vs compiled kernel"),
+             ("numba_plain_vs_rk4", "numba plain vs RK4(200)"),
+             ("rk4_vs_default", "plain RK4 vs kink-aware (RK4's kink error, 1 period)"))
+    for key, label in names:
+        if key in D:
+            L.append(f"  max |diff| {label:54s} {D[key]['abs']:.1e} (rel {D[key]['rel']:.1e})")
+    if "kernel_ratio" in K:
+        L.append(f"  kernel ratio = default / numba kink-aware: {K['kernel_ratio']:.2f} "
+                 f"(target <= {TARGET_KERNEL_RATIO})")
+    L.append("")
+
+    S = R.get("styles", {})
+    L.append("2. other CPU styles of the same map")
+    for label, key in (("numba naive per-cell prange (plain RK4)", "numba_naive"),
+                       ("scipy solve_ivp RK45 loop (rtol=atol=1e-8)", "scipy"),
+                       ("diffrax Tsit5 vmap (rtol=atol=1e-8)", "diffrax")):
+        m = S.get(key)
+        if not m or "steady_s" not in m:
+            L.append(f"  {label:52s} {'skipped':>9s}  {(m or {}).get('skipped', '')}")
+            continue
+        if key == "numba_naive":
+            txt = f"max |diff| vs RK4(200) {m['max_abs_diff_vs_rk4']:.1e}"
+        else:
+            txt = (f"{m['sample']} cells in {m['sample_s']:.2f} s, x{K.get('n_cells', 1) / m['sample']:.0f}; |diff| vs "
+                   f"kink-aware {m['max_abs_diff_vs_kink']:.1e}, vs RK4 {m['max_abs_diff_vs_rk4']:.1e}")
             if "mean_accepted_steps" in m:
                 txt += f"; {m['mean_accepted_steps']:.0f} steps/period"
-        L.append(f"  {label:48s} {_fmt(m.get('compile_s'), '.2f'):>9s} {m['steady_s']:9.3f} "
+        L.append(f"  {label:52s} {_fmt(m.get('compile_s'), '.2f'):>9s} {m['steady_s']:8.3f} "
                  f"{m['ns_per_step_cell']:12.2f}  {txt}")
-    if "strobe_diffrax" in R and "max_abs_diff_vs_scipy_common_cells" in R["strobe_diffrax"]:
-        d = R["strobe_diffrax"]
+    if "max_abs_diff_vs_scipy_common_cells" in S.get("diffrax", {}):
+        d = S["diffrax"]
         L.append(f"  (diffrax vs scipy on {d['common_cells']} common cells: max |diff| "
                  f"{d['max_abs_diff_vs_scipy_common_cells']:.1e})")
     L.append("")
-    L.append("3. global analysis (jaxgear.analyze_global)")
+
+    W = R.get("whole_job", {})
+    L.append("3. whole job: jaxgear analyze (paper grid, direct method, default integrator)")
+    L.append(f"  {'run':44s} {'wall s':>7s} {'analysis s':>10s} {'CPU s':>7s} {'cores used':>10s} {'numba-periods':>13s}")
+    for label, key in (("jaxgear analyze, cold (empty cache dir)", "cold"),
+                       ("jaxgear analyze, warm", "warm"),
+                       ("jaxgear analyze --no-figures, warm", "warm_no_figures"),
+                       ("analyze_global() in-process, first call", "in_process_first"),
+                       ("analyze_global() in-process, second call", "in_process_second")):
+        m = W.get(key)
+        if not m:
+            continue
+        if m.get("returncode", 0) != 0:
+            L.append(f"  {label:44s} error: {m.get('error', '')[-120:]!r}")
+            continue
+        L.append(f"  {label:44s} {m['wall_s']:7.1f} {_fmt(m.get('analysis_s'), '.1f'):>10s} {m['cpu_s']:7.1f} "
+                 f"{m['cpu_cores']:7.2f}/{W['cores']} {_fmt(m.get('numba_periods'), '.0f'):>13s}")
+    if W.get("numba_kink_period_s"):
+        att = ", ".join(f"P-{a['period']}:{a['share']:.3f}" for a in W.get("in_process_second", {}).get("attractors", []))
+        L.append("  cold: an empty $JAXGEAR_CACHE_DIR (the C++ kernel is built, every computation compiled); "
+                 "warm: the same folder again")
+        meas = ", ".join(f"{v:.3f}" for v in W.get("numba_kink_period_s_measured", []))
+        L.append(f"  1 numba-period = numba kink-aware, one period of the grid = {W['numba_kink_period_s']:.3f} s "
+                 f"(least of {meas} s: item 1, then between the runs)")
+        L.append(f"  {W.get('in_process_second', {}).get('mean_periods', float('nan')):.1f} periods per cell; {att}; "
+                 f"compilation cache {W.get('cache_MB', 0):.0f} MB; load average "
+                 f"{_fmt((W.get('load_start') or [None])[0], '.2f')} -> {_fmt((W.get('load_end') or [None])[0], '.2f')}")
+    L.append("")
+
+    C = R.get("convergence", {})
+    if C:
+        L.append("4. convergence: periodic_orbit at n steps per period (seeded from the previous n); "
+                 "|d| = change from the previous n, ord = log2 of the ratio of successive changes")
+        L.append("   lambda1: leading multiplier from jax.jacfwd (as reported); FD: central differences of the map itself")
+        for key, rows in C.items():
+            L.append(f"  {key}")
+            L.append(f"  {'n':>6s}  {'point (x1, x2, x3, x4)':47s} {'|d|':>8s} {'ord':>4s}  {'lambda1 (jacfwd)':26s} "
+                     f"{'|d|':>8s} {'ord':>4s}  {'lambda1 (FD)':26s} {'|d|':>8s} {'ord':>4s}")
+            for r in rows:
+                if "lead" not in r:
+                    L.append(f"  {r['n']:6d}  {r['status']}")
+                    continue
+                pt = " ".join(f"{v:11.8f}" for v in r["point"])
+                L.append(f"  {r['n']:6d}  {pt:47s} {_fmt(r.get('d_state'), '8.1e'):>8s} "
+                         f"{_fmt(r.get('order_state'), '4.1f'):>4s}  {_cplx(r['lead']):26s} "
+                         f"{_fmt(r.get('d_lead'), '8.1e'):>8s} {_fmt(r.get('order_lead'), '4.1f'):>4s}  "
+                         f"{_cplx(r['lead_fd']):26s} {_fmt(r.get('d_lead_fd'), '8.1e'):>8s} "
+                         f"{_fmt(r.get('order_lead_fd'), '4.1f'):>4s}")
+    A = R.get("label_agreement")
+    if A:
+        L.append("  cell labels of the default analysis (Direct, KinkAwareRK4(n)) on the paper grid, n vs 2n:")
+        for n, run in A["runs"].items():
+            att = ", ".join(f"P-{a['period']}:{a['share']:.4f}" for a in run["attractors"])
+            L.append(f"    n={n}: {run['s']:.1f} s, {run['mean_periods']:.1f} periods per cell; {att}")
+        for pair, d in A["pairs"].items():
+            L.append(f"    n={pair}: {100 * d['agreement']:.3f} % equal labels ({d['differ']} of {d['cells']} cells differ)")
+    elif C:
+        L.append("  (cell-label agreement at n vs 2n: full run only)")
+    L.append("")
+
+    L.append("5. global analysis per method (jaxgear.analyze_global)")
     ga = R.get("global_analysis", {})
     if "skipped" in ga:
         L.append(f"  skipped: {ga['skipped']}")
@@ -530,7 +860,8 @@ def print_table(R) -> list[str]:
             L.append(f"  {method:16s} {row['cells']:8d} {row['first_s']:9.2f} {_fmt(row.get('steady_s'), '9.2f'):>9s} "
                      f"{row['mean_periods']:12.1f} {row['ns_per_step_cell']:12.2f}  {att}; sink {row['n_sink']}")
     L.append("")
-    L.append("4. parameter sweep and shooting")
+
+    L.append("6. parameter sweep and shooting (default integrator)")
     for b in (R.get("bifurcation") or {}).values():
         L.append(f"  bifurcation_diagram in {b['param']}: {b['n_params']} values x {b['n_states']} states x "
                  f"{b['periods']} periods: compile {b['compile_s']:.2f} s, run {b['steady_s']:.2f} s, "
@@ -538,14 +869,15 @@ def print_table(R) -> list[str]:
                  + (f" (500 periods ~ {b['extrapolated_500_periods_s']:.1f} s)" if "extrapolated_500_periods_s" in b
                     else ""))
     s = R.get("shooting", {})
-    if "skipped" in s or "steady_s" not in s:
-        L.append(f"  shooting: skipped: {s.get('skipped', '?')}")
+    if "steady_s" not in s:
+        L.append(f"  shooting: {s.get('error', s.get('skipped', '?'))}")
     else:
         orbs = ", ".join(f"P-{o['period']}{' stable' if o['stable'] else ' unstable'}" for o in s["orbits"])
-        L.append(f"  batched shooting, {s['guesses']} random seeds, period 4 (Newton, jacfwd): compile "
+        L.append(f"  find_periodic_orbits, {s['guesses']} random seeds, period 4 (Newton, jacfwd): compile "
                  f"{s['compile_s']:.2f} s, run {s['steady_s']:.2f} s; distinct orbits: {orbs or 'none'}")
     L.append("")
-    L.append("5. scaling: one period, RK4 200 steps, fresh process per size; peak RSS (VmHWM) of the "
+
+    L.append("7. scaling: one period, 200 steps, fresh process per size; peak RSS (VmHWM) of the "
              "process, 'before' = after imports and input, before the kernel")
     sc = R.get("scaling", {})
     L.append(f"  {'kernel':20s} {'cells':>10s} {'compile s':>9s} {'run s':>9s} {'ns/step/cell':>12s} "
@@ -560,23 +892,20 @@ def print_table(R) -> list[str]:
         L.append(f"  {kind:20s} {int(n):10,d} {_fmt(m['compile_s'], '9.2f'):>9s} {m['steady_s']:9.3f} "
                  f"{m['ns_per_step_cell']:12.2f} {m['peak_rss_MB']:11.0f} {m['rss_before_kernel_MB']:9.0f}{extra}")
     L.append("")
-    if "strobe_numba_blocked" in R and "steady_s" in R["strobe_numba_blocked"]:
-        j, nb = R["strobe_jaxgear"]["steady_s"], R["strobe_numba_blocked"]["steady_s"]
-        sp = R["strobe_scipy"]["steady_s"] / j
-        L.append(f"jaxgear vs solve_ivp loop: {sp:.0f}x faster;  item-1 compile {R['strobe_jaxgear']['compile_s']:.2f} s")
-        R["ratio_jaxgear_over_numba_blocked"] = j / nb
-        L.append(f"ratio jaxgear / numba(blocked), item 1: {j / nb:.2f}")
-    else:
-        L.append("ratio jaxgear / numba(blocked), item 1: n/a (numba missing)")
+    if "kernel_ratio" in K:
+        L.append(f"kernel: default integrator = {K['kernel_ratio']:.2f} x numba kink-aware "
+                 f"({K['default']['ns_per_step_cell']:.2f} vs {K['numba_blocked_kink']['ns_per_step_cell']:.2f} "
+                 f"ns/step/cell; target <= {TARGET_KERNEL_RATIO})")
+    L.append(headline(R))
     return L
 
 
 # =========================================================================== main
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="~1-2 minute version")
+    ap.add_argument("--quick", action="store_true", help="a few minutes' version")
     ap.add_argument("--json", default=None, help="output JSON path (default benchmarks/results[-quick].json)")
-    ap.add_argument("--skip-global", action="store_true", help="skip item 3 (the global analysis)")
+    ap.add_argument("--skip-global", action="store_true", help="skip item 5 (the global analysis per method)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--n", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--repeat", type=int, default=3, help=argparse.SUPPRESS)
@@ -592,32 +921,39 @@ def main(argv=None):
     t_all = time.perf_counter()
     X = paper_centres()
     repeat = 3 if a.quick else 5
-    print("item 1: jaxgear stroboscopic map ...", flush=True)
-    bench_strobe(X, repeat, R)
-    print("item 2: baselines ...", flush=True)
-    bench_baselines(X, repeat, R, scipy_sample=50 if a.quick else 200,
-                    diffrax_sample=500 if a.quick else 2000)
-    print("item 3: global analysis ...", flush=True)
+    print("item 1: kernel ...", flush=True)
+    bench_kernel(X, repeat, R)
+    print("item 2: other CPU styles ...", flush=True)
+    bench_other_styles(X, repeat, R, scipy_sample=50 if a.quick else 200, diffrax_sample=500 if a.quick else 2000)
+    print("item 3: whole job ...", flush=True)
+    bench_whole_job(R, X)
+    print("item 4: convergence ...", flush=True)
+    bench_convergence(R, (100, 200, 400) if a.quick else (100, 200, 400, 800, 1600, 3200))
+    if not a.quick:
+        bench_label_agreement(R)
+    print("item 5: global analysis per method ...", flush=True)
     if a.skip_global:
         R["global_analysis"] = {"skipped": "--skip-global"}
     else:
         bench_global_analysis(R, a.quick, repeat_cheap=not a.quick)
-    print("item 4: parameter sweep, shooting ...", flush=True)
+    print("item 6: parameter sweep, shooting ...", flush=True)
     bench_bifurcation(R, a.quick)
     bench_shooting(R, a.quick)
-    print("item 5: scaling ...", flush=True)
-    sizes = [10_000, 100_000] if a.quick else [10_000, 100_000, 1_000_000]
-    bench_scaling(R, sizes, ["jaxgear", "jaxgear-unchunked", "numba-blocked", "direct"])
+    print("item 7: scaling ...", flush=True)
+    sizes = [100_000] if a.quick else [10_000, 100_000, 1_000_000]
+    # (quick: the direct analysis is item 3's; plain RK4 is item 1's)
+    kinds = ["jaxgear", "numba-blocked-kink"] if a.quick else ["jaxgear", "jaxgear-rk4", "numba-blocked-kink", "direct"]
+    bench_scaling(R, sizes, kinds)
     R["load_end"] = loadavg()
     R["total_wall_s"] = time.perf_counter() - t_all
-    R.pop("_Y_jaxgear", None)
+    R.pop("_Y", None)
     lines = print_table(R)
-    print()
-    print("\n".join(lines))
     path = a.json or os.path.join(HERE, "results-quick.json" if a.quick else "results.json")
     with open(path, "w") as fh:
         json.dump({**R, "table": lines}, fh, indent=1, default=float)
-    print(f"\n(json: {path}; total {R['total_wall_s']:.0f} s)", file=sys.stderr)
+    print(f"(json: {os.path.relpath(path, ROOT)}; total {R['total_wall_s']:.0f} s)", file=sys.stderr, flush=True)
+    print()
+    print("\n".join(lines), flush=True)  # its last line, the headline, is the last line of the output
 
 
 if __name__ == "__main__":
