@@ -281,6 +281,7 @@ KINK_FASTMATH = frozenset({"nsz", "arcp", "contract", "afn"})
 _KINK_KERNELS = {}
 _HERMITE_ITERS = 12
 _EPS = 2.220446049250313e-16
+_SIMULTANEOUS = 1e-12  # crossings this close (fraction of a step) are one event, as in jaxgear
 
 
 def _build_kink_kernels(fastmath=KINK_FASTMATH):
@@ -356,14 +357,28 @@ def _build_kink_kernels(fastmath=KINK_FASTMATH):
         return _terms_at(tc, ck, t)
 
     @njit(inline="always", fastmath=fm)
-    def _rk4_lane(kc, tc, ck, H, qa, qb, t, y, h, k1, q1):
-        """One RK4 step of one lane from t (terms q1 there, first stage k1): (y_new, terms at t + h)."""
+    def _blp(x, b, hi, lo):
+        # the branch of the backlash on the sides (hi, lo) of x = b and x = -b, extended
+        return x - b if hi > 0 else (x + b if lo < 0 else 0.0)
+
+    @njit(inline="always", fastmath=fm)
+    def _field_piece(q, y, kc, sd):
+        # the field's smooth piece on the sides sd of the four switching surfaces
+        X = y[2] - y[0] - q[2]
+        V = y[3] - y[1] - q[3]
+        gs = q[0] * _blp(y[0], kc[5], sd[0], sd[1]) + kc[7] * y[1]
+        gr = q[1] * _blp(X, kc[6], sd[2], sd[3]) + kc[8] * V
+        return (y[1], kc[0] * gs + kc[1] * gr + q[4], y[3], kc[2] * gs + kc[3] * gr + kc[4])
+
+    @njit(inline="always", fastmath=fm)
+    def _rk4_lane(kc, tc, ck, H, qa, qb, t, y, h, k1, sd):
+        """One RK4 step of one lane from t on the piece sd (first stage k1): (y_new, terms at t + h)."""
         h2 = 0.5 * h
         qm = _terms(tc, ck, H, qa, qb, t + h2)
-        b = _field(qm, _axpy(y, h2, k1), kc)
-        c = _field(qm, _axpy(y, h2, b), kc)
+        b = _field_piece(qm, _axpy(y, h2, k1), kc, sd)
+        c = _field_piece(qm, _axpy(y, h2, b), kc, sd)
         q4 = _terms(tc, ck, H, qa, qb, t + h)
-        d = _field(q4, _axpy(y, h, c), kc)
+        d = _field_piece(q4, _axpy(y, h, c), kc, sd)
         h6 = h / 6.0
         out = (y[0] + h6 * (k1[0] + 2.0 * (b[0] + c[0]) + d[0]), y[1] + h6 * (k1[1] + 2.0 * (b[1] + c[1]) + d[1]),
                y[2] + h6 * (k1[2] + 2.0 * (b[2] + c[2]) + d[2]), y[3] + h6 * (k1[3] + 2.0 * (b[3] + c[3]) + d[3]))
@@ -431,73 +446,92 @@ def _build_kink_kernels(fastmath=KINK_FASTMATH):
 
     @njit(fastmath=fm)
     def _first_crossing(kc, qs, qe, h, y1, k1, S0, S1, sd):
-        """(theta, which) of the earliest crossing in a step (terms qs, qe at its ends);
-        which = -1 for none."""
+        """(theta, which, flips) of the earliest crossing in a step (terms qs, qe at its ends);
+        which = -1 for none; flips: the functions crossed at that same instant."""
+        none = (False, False, False, False)
         if not (_crosses(S0[0], S1[0], sd[0]) or _crosses(S0[1], S1[1], sd[1])
                 or _crosses(S0[2], S1[2], sd[2]) or _crosses(S0[3], S1[3], sd[3])):
-            return 1.0, -1
+            return 1.0, -1, none
         F1 = _field(qe, y1, kc)
         Dx0, Dx1 = k1[0], F1[0]
         DX0, DX1 = k1[2] - k1[0] - qs[3], F1[2] - F1[0] - qe[3]
-        th_s, j = 2.0, 0
-        th = _root(S0[0], S1[0], sd[0], Dx0, Dx1, h)
-        if th < th_s:
-            th_s, j = th, 0
-        th = _root(S0[1], S1[1], sd[1], Dx0, Dx1, h)
-        if th < th_s:
-            th_s, j = th, 1
-        th = _root(S0[2], S1[2], sd[2], DX0, DX1, h)
-        if th < th_s:
-            th_s, j = th, 2
-        th = _root(S0[3], S1[3], sd[3], DX0, DX1, h)
-        if th < th_s:
-            th_s, j = th, 3
+        t0 = _root(S0[0], S1[0], sd[0], Dx0, Dx1, h)
+        t1 = _root(S0[1], S1[1], sd[1], Dx0, Dx1, h)
+        t2 = _root(S0[2], S1[2], sd[2], DX0, DX1, h)
+        t3 = _root(S0[3], S1[3], sd[3], DX0, DX1, h)
+        th_s, j = t0, 0
+        if t1 < th_s:
+            th_s, j = t1, 1
+        if t2 < th_s:
+            th_s, j = t2, 2
+        if t3 < th_s:
+            th_s, j = t3, 3
         if 1.0 < th_s:  # no crossing (the sine shape has no time breaks)
-            return 1.0, -1
-        return th_s, j
+            return 1.0, -1, none
+        lim = th_s + _SIMULTANEOUS
+        return th_s, j, (t0 <= lim, t1 <= lim, t2 <= lim, t3 <= lim)
 
     @njit(inline="always", fastmath=fm)
-    def _flip(sd, which):
-        return (-sd[0] if which == 0 else sd[0], -sd[1] if which == 1 else sd[1],
-                -sd[2] if which == 2 else sd[2], -sd[3] if which == 3 else sd[3])
+    def _flip(sd, fl):
+        return (-sd[0] if fl[0] else sd[0], -sd[1] if fl[1] else sd[1],
+                -sd[2] if fl[2] else sd[2], -sd[3] if fl[3] else sd[3])
+
+    @njit(inline="always", fastmath=fm)
+    def _land(kc, tc, ck, H, qa, qb, t, Ym, h1, hh, which, sd):
+        """Put the end of the sub-step to a crossing on the crossed surface: one Newton
+        correction along the piece being left (as jaxgear's kernel does)."""
+        if which < 0:
+            return Ym, h1
+        q = _terms(tc, ck, H, qa, qb, t + h1)
+        F = _field_piece(q, Ym, kc, sd)
+        S = _switching(kc, q[2], Ym)
+        rate = F[0] if which < 2 else F[2] - F[0] - q[3]
+        dt = -S[which] / (rate if rate != 0 else 1.0)
+        if not (rate != 0 and math.isfinite(dt) and abs(dt) <= 0.25 * abs(hh)):
+            return Ym, h1
+        return _axpy(Ym, dt, F), h1 + dt
 
     @njit(fastmath=fm)
     def _split_lane(kc, tc, ck, h, qa, qb, y, y1, k1, max_splits):
         """A lane whose trial step (y -> y1, first stage k1) changes a sign: sub-step to the
-        crossing, flip, the rest; again for a further event, up to max_splits events."""
+        crossing on the lane's piece, land on the surface, flip, the rest on the new piece;
+        again for a further event, up to max_splits events."""
         t = ck[0]
         S0 = _switching(kc, qa[2], y)
         S1 = _switching(kc, qb[2], y1)
         sd = (_side(S0[0]), _side(S0[1]), _side(S0[2]), _side(S0[3]))
-        th, which = _first_crossing(kc, qa, qb, h, y1, k1, S0, S1, sd)
-        tt, hh, Y, K1, Q = t, h, y, k1, qa
+        th, which, fl = _first_crossing(kc, qa, qb, h, y1, k1, S0, S1, sd)
+        tt, hh, Y, K1 = t, h, y, k1
         for it in range(max_splits):
             h1 = th * hh
-            if it > 0:
-                K1 = _field(Q, Y, kc)
-            Ym, Qm = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Y, h1, K1, Q)
-            if which >= 0:
-                sd = _flip(sd, which)
+            Ym, _ = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Y, h1, K1, sd)
+            Ym, h1 = _land(kc, tc, ck, h, qa, qb, tt, Ym, h1, hh, which, sd)
+            sd = _flip(sd, fl)
             tt = tt + h1
             hh = hh - h1
-            K1 = _field(Qm, Ym, kc)
-            Y1, Qe = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Ym, hh, K1, Qm)
+            Qm = _terms(tc, ck, h, qa, qb, tt)
+            K1 = _field_piece(Qm, Ym, kc, sd)
+            Y1, Qe = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Ym, hh, K1, sd)
             if it == max_splits - 1:
                 return Y1
             S1 = _switching(kc, Qe[2], Y1)
             S0 = _switching(kc, Qm[2], Ym)
-            th2, which2 = _first_crossing(kc, Qm, Qe, hh, Y1, K1, S0, S1, sd)
+            th2, which2, fl2 = _first_crossing(kc, Qm, Qe, hh, Y1, K1, S0, S1, sd)
             more = th2 < 1.0
             if it == max_splits - 2:
                 if not more:
                     return Y1
-                fin, Qf = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Ym, th2 * hh, K1, Qm)
-                out, _ = _rk4_lane(kc, tc, ck, h, qa, qb, tt + th2 * hh, fin, (1.0 - th2) * hh,
-                                   _field(Qf, fin, kc), Qf)
+                h2 = th2 * hh
+                fin, _ = _rk4_lane(kc, tc, ck, h, qa, qb, tt, Ym, h2, K1, sd)
+                fin, h2 = _land(kc, tc, ck, h, qa, qb, tt, fin, h2, hh, which2, sd)
+                sd = _flip(sd, fl2)
+                Qf = _terms(tc, ck, h, qa, qb, tt + h2)
+                out, _ = _rk4_lane(kc, tc, ck, h, qa, qb, tt + h2, fin, hh - h2, _field_piece(Qf, fin, kc, sd), sd)
                 return out
-            Y, Q = Ym, Qm
+            Y = Ym
             th = th2 if more else 1.0
             which = which2 if more else -1
+            fl = fl2
         return Y1
 
     @njit(parallel=True, fastmath=fm)

@@ -77,6 +77,7 @@ from .analysis import (  # noqa: E402
     analyze_cell_map as analyze_cell_map,
     cell_images as cell_images,
     compare_with_direct as compare_with_direct,
+    label_uncertainty as label_uncertainty,
     detect_period as detect_period,
     Attractor as Attractor,
     GlobalResult as GlobalResult,

@@ -272,7 +272,7 @@ def to_dataset(obj):
     params = getattr(obj, "params", None)
     if isinstance(params, dict):  # the scalar parameters one attribute each, for readers of the file
         attrs.update({f"param_{k}": v for k, v in params.items()
-                      if isinstance(v, (int, float)) and not isinstance(v, bool)})
+                      if isinstance(v, (int, float, str)) and not isinstance(v, bool)})
     data = {}
     for name, (dims, a, at) in w.data.items():
         if np.asarray(a).dtype.kind == "U":

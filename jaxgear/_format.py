@@ -8,7 +8,9 @@ __all__ = ["format_table", "fmt_value"]
 
 
 def fmt_value(v) -> str:
-    """A number (6 significant digits) or a bracketed list of numbers."""
+    """A number (6 significant digits), a bracketed list of numbers, or a string as it is."""
+    if isinstance(v, str):
+        return v
     a = np.asarray(v)
     if a.ndim == 0:
         return f"{float(a):.6g}"

@@ -35,6 +35,13 @@ class GearSet:
     opposing its rotation; both positive in normal operation. ``T_L=None`` takes the
     static torque balance ``T_L = T_D (1 + z_r/z_s)``.
 
+    Mesh stiffness: ``mesh_shape="sine"`` keeps the first harmonic of the tooth-pair
+    alternation (the paper's model), ``"rectangular"`` the alternation itself between
+    one and two pairs in contact (model document §4), whose duty cycle is the contact
+    ratio; ``contact_ratio_sp`` / ``contact_ratio_rp`` default to the standard involute
+    values of the geometry (addendum ``addendum_coef * module``, full-depth teeth,
+    standard centre distances; :meth:`derived`).
+
     ``notes`` maps a field name to where its value comes from (e.g. "paper §4.1" or an
     assumption with its reason); :meth:`table` prints it beside the value.
     """
@@ -73,6 +80,10 @@ class GearSet:
     Omega: float | None = 0.87
     input_rpm: float | None = None
     b_c: float = 10.0
+    mesh_shape: str = "sine"
+    addendum_coef: float = 1.0
+    contact_ratio_sp: float | None = None
+    contact_ratio_rp: float | None = None
     notes: Mapping[str, str] = dataclasses.field(default_factory=dict, compare=False)
 
     # units for tables
@@ -84,7 +95,7 @@ class GearSet:
         "beta_sp": "rad", "beta_rp": "rad", "gamma_sr": "rad", "b_sp": "um (half)",
         "b_rp": "um (half)", "zeta_sp": "", "zeta_rp": "", "c_sp_coef": "N s/m",
         "c_rp_coef": "N s/m", "T_D": "N m", "T_L": "N m", "Omega": "", "input_rpm": "rpm",
-        "b_c": "um",
+        "b_c": "um", "mesh_shape": "", "addendum_coef": "", "contact_ratio_sp": "", "contact_ratio_rp": "",
     }
 
     def __post_init__(self):
@@ -103,7 +114,7 @@ class GearSet:
     def validate(self) -> None:
         """Raise ``ValueError`` naming the parameter and its allowed range."""
         for f in dataclasses.fields(self):
-            if f.name == "notes":
+            if f.name in ("notes", "mesh_shape"):
                 continue
             v = getattr(self, f.name)
             if v is None:
@@ -143,6 +154,17 @@ class GearSet:
             for n in (f"zeta_{mesh}", f"c_{mesh}_coef"):
                 if getattr(self, n) is not None:
                     require(bool(np.all(self._per_planet(n) >= 0)), n, getattr(self, n), "must be >= 0")
+        require(self.mesh_shape in ("sine", "rectangular"), "mesh_shape", self.mesh_shape,
+                "must be 'sine' or 'rectangular'")
+        require(0 < float(self.addendum_coef) <= 1.5, "addendum_coef", self.addendum_coef, "must be in (0, 1.5]")
+        for n in ("contact_ratio_sp", "contact_ratio_rp"):
+            v = getattr(self, n)
+            if v is not None:
+                require(1 < float(v) < 2, n, v, "must lie in (1, 2): one or two tooth pairs in contact")
+        eps_sp, eps_rp = self._contact_ratios()
+        for n, v in (("contact_ratio_sp", eps_sp), ("contact_ratio_rp", eps_rp)):
+            require(1 < v < 2, n, v, "(from the geometry) must lie in (1, 2) for the two-level stiffness model; "
+                    "give it explicitly or change addendum_coef / the teeth")
         if (self.Omega is None) == (self.input_rpm is None):
             raise ValueError("give exactly one operating speed: Omega (dimensionless) or input_rpm (sun, rev/min).")
         if self.Omega is not None:
@@ -151,6 +173,24 @@ class GearSet:
             require(self.input_rpm > 0, "input_rpm", self.input_rpm, "must be > 0")
 
     # ------------------------------------------------------------ derived
+    def _contact_ratios(self) -> tuple[float, float]:
+        """Sun-planet and ring-planet contact ratios: the given ones, else the involute
+        values (length of the line of action over the base pitch ``pi m cos(alpha)``):
+        external mesh ``(sqrt(ra_s^2 - rb_s^2) + sqrt(ra_p^2 - rb_p^2) - a sin(alpha)) / p_b``
+        with ``a = r_s + r_p``; internal mesh ``(sqrt(ra_p^2 - rb_p^2) - sqrt(ra_r^2 - rb_r^2)
+        + a sin(alpha)) / p_b`` with ``a = r_r - r_p`` and the ring's addendum circle
+        inside its pitch circle."""
+        alpha = math.radians(self.pressure_angle_deg)
+        m, ha = self.module, float(self.addendum_coef)
+        r_s, r_p, r_r = (m * z / 2 for z in (self.z_s, self.z_p, self.z_r))
+        rb = lambda r: r * math.cos(alpha)  # noqa: E731
+        arm = lambda ra, r: math.sqrt(max(ra * ra - rb(r) ** 2, 0.0))  # noqa: E731
+        p_b = math.pi * m * math.cos(alpha)
+        sp = (arm(r_s + ha * m, r_s) + arm(r_p + ha * m, r_p) - (r_s + r_p) * math.sin(alpha)) / p_b
+        rp = (arm(r_p + ha * m, r_p) - arm(r_r - ha * m, r_r) + (r_r - r_p) * math.sin(alpha)) / p_b
+        given = (self.contact_ratio_sp, self.contact_ratio_rp)
+        return (float(given[0]) if given[0] is not None else sp, float(given[1]) if given[1] is not None else rp)
+
     def derived(self) -> dict[str, Any]:
         """Geometry, equivalent masses and ``omega_n`` (MODEL.md §1-§3), SI units."""
         alpha = math.radians(self.pressure_angle_deg)
@@ -178,7 +218,9 @@ class GearSet:
             w_s = self.input_rpm * 2 * math.pi / 60
             omega = self.z_s * w_s * self.z_r / (self.z_s + self.z_r)  # mesh frequency, rad/s
             Omega = omega / omega_n
+        eps_sp, eps_rp = self._contact_ratios()
         return dict(alpha=alpha, r_s=r_s, r_p=r_p, r_r=r_r, r_bs=r_bs, r_bp=r_bp, r_c=r_c,
+                    contact_ratio_sp=eps_sp, contact_ratio_rp=eps_rp,
                     J_s=J_s, J_p=J_p, M_p=M_p, m_s=m_s, m_p=m_p, m_c=m_c, m_eq1=m_eq1,
                     omega_n=omega_n, F_D=F_D, F_L=F_L, T_L=T_L, omega=omega, Omega=Omega,
                     mesh_frequency_hz=omega / (2 * math.pi))
@@ -226,6 +268,9 @@ class GearSet:
             f_D=d["F_D"] / (k_ref * bc),
             f_L=d["F_L"] / (k_ref * bc),
             Omega=d["Omega"],
+            contact_ratio_sp=d["contact_ratio_sp"],
+            contact_ratio_rp=d["contact_ratio_rp"],
+            mesh_shape=self.mesh_shape,
         )
 
     def replace(self, **changes) -> "GearSet":
@@ -255,7 +300,8 @@ class GearSet:
         d = self.derived()
         for k, unit in (("m_s", "kg"), ("m_p", "kg"), ("m_c", "kg"), ("m_eq1", "kg"),
                         ("omega_n", "rad/s"), ("F_D", "N"), ("F_L", "N"), ("T_L", "N m"),
-                        ("mesh_frequency_hz", "Hz"), ("Omega", "")):
+                        ("mesh_frequency_hz", "Hz"), ("Omega", ""), ("contact_ratio_sp", ""),
+                        ("contact_ratio_rp", "")):
             rows.append((k, fmt_value(d[k]), unit, "derived"))
         return format_table(rows, ("name", "value", "unit", "source"))
 

@@ -47,6 +47,13 @@ def backlash(X, b):
     return jnp.where(X >= b, X - b, jnp.where(X <= -b, X + b, 0.0))
 
 
+def backlash_piece(X, b, side_hi, side_lo):
+    """The branch of :func:`backlash` on the side ``side_hi`` (+-1) of ``X = b`` and ``side_lo``
+    of ``X = -b``, extended across them (model document §8): ``X - b`` in contact on the
+    drive side, ``X + b`` on the back side, ``0`` in the gap."""
+    return jnp.where(side_hi > 0, X - b, jnp.where(side_lo < 0, X + b, 0.0))
+
+
 def gear_period(p: GearParams):
     """Forcing (mesh) period ``T = 2 pi / Omega`` in dimensionless time."""
     return 2.0 * jnp.pi / p.Omega
@@ -87,7 +94,7 @@ def mesh_excitation(t, p: GearParams):
     return k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp
 
 
-def reduced_vector_field(t, x, p: GearParams):
+def reduced_vector_field(t, x, p: GearParams, sides=None):
     """Reduced 2-DOF model (model document §4): identical planets, ``x = (X_sp, X_sp', X_sc, X_sc')``.
 
     ``x1' = x2``, ``x2' = -(N + mu_p) g_sp + (mu_p - N mu_c) g_rp + mu_s f_D + mu_c f_L - e_sp''``,
@@ -96,14 +103,20 @@ def reduced_vector_field(t, x, p: GearParams):
 
     Dimensionless (model document §3): ``t`` is ``tau = omega_n t``, ``x1 = X_sp`` and
     ``x3 = X_sc`` are relative displacements in ``b_c``, ``x2``, ``x4`` their rates;
-    ``x`` has shape ``(4,)``. Returns ``dx/dtau``, shape ``(4,)``.
+    ``x`` has shape ``(4,)``. Returns ``dx/dtau``, shape ``(4,)``. With ``sides`` (the signs
+    of :func:`reduced_switching`, shape ``(4,)``) the field's smooth piece on those sides.
     """
     x1, x2, x3, x4 = x[0], x[1], x[2], x[3]
     k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp = mesh_excitation(t, p)
     X_rp = x3 - x1 - e_sp - e_rp
     V_rp = x4 - x2 - de_sp - de_rp
-    g_sp = k_sp * backlash(x1, p.b_sp) + p.c_sp * x2
-    g_rp = k_rp * backlash(X_rp, p.b_rp) + p.c_rp * V_rp
+    if sides is None:
+        d_sp, d_rp = backlash(x1, p.b_sp), backlash(X_rp, p.b_rp)
+    else:
+        d_sp = backlash_piece(x1, p.b_sp, sides[0], sides[1])
+        d_rp = backlash_piece(X_rp, p.b_rp, sides[2], sides[3])
+    g_sp = k_sp * d_sp + p.c_sp * x2
+    g_rp = k_rp * d_rp + p.c_rp * V_rp
     N = p.N
     load1 = p.mu_s * p.f_D + p.mu_c * p.f_L - dde_sp
     load2 = p.mu_s * p.f_D + 2.0 * p.mu_c * p.f_L
@@ -112,7 +125,7 @@ def reduced_vector_field(t, x, p: GearParams):
     return jnp.stack([x2, dx2, x4, dx4])
 
 
-def nplanet_vector_field(t, x, p: GearParams):
+def nplanet_vector_field(t, x, p: GearParams, sides=None):
     """General N-planet model (model document §2 in dimensionless form), N+1 DOF.
 
     State ``(X_sp1, V_sp1, ..., X_spN, V_spN, X_sc, V_sc)``; per-planet stiffness,
@@ -120,7 +133,8 @@ def nplanet_vector_field(t, x, p: GearParams):
 
     ``X_spi'' = mu_s f_D + mu_c f_L - e_spi'' - (mu_s + mu_c) sum_j g_spj - mu_c sum_j g_rpj
     - mu_pi (g_spi - g_rpi)``, ``X_sc'' = mu_s f_D + 2 mu_c f_L - (mu_s + 2 mu_c) sum_j g_spj
-    - 2 mu_c sum_j g_rpj``.
+    - 2 mu_c sum_j g_rpj``. With ``sides`` (the signs of :func:`nplanet_switching`, shape
+    ``(4N,)``) the field's smooth piece on those sides.
     """
     N = p.N
     X = x[0 : 2 * N : 2]
@@ -129,8 +143,13 @@ def nplanet_vector_field(t, x, p: GearParams):
     k_sp, k_rp, e_sp, de_sp, dde_sp, e_rp, de_rp = mesh_excitation(t, p)
     X_rp = Xsc - X - e_sp - e_rp
     V_rp = Vsc - V - de_sp - de_rp
-    g_sp = k_sp * backlash(X, p.b_sp) + p.c_sp * V
-    g_rp = k_rp * backlash(X_rp, p.b_rp) + p.c_rp * V_rp
+    if sides is None:
+        d_sp, d_rp = backlash(X, p.b_sp), backlash(X_rp, p.b_rp)
+    else:
+        d_sp = backlash_piece(X, p.b_sp, sides[0:N], sides[N:2 * N])
+        d_rp = backlash_piece(X_rp, p.b_rp, sides[2 * N:3 * N], sides[3 * N:4 * N])
+    g_sp = k_sp * d_sp + p.c_sp * V
+    g_rp = k_rp * d_rp + p.c_rp * V_rp
     S_sp, S_rp = jnp.sum(g_sp), jnp.sum(g_rp)
     dde_sp = jnp.broadcast_to(dde_sp, (N,))
     acc = (p.mu_s * p.f_D + p.mu_c * p.f_L - dde_sp
@@ -180,6 +199,7 @@ REDUCED = ForcedSystem(
     section_index=3,
     name="planetary-reduced",
     switching=reduced_switching,
+    piece_field=reduced_vector_field,
     time_breaks=gear_time_breaks,
     native="reduced",
 )
@@ -205,6 +225,7 @@ def nplanet_system(N: int) -> ForcedSystem:
         section_index=2 * N + 1,
         name=f"planetary-{N}-planets",
         switching=nplanet_switching,
+        piece_field=nplanet_vector_field,
         time_breaks=gear_time_breaks,
     )
 

@@ -25,12 +25,12 @@ def test_params_json_is_the_canonical_set(capsys):
     assert rc == 0
     d = json.loads(out)  # exactly one JSON object, nothing else on stdout
     assert isinstance(d, dict)
-    assert list(d) == list(jg.PARAM_NAMES)
-    # MODEL.md §4 names, written out independently of the code
+    assert list(d) == [*jg.PARAM_NAMES, "mesh_shape"]
+    # model document §4 names (and the mesh-stiffness shape of §3), written out independently of the code
     assert set(d) == {
         "N", "mu_s", "mu_p", "mu_c", "kappa_sp_mean", "kappa_sp_amp", "kappa_rp_mean", "kappa_rp_amp",
         "phi_sp", "phi_rp", "e_sp_amp", "e_rp_amp", "beta_sp", "beta_rp", "gamma_sr", "b_sp", "b_rp",
-        "c_sp", "c_rp", "f_D", "f_L", "Omega",
+        "c_sp", "c_rp", "f_D", "f_L", "Omega", "contact_ratio_sp", "contact_ratio_rp", "mesh_shape",
     }
     assert d == jg.paper_params().to_dict()
     # and it rebuilds the same parameters

@@ -319,3 +319,61 @@ def test_jit_and_vmap_agree_with_eager_loop(system, field):
     for k, w in enumerate(np.asarray(Om)):
         np.testing.assert_allclose(np.asarray(pv[k]), np.asarray(field(1.0, jnp.asarray(X[0]), p.replace(Omega=float(w)))),
                                    rtol=1e-14, atol=1e-13)
+
+
+# ----------------------------------------------------------------------------- the rectangular stiffness wave
+@pytest.mark.parametrize("eps", [1.2, 1.5, 1.96])
+def test_rectangular_wave_first_harmonic_is_the_sine(eps):
+    """Paper §2.1: the sine stiffness is the first harmonic of the rectangular wave that
+    alternates between one and two tooth pairs, in double contact a share eps - 1 of the
+    mesh period; the wave has zero mean and two levels."""
+    from jaxgear._model import stiffness_wave
+
+    n = 1 << 14
+    angle = 2 * math.pi * (np.arange(n) + 0.5) / n + 0.3
+    w = np.asarray(stiffness_wave(jnp.asarray(angle), eps, "rectangular"))
+    levels = np.unique(np.round(w, 12))
+    assert len(levels) == 2
+    assert abs(np.mean(np.isclose(w, levels.max())) - (eps - 1)) < 2.0 / n  # duty cycle = eps - 1
+    assert abs(w.mean()) < 1e-3  # zero mean (up to the sampling of the two jumps)
+    a1 = 2 * np.mean(w * np.sin(angle))
+    b1 = 2 * np.mean(w * np.cos(angle))
+    assert abs(a1 - 1.0) < 2e-3 and abs(b1) < 2e-3  # first harmonic = sin(angle)
+    np.testing.assert_allclose(np.asarray(stiffness_wave(jnp.asarray(angle), eps, "sine")), np.sin(angle))
+
+
+def test_rectangular_wave_jumps_at_the_declared_time_breaks():
+    p = jg.paper_params().replace(mesh_shape="rectangular", kappa_sp_amp=0.05, kappa_rp_amp=0.01,
+                                  contact_ratio_sp=1.4, contact_ratio_rp=1.7, phi_sp=0.4, phi_rp=1.1)
+    T = float(p.period)
+    breaks = np.sort(np.asarray(REDUCED.time_breaks(p))) * T
+    assert breaks.size == 4
+    k = lambda t: np.asarray(jg._model.mesh_excitation(t, p)[:2])  # noqa: E731
+    for tb in breaks:  # a jump at every break ...
+        assert np.abs(k(tb + 1e-9) - k(tb - 1e-9)).max() > 1e-3
+    mids = 0.5 * (breaks + np.roll(breaks, -1) + np.r_[0, 0, 0, T])  # ... and none between them
+    for a, b in zip(breaks, np.roll(breaks, -1) + np.r_[0, 0, 0, T]):
+        ts = np.linspace(a + 1e-9, b - 1e-9, 50)
+        ks = np.stack([k(t) for t in ts])
+        assert np.ptp(ks, axis=0).max() < 1e-12
+    assert mids.size == 4
+
+
+def test_gear_set_contact_ratios_from_the_involute_geometry():
+    # a textbook value: two 20-tooth standard spur gears, 20 degrees: 1.557
+    base = dict(pressure_angle_deg=20.0, module=2e-3, addendum_coef=1.0)
+    a = jg.GearSet(z_s=20, z_p=20, z_r=60, **base)
+    assert abs(a.derived()["contact_ratio_sp"] - 1.557) < 1e-3
+    # a ring with many teeth meshes like a rack: (sqrt(ra_p^2 - rb_p^2) - r_p sin a + ha m / sin a) / p_b
+    zp, m, al = 20, 2e-3, math.radians(20.0)
+    rp, rb = m * zp / 2, m * zp / 2 * math.cos(al)
+    rack = (math.sqrt((rp + m) ** 2 - rb ** 2) - rp * math.sin(al) + m / math.sin(al)) / (math.pi * m * math.cos(al))
+    gap = [abs(jg.GearSet(z_s=z, z_p=20, z_r=z + 40, **base).derived()["contact_ratio_rp"] - rack)
+           for z in (2000, 20000)]
+    assert gap[1] < 5e-4 and 8 < gap[0] / gap[1] < 12, gap  # O(1 / z_r) towards the rack
+    # given values win; the dimensionless set carries them and the shape
+    c = a.replace(contact_ratio_sp=1.3, mesh_shape="rectangular", k_sp_amp=0.05e9, k_rp_amp=0.05e9)
+    p = c.to_params()
+    assert float(p.contact_ratio_sp) == 1.3 and p.mesh_shape == "rectangular"
+    with pytest.raises(ValueError, match="contact_ratio_sp"):
+        a.replace(contact_ratio_sp=2.5)

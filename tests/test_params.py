@@ -154,7 +154,7 @@ def test_replace_and_dict_round_trip():
     assert float(q.Omega) == 0.9 and float(q.b_sp) == 4.0
     assert float(p.Omega) == 0.87  # immutable original
     d = q.to_dict()
-    assert list(d) == list(PARAM_NAMES)
+    assert list(d) == [*PARAM_NAMES, "mesh_shape"]
     assert GearParams.from_dict(d).to_dict() == d
     # per-planet arrays survive the round trip
     r = p.replace(phi_sp=[0.0, 1.0, 2.0], mu_p=[0.3, 0.4, 0.5])

@@ -8,7 +8,9 @@
 - :mod:`._global` — :func:`analyze_global`, the common steps and the result;
 - :mod:`._result` — :class:`GlobalResult` and :class:`Attractor`;
 - :mod:`._diagnostics` — warnings when a result looks unreliable;
-- :mod:`._compare` — agreement with direct integration on a sample of cells.
+- :mod:`._compare` — agreement with direct integration on a sample of cells;
+- :mod:`._uncertainty` — :func:`label_uncertainty`, how far a result's labels can be trusted;
+- :mod:`._pool` — the direct method's device-resident lane pool.
 """
 
 from ._cellmap import PoincareCellMap, StroboscopicCellMap, cell_images
@@ -19,8 +21,9 @@ from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
 from ._orbits import detect_period
 from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult
+from ._uncertainty import label_uncertainty
 
 __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCellMap", "analyze_global",
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
            "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
-           "method_from_dict", "method_from_name", "Classification"]
+           "method_from_dict", "method_from_name", "Classification", "label_uncertainty"]

@@ -9,20 +9,23 @@ section crossings, and the :class:`~jaxgear.GlobalResult`.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from .._cells import CellGrid
-from .._checks import check_bool
+from .._checks import check_bool, check_int
 from .._matching import group_attractors, minimal_cycle
 from .._params import params_to_dict
 from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ._diagnostics import warn_if_unreliable
+from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
 from ._orbits import section_points
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
+from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
 __all__ = ["analyze_global", "default_method", "DEFAULT_METHOD"]
 
@@ -36,7 +39,8 @@ def default_method() -> AbstractGlobalMethod:
 
 
 def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGrid | None = None,
-                   method: AbstractGlobalMethod | str | None = None, *, progress: bool = True) -> GlobalResult:
+                   method: AbstractGlobalMethod | str | None = None, *, progress: bool = True,
+                   uncertainty: int = DEFAULT_SAMPLES) -> GlobalResult:
     """Every coexisting attractor in a region, its period and its domain (paper §3-§4).
 
     Args:
@@ -49,6 +53,9 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
             :class:`~jaxgear.StroboscopicCellMap` — holding all its options, or the name
             of one (``"direct"``, ``"poincare-like"``, ``"stroboscopic"``) for its defaults.
         progress: show progress bars (tqdm); ``False`` silences them.
+        uncertainty: cells sampled for the result's label uncertainty (the share of
+            them whose label changes with a halved step, and with a start moved by 1e-3
+            cell: :func:`~jaxgear.analysis.label_uncertainty`); ``0`` skips it.
     Returns:
         :class:`~jaxgear.GlobalResult`. Warnings name what to change when the result looks
         unreliable: many sink cells or an attractor on the region's edge (enlarge the
@@ -63,6 +70,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
 
     t_start = time.perf_counter()
     check_bool(progress, "progress")
+    check_int(uncertainty, "uncertainty", 0)
     system = REDUCED if system is None else system
     if not isinstance(system, ForcedSystem):
         raise ValueError(f"system must be a jaxgear.ForcedSystem, got {type(system).__name__}.")
@@ -90,6 +98,13 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     labels, raw, cycles = _merge_same(labels, raw, cycles, method)
     result = _assemble(system, params, grid, method, labels, raw, cycles, mean_periods,
                        time.perf_counter() - t_start)
+    if uncertainty:
+        direct = method if isinstance(method, Direct) else Direct(
+            integrator=method.integrator, max_period=method.max_period, period_tol=method.period_tol,
+            merge_tol=method.merge_tol, chunk_size=method.chunk_size)
+        u = label_uncertainty(system, params, grid, result.labels, result.attractors, direct, samples=uncertainty,
+                              progress=progress)
+        result = dataclasses.replace(result, uncertainty=u, runtime_s=time.perf_counter() - t_start)
     warn_if_unreliable(result)
     return result
 

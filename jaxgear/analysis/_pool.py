@@ -149,7 +149,7 @@ def _decide(o: _Options, s: PoolState, X, n: int) -> PoolState:
     norms = jnp.sqrt(_sqdist(Y, 0.0))
     esc = busy & (~jnp.isfinite(norms) | (norms > o.bound))
     ks = jnp.arange(1, M + 1)
-    per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0)  # (L,)
+    per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0).astype(jnp.int32)  # (L,)
     rec = busy & ~esc & (per <= M)
     live = busy & ~esc
     label = jnp.full(L, -1, jnp.int32)
@@ -267,13 +267,16 @@ def _resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolSta
 
 
 def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, max_periods: int, max_period: int,
-             tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = 1024):
+             tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = 1024,
+             attractors=(), label: str = "direct"):
     """Label the states ``X (n, dim)`` (see the module): ``(labels (n,) with attractor slot,
     SINK or UNRESOLVED; [(points (k, dim) in cycle order, k)]; periods per state (n,))``.
 
     A pilot sample of ``pilot`` states (drawn with a fixed seed) runs first in a small pool
     until each of its states is decided, so the common attractors are known (and capture
     decides the bulk early) when the other states start with the pilot's attractors.
+    ``attractors``: known ``(points, k)`` cycles (``k <= max_period``) that take the first
+    slots, in that order.
     """
     X = np.asarray(X, dtype=np.float64)
     n, dim = X.shape
@@ -283,8 +286,8 @@ def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, m
     n_p = min(int(pilot), n) if 0 < int(pilot) < n else 0
     first = np.sort(np.random.default_rng(0).choice(n, size=n_p, replace=False))
     order = np.concatenate([first, np.setdiff1d(np.arange(n), first)])
-    att = (jnp.full((8, M, dim), jnp.nan), jnp.zeros(8, jnp.int32), 0)
-    bar = progress_bar(n, "direct", progress)
+    att = _seed_attractors(attractors, M, dim)
+    bar = progress_bar(n, label, progress)
     parts = []
     for part in (order[:n_p], order[n_p:]):
         if len(part):
@@ -300,6 +303,21 @@ def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, m
     att_pts, att_k = jax.device_get(att[:2])
     atts = [(np.asarray(att_pts[a, : int(att_k[a])]), int(att_k[a])) for a in range(int(att[2]))]
     return labels, atts, used
+
+
+def _seed_attractors(attractors, M: int, dim: int):
+    """The attractor table ``(points (A, M, dim), periods (A,), count)`` holding the known
+    cycles first (``A``: 8 slots, or the next power of two that holds them)."""
+    known = [(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in attractors]
+    if any(not 0 < k <= M for _, k in known):
+        raise ValueError(f"known attractors must have periods 1..{M}")
+    A = max(8, 1 << max(0, len(known) - 1).bit_length())
+    pts = np.full((A, M, dim), np.nan)
+    ks = np.zeros(A, np.int32)
+    for a, (p, k) in enumerate(known):
+        pts[a, :k] = p[:k]
+        ks[a] = k
+    return jnp.asarray(pts), jnp.asarray(ks), len(known)
 
 
 def _drive(system, params, integrator, o: _Options, Xd, L: int, att, bar) -> PoolState:

@@ -63,6 +63,21 @@ class Attractor:
                     n_periodic_cells=int(len(self.periodic_cells)))
 
 
+def describe_uncertainty(u: dict) -> str:
+    """One line for the printed table."""
+    if not u:
+        return ""
+    return (f"label uncertainty ({u['samples']} sampled cells): {100 * u['step']:.1f} % change with a "
+            f"{_refined_name(u)}, {100 * u['start']:.1f} % when the start moves by {u['perturbation']:g} cell")
+
+
+def _refined_name(u: dict) -> str:
+    r = u.get("refined_integrator", {})
+    if "steps_per_period" in r:
+        return f"halved step ({r['steps_per_period']} steps/period)"
+    return "16x smaller integration error"
+
+
 def _grid_dims(r: "GlobalResult") -> tuple[str, ...]:
     return r.grid.axis_names
 
@@ -85,6 +100,10 @@ class GlobalResult:
         n_sink, n_unresolved: cell counts.
         runtime_s: wall time of the analysis; version: jaxgear version.
         mean_periods: mean number of forcing periods integrated per cell.
+        uncertainty: the label uncertainty (:func:`~jaxgear.analysis.label_uncertainty`):
+            ``samples``, ``step`` and ``start`` (shares of sampled cells whose label
+            changes with a halved step / a start moved by ``perturbation`` cells);
+            empty when not measured.
     """
 
     labels: np.ndarray = array_field(_grid_dims)
@@ -100,6 +119,7 @@ class GlobalResult:
     runtime_s: float = float("nan")
     version: str = ""
     mean_periods: float = float("nan")
+    uncertainty: dict = dataclasses.field(default_factory=dict)
 
     @property
     def n_cells(self) -> int:
@@ -128,7 +148,8 @@ class GlobalResult:
                          "fate not decided", ""))
         head = ("id", "period", "cells", "share", "stroboscopic point (" + ", ".join(self.state_names) + ")",
                 "residual")
-        return format_table(rows, head)
+        note = describe_uncertainty(self.uncertainty)
+        return format_table(rows, head) + ("\n" + note if note else "")
 
     def summary(self) -> dict[str, Any]:
         """Everything but the per-cell labels, JSON-able (written as ``summary.json``)."""
@@ -137,7 +158,7 @@ class GlobalResult:
             grid=self.grid.to_dict(), n_cells=self.n_cells, settings=self.settings, params=self.params,
             attractors=[a.summary() for a in self.attractors], n_sink=self.n_sink,
             n_unresolved=self.n_unresolved, shares=self.shares, runtime_s=self.runtime_s,
-            mean_periods=self.mean_periods, version=self.version,
+            mean_periods=self.mean_periods, uncertainty=self.uncertainty, version=self.version,
         )
 
     # ------------------------------------------------------------------ I/O

@@ -19,6 +19,7 @@ models); ``periods`` is a Python int (it sets the length of a compiled loop).
 from __future__ import annotations
 
 import abc
+import dataclasses
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -86,6 +87,11 @@ class AbstractIntegrator(eqx.Module):
         """The integrator's settings (JSON-able; :func:`integrator_from_dict` rebuilds it)."""
         return {"type": self.name}
 
+    def refined(self) -> "AbstractIntegrator":
+        """The same integrator with its error about 16 times smaller (half the step of a
+        fourth-order method): what a result's label uncertainty is measured against."""
+        raise NotImplementedError(f"{type(self).__name__} does not define refined()")
+
 
 class AbstractFixedStep(AbstractIntegrator):
     """A one-step method with ``steps_per_period`` equal steps per forcing period.
@@ -110,6 +116,10 @@ class AbstractFixedStep(AbstractIntegrator):
 
     def to_dict(self) -> dict[str, Any]:
         return {"type": self.name, "steps_per_period": int(self.steps_per_period)}
+
+    def refined(self) -> "AbstractFixedStep":
+        """Twice the steps per period (a fourth-order method's error / 16)."""
+        return dataclasses.replace(self, steps_per_period=2 * int(self.steps_per_period))
 
     def advance(self, system, params, Y, t0, periods: int, n_active=None):
         """``periods`` forcing periods of ``steps_per_period`` steps each. The step times of

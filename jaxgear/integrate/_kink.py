@@ -6,11 +6,12 @@ step is first taken as a plain RK4 step (the *trial*); for a lane whose switchin
 functions ``s(t, x)`` change sign over it, or whose step contains a known time break,
 the crossing is located on the cubic Hermite interpolant of the switching function
 (values and time derivatives at both ends of the trial step; a known break is exact),
-and the step is redone as sub-steps that end and start on the surface. States then
-converge at fourth order and, because the crossing time enters the result as a
-differentiable function of the state, ``jax.jacfwd`` through the steps converges to
-the monodromy matrix of the flow, saltation included (identity where the field only
-kinks).
+and the step is redone as sub-steps that end and start on the surface, each evaluated
+on its own smooth piece of the field (``ForcedSystem.piece_field``); one Newton
+correction lands the sub-step's end on the surface to round-off. States then converge
+at fourth order, and ``jax.jacfwd`` through the steps converges at fourth order to the
+monodromy matrix of the flow, saltation included (identity where the field only kinks;
+model document §8).
 
 The lanes that need a split (a few per cent per step) are gathered into a compact
 buffer in large batches and selected from a whole-batch computation in small ones,
@@ -39,13 +40,16 @@ COMPACT_FRACTION = 8
 """Large batches gather up to ``n / COMPACT_FRACTION`` lanes that need a split (a few per
 cent do per step); a step with more splits them all with a select."""
 
+SIMULTANEOUS = 1e-12
+"""Crossings within this fraction of a step of the first one are the same event (all
+their sides flip together)."""
+
 BREAK_TOL = 1e-10
 """A known time break within ``BREAK_TOL * T`` of a step's end lies on that end: no split,
 and the step's stage times are kept that far inside the step (model document §8)."""
 
 _HERMITE_ITERS = 12
 _EPS = 2.220446049250313e-16
-_NUDGE = 1e-12  # side forcing for fields that jump: distance from the surface, relative
 
 
 def _sides(S):
@@ -96,34 +100,20 @@ def _break_fraction(system, params, t, h):
 
 def _field(system, params, t, Y, t_lo=None, t_hi=None, sides=None):
     """The vector field on a batch, with stage times kept inside ``[t_lo, t_hi]`` (systems
-    with time breaks) and states moved onto the side ``sides`` of each switching surface
-    they lie within round-off of (systems whose field jumps)."""
+    with time breaks) and, given ``sides`` (``(m, n)`` of +-1) and a system with a
+    ``piece_field``, the smooth piece of those sides of the switching surfaces, extended
+    across them."""
     if t_lo is not None:
         t = jnp.clip(t, t_lo, t_hi)
-    if sides is not None and system.field_jumps and system.switching is not None:
-        Y = _force_sides(system, params, t, Y, sides)
-    return batch_field(system, params, t, Y)
-
-
-def _force_sides(system, params, t, Y, sides):
-    """Move each lane a round-off distance onto its side of every switching surface it sits
-    on (``|s| <= 1e-6 (1 + |s|)`` on the wrong side), without changing derivatives."""
-    tt = jnp.broadcast_to(t, (Y.shape[1],))
-
-    def one(ti, y, sd):
-        s = system.switching(ti, y, params)
-        G = jax.jacfwd(lambda z: system.switching(ti, z, params))(y)  # (m, dim)
-        wrong = (jnp.sign(s) != sd) & (jnp.abs(s) <= 1e-6 * (1.0 + jnp.abs(s)))
-        target = sd * _NUDGE * (1.0 + jnp.abs(y).max())
-        step = jnp.where(wrong, target - s, 0.0) / jnp.maximum(jnp.sum(G * G, axis=1), 1e-300)
-        return y + jax.lax.stop_gradient(G.T @ step)
-
-    return jax.vmap(one, in_axes=(0, 1, 1), out_axes=1)(tt, Y, sides)
+    if sides is None or system.piece_field is None:
+        return batch_field(system, params, t, Y)
+    in_t = None if jnp.ndim(t) == 0 else 0
+    return jax.vmap(system.piece_field, in_axes=(in_t, 1, None, 1), out_axes=1)(t, Y, params, sides)
 
 
 def _rk4(system, params, t, Y, h, window=False, sides=None, k1=None):
     """One RK4 step; returns ``(Y_new, k1)``. ``window``: keep stage times inside the step
-    (by ``BREAK_TOL * T``); ``sides``: evaluate every stage on those sides of the surfaces."""
+    (by ``BREAK_TOL * T``); ``sides``: evaluate every stage with the piece of those sides."""
     if window:
         tol = jnp.minimum(BREAK_TOL * system.period(params), 0.25 * jnp.abs(h))
         lo, hi = t + tol, t + h - tol
@@ -148,11 +138,15 @@ def trial_step(system, params, t, Y, h):
     return Y1, k1, S0, S1, _break_fraction(system, params, t, h)
 
 
-def _hermite_root(s0, s1, d0, d1):
+def _hermite_root(s0, s1, d0, d1, differentiable=True):
     """Root in ``(0, 1)`` of the cubic Hermite interpolant through ``(0, s0, d0)`` and
     ``(1, s1, d1)`` (``d`` scaled by the step), given ``s0 s1 < 0``: safeguarded Newton
-    from the secant point, to round-off. Shapes broadcast; the gradient is that of the
-    root (one Newton step at the converged point carries it)."""
+    from the secant point, to round-off. Shapes broadcast. ``differentiable``: the root's
+    derivative is that of the interpolant's root (one Newton step at the converged point
+    carries it); otherwise none (:func:`_split` says when)."""
+    sg = jax.lax.stop_gradient
+    if not differentiable:
+        s0, s1, d0, d1 = sg(s0), sg(s1), sg(d0), sg(d1)
 
     def p(th):
         t2, t3 = th * th, th * th * th
@@ -163,17 +157,7 @@ def _hermite_root(s0, s1, d0, d1):
         t2 = th * th
         return (6 * t2 - 6 * th) * s0 + (3 * t2 - 4 * th + 1) * d0 + (-6 * t2 + 6 * th) * s1 + (3 * t2 - 2 * th) * d1
 
-    sg = jax.lax.stop_gradient
-    a0, a1, b0, b1 = sg(s0), sg(s1), sg(d0), sg(d1)
-
-    def pc(th):
-        t2, t3 = th * th, th * th * th
-        return ((2 * t3 - 3 * t2 + 1) * a0 + (t3 - 2 * t2 + th) * b0 + (-2 * t3 + 3 * t2) * a1 + (t3 - t2) * b1)
-
-    def dpc(th):
-        t2 = th * th
-        return (6 * t2 - 6 * th) * a0 + (3 * t2 - 4 * th + 1) * b0 + (-6 * t2 + 6 * th) * a1 + (3 * t2 - 2 * th) * b1
-
+    a0, a1 = sg(s0), sg(s1)
     denom = a0 - a1
     th = jnp.clip(jnp.where(denom != 0, a0 / jnp.where(denom != 0, denom, 1.0), 0.5), 0.0, 1.0)
     lo, hi = jnp.zeros_like(th), jnp.ones_like(th)
@@ -181,11 +165,11 @@ def _hermite_root(s0, s1, d0, d1):
 
     def body(_, c):
         th, lo, hi = c
-        v = pc(th)
+        v = sg(p(th))
         same = jnp.sign(v) == sgn0
         lo = jnp.where(same, th, lo)
         hi = jnp.where(same, hi, th)
-        d = dpc(th)
+        d = sg(dp(th))
         nt = th - v / jnp.where(d != 0, d, 1.0)
         # converged: the Newton correction is at round-off; keep th (a bracket end that
         # round-off moved onto th would otherwise reject the step and bisect away)
@@ -201,58 +185,124 @@ def _hermite_root(s0, s1, d0, d1):
 
 
 def _first_crossing(system, params, t, Y, Y1, h, k1, S0, S1, sides, th_break):
-    """The earliest event of a trial step, per lane: ``(theta, which)`` with ``which`` the
-    index of the crossed switching function, or ``-1`` for a time break / no event."""
+    """The earliest event of a trial step, per lane: ``(theta, which, flips)`` with
+    ``which`` the index of the crossed switching function (``-1`` for a time break or no
+    event) and ``flips (m, n)`` every function crossed at that same instant (identical
+    planets, or ``b = 0`` where both sides of a backlash coincide), whose sides all flip."""
     n = Y.shape[1]
     if S0.shape[0]:
         cross = (_sides(S1) != sides) & jnp.isfinite(S1) & jnp.isfinite(S0)
         F1 = batch_field(system, params, t + h, Y1)
         D0 = _switching_rate(system, params, t, Y, k1) * h
         D1 = _switching_rate(system, params, t + h, Y1, F1) * h
-        th = _hermite_root(S0, S1, D0, D1)
+        # (the root's derivative is needed only where stages are not evaluated piece by piece)
+        th = _hermite_root(S0, S1, D0, D1, differentiable=system.piece_field is None)
         th = jnp.where(cross, jnp.clip(th, 0.0, 1.0), 2.0)
         j = jnp.argmin(th, axis=0)
         th_s = jnp.take_along_axis(th, j[None], axis=0)[0]
     else:
+        th = jnp.full((0, n), 2.0)
         th_s = jnp.full((n,), 2.0)
         j = jnp.zeros((n,), jnp.int32)
     use_break = th_break < th_s
     theta = jnp.where(use_break, th_break, th_s)
     which = jnp.where(use_break | (th_s > 1.0), -1, j)
-    return jnp.minimum(theta, 1.0), which
+    flips = (th <= jax.lax.stop_gradient(th_s) + SIMULTANEOUS) & (which >= 0)[None]
+    return jnp.minimum(theta, 1.0), which, flips
 
 
-def _split(system, params, t, Y, h, k1, th, which, sides, max_splits):
+def _land(system, params, t, Ym, h1, h, which, flips, sides, window):
+    """Put the end ``Ym`` of the sub-step to a crossing on the crossed surface.
+
+    The located crossing (a root of the trial step's interpolant) is off the true one
+    by the trial step's error; the sub-steps' derivatives would inherit that offset
+    times the jump of the field's Jacobian (one order lost in the monodromy matrix), and
+    a jumping field's state that offset times the jump. One Newton correction
+    ``dt = -s / (ds/dt)`` along the piece being left (an Euler move of that small
+    distance, so its own error is its square) lands the end on the surface to round-off;
+    the move is differentiated with the correction held fixed. For a system whose field
+    jumps, the saltation matrix ``S = I + (f+ - f-) (grad s)^T / (ds/dt)`` (Leine and
+    Nijmeijer) then enters the first derivatives through a term whose value is zero; for
+    one that kinks, a term with zero value and zero first derivative gives the second
+    derivatives the motion of the kink. Lanes with ``which < 0`` (a time break, no
+    event) are unchanged. Returns ``(Ym, h1)``."""
+    sg = jax.lax.stop_gradient
+    tm = t + h1
+    lo, hi = (t + jnp.minimum(BREAK_TOL * system.period(params), 0.25 * jnp.abs(h1)), tm) if window else (None, None)
+    w = jnp.maximum(which, 0)[None]
+    pick = lambda A: jnp.take_along_axis(A, w, axis=0)[0]  # noqa: E731
+    F = _field(system, params, tm, Ym, lo, hi, sides)
+    rate = pick(_switching_rate(system, params, tm, Ym, F))
+    dt = -pick(_switching(system, params, tm, Ym)) / jnp.where(rate != 0, rate, 1.0)
+    ok = (which >= 0) & (rate != 0) & jnp.isfinite(dt) & (jnp.abs(dt) <= 0.25 * jnp.abs(h))
+    dt = sg(jnp.where(ok, dt, 0.0))
+    Ym, tm = Ym + F * dt[None], tm + dt
+    other = jnp.where(flips, -sides, sides)
+    if system.field_jumps:
+        F_old = _field(system, params, tm, Ym, lo, None if hi is None else tm, sides)
+        F_new = _field(system, params, tm, Ym, None, None, other)
+        rate = pick(_switching_rate(system, params, tm, Ym, F_old))
+        s_w = pick(_switching(system, params, tm, Ym))
+        gain = jnp.where(ok & (rate != 0), (s_w - sg(s_w)) / sg(jnp.where(rate != 0, rate, 1.0)), 0.0)
+        Ym = Ym + sg(F_new - F_old) * gain[None]
+    else:
+        # second derivatives: the split point is held fixed, so the frozen-split map misses
+        # how the Jacobian's kink moves with the crossing time; the exact flow differs from
+        # it by -w dtc^2 / 2, w = d/dt (f- - f+) along the flow at the surface and dtc the
+        # crossing-time shift (value and first derivative zero; Hessians and mixed
+        # parameter-state derivatives of the monodromy matrix come out right)
+        tt = jnp.broadcast_to(tm, (Ym.shape[1],))
+
+        def rate_of_jump(ti, y, f, sa, sb):
+            gap = lambda a, b: system.piece_field(a, b, params, sa) - system.piece_field(a, b, params, sb)  # noqa: E731
+            return jax.jvp(gap, (ti, y), (jnp.ones_like(ti), f))[1]
+
+        wj = jax.vmap(rate_of_jump, in_axes=(0, 1, 1, 1, 1), out_axes=1)(sg(tt), sg(Ym), sg(F), sides, other)
+        s_w = pick(_switching(system, params, tm, Ym))
+        shift = jnp.where(ok & (rate != 0), (s_w - sg(s_w)) / sg(jnp.where(rate != 0, rate, 1.0)), 0.0)
+        Ym = Ym - wj * (0.5 * shift * shift)[None]
+    return Ym, h1 + dt
+
+
+def _split(system, params, t, Y, h, k1, th, which, flips, sides, max_splits):
     """Lanes whose trial step holds an event: sub-step to it, flip the crossed surface's
-    side, then the rest of the step (split again, up to ``max_splits`` events)."""
+    side, then the rest of the step (split again, up to ``max_splits`` events).
+
+    With the system's ``piece_field`` every stage of a sub-step is evaluated on that
+    sub-step's piece, so each sub-step is an RK4 step of a smooth field (in value and
+    derivative) and the split points carry no derivative: where the field only kinks,
+    moving the crossing does not change the flow's derivative (the saltation matrix is
+    the identity) and differentiating the sub-steps with respect to their lengths would
+    add an error of order ``h^4`` per crossing that depends on where the crossing falls
+    in the step; :func:`_land` puts the crossing on the surface and, where the field
+    jumps, supplies the saltation matrix. Without a
+    ``piece_field`` the stages see the field itself and the crossing's place is
+    differentiated (fourth order still, less regular)."""
     window = _has_breaks(system, params)
-    jumps = system.field_jumps
+    sided = system.piece_field is not None
+    pieces = lambda sd: sd if sided else None  # noqa: E731
+
+    def event(_, c):
+        # sub-step to the event, land, flip, the rest of the step; then the next event
+        Y, tt, hh, k1, th, which, flips, sides, _ = c
+        h1 = th * hh
+        Ym, _ = _rk4(system, params, tt, Y, h1, window=window, sides=pieces(sides), k1=None if window else k1)
+        if sided:
+            Ym, h1 = _land(system, params, tt, Ym, h1, hh, which, flips, sides, window)
+        sides = jnp.where(flips, -sides, sides)
+        tt, hh = tt + h1, hh - h1
+        Y1, k1 = _rk4(system, params, tt, Ym, hh, window=window, sides=pieces(sides))
+        S1 = _switching(system, params, tt + hh, Y1)
+        S0 = _switching(system, params, tt, Ym)
+        th_break = _break_fraction(system, params, tt, hh)
+        th, which, flips = _first_crossing(system, params, tt, Ym, Y1, hh, k1, S0, S1, sides, th_break)
+        # no further event: the next pass steps the remaining hh whole and ends on Y1 again
+        return Ym, tt, hh, k1, jnp.where(th < 1.0, th, 1.0), which, flips, sides, Y1
+
     tt = jnp.broadcast_to(t, th.shape)
     hh = jnp.broadcast_to(h, th.shape)
-    for i in range(max_splits):
-        h1 = th * hh
-        Ym, _ = _rk4(system, params, tt, Y, h1, window=window, sides=sides if jumps else None,
-                     k1=k1 if (i == 0 and not jumps and not window) else None)
-        flip = (jnp.arange(sides.shape[0])[:, None] == which[None]) & (which[None] >= 0)
-        sides = jnp.where(flip, -sides, sides)
-        tt, hh, Y = tt + h1, hh - h1, Ym
-        Y1, k1 = _rk4(system, params, tt, Y, hh, window=window, sides=sides if jumps else None)
-        if i == max_splits - 1:
-            return Y1
-        S1 = _switching(system, params, tt + hh, Y1)
-        S0 = _switching(system, params, tt, Y)
-        th_break = _break_fraction(system, params, tt, hh)
-        th, which = _first_crossing(system, params, tt, Y, Y1, hh, k1, S0, S1, sides, th_break)
-        more = th < 1.0
-        th = jnp.where(more, th, 1.0)
-        if i == max_splits - 2:  # the last split: lanes without a further event keep the trial
-            final, _ = _rk4(system, params, tt, Y, th * hh, window=window, sides=sides if jumps else None)
-            flip = (jnp.arange(sides.shape[0])[:, None] == which[None]) & (which[None] >= 0) & more[None]
-            sides2 = jnp.where(flip, -sides, sides)
-            rest, _ = _rk4(system, params, tt + th * hh, final, (1.0 - th) * hh, window=window,
-                           sides=sides2 if jumps else None)
-            return jnp.where(more[None], rest, Y1)
-    return Y1
+    c = (Y, tt, hh, k1, th, which, flips, sides, Y)
+    return jax.lax.fori_loop(0, max_splits, event, c)[-1]
 
 
 def kink_step(system, params, t, Y, h, max_splits: int = 2):
@@ -276,8 +326,8 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
              jnp.broadcast_to(th_break, (n,)))
 
     def split(Ys, ks, ts, hs, S0s, S1s, Y1s, sds, bs):
-        th, which = _first_crossing(system, params, ts, Ys, Y1s, hs, ks, S0s, S1s, sds, bs)
-        return _split(system, params, ts, Ys, hs, ks, th, which, sds, max_splits)
+        th, which, flips = _first_crossing(system, params, ts, Ys, Y1s, hs, ks, S0s, S1s, sds, bs)
+        return _split(system, params, ts, Ys, hs, ks, th, which, flips, sds, max_splits)
 
     def dense(_):
         return jnp.where(need[None], split(*lanes), Y1)

@@ -135,7 +135,7 @@ def native_advance(integrator, system, params, Y, t0, periods: int, n_active=Non
 
     def cpu_path(Y, t0, params, active):
         n = Y.shape[1]
-        call = jax.ffi.ffi_call(TARGET, jax.ShapeDtypeStruct(Y.shape, Y.dtype), vmap_method="expand_dims")
+        call = jax.ffi.ffi_call(TARGET, jax.ShapeDtypeStruct(Y.shape, Y.dtype), vmap_method="broadcast_all")
         return call(Y, pack_params(params)[None], jnp.zeros((n,), jnp.int32),
                     jnp.reshape(jnp.asarray(t0, jnp.float64), (1,)), jnp.reshape(active, (1,)),
                     periods=np.int64(periods), steps=np.int64(steps), max_splits=np.int64(max_splits),

@@ -255,8 +255,8 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
             is a mapping).
         t0: phase of the stroboscopic section (system time unit; the gear models use
             dimensionless time ``omega_n t``).
-        integrator: :class:`~jaxgear.RK4` (default 200 steps per period) or
-            :class:`~jaxgear.Adaptive`.
+        integrator: any integrator object; default :func:`~jaxgear.default_integrator`
+            (kink-aware RK4, 200 steps per period).
         tol: convergence on ``||P^k(x) - x||`` (Euclidean, state units).
         max_iter, max_norm, period_tol: as in :func:`periodic_orbit`.
         dedup_tol: two converged seeds give the same orbit when a point of one lies

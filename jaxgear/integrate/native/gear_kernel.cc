@@ -27,6 +27,7 @@ constexpr int kBlock = 256;
 constexpr int kHermiteIters = 12;
 constexpr double kEps = 2.220446049250313e-16;
 constexpr double kBreakTol = 1e-10;  // BREAK_TOL of _kink.py
+constexpr double kSimultaneous = 1e-12;  // SIMULTANEOUS of _kink.py
 
 // Packed parameter row (the order of _native.PARAM_ORDER).
 enum P {
@@ -195,6 +196,27 @@ inline void field(const Coef& c, const Terms& q, const double* x, double* dx) {
   dx[3] = c.a4sp * g_sp + c.a4rp * g_rp + c.L2;
 }
 
+// The piece of the field on the sides `sd` (signs of the switching functions) of every
+// surface, extended across them (the piece_field of jaxgear/_model.py).
+inline double backlash_piece(double X, double b, double hi, double lo) {
+  return hi > 0 ? X - b : (lo < 0 ? X + b : 0.0);
+}
+
+inline void field_piece(const Coef& c, const Terms& q, const double* x, const double* sd, double* dx) {
+  if (!sd) {
+    field(c, q, x, dx);
+    return;
+  }
+  const double X_rp = x[2] - x[0] - q.E;
+  const double V_rp = x[3] - x[1] - q.dE;
+  const double g_sp = q.ksp * backlash_piece(x[0], c.b_sp, sd[0], sd[1]) + c.c_sp * x[1];
+  const double g_rp = q.krp * backlash_piece(X_rp, c.b_rp, sd[2], sd[3]) + c.c_rp * V_rp;
+  dx[0] = x[1];
+  dx[1] = c.a2sp * g_sp + c.a2rp * g_rp + q.L1;
+  dx[2] = x[3];
+  dx[3] = c.a4sp * g_sp + c.a4rp * g_rp + c.L2;
+}
+
 inline void switching(const Coef& c, double E, const double* x, double* s) {
   const double X_rp = x[2] - x[0] - E;
   s[0] = x[0] - c.b_sp;
@@ -225,9 +247,10 @@ inline double break_fraction(const Model& m, double t, double h) {
 }
 
 // One RK4 step on one lane at arbitrary times (stage times kept inside the step when the
-// model has time breaks). k1_in: the first stage when already known, else nullptr.
+// model has time breaks), every stage on the piece `sd` (nullptr: the field itself).
+// k1_in: the first stage when already known, else nullptr.
 inline void rk4_lane(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, const double* y,
-                     double h, const double* k1_in, double* out, double* k1_out) {
+                     double h, const double* k1_in, double* out, double* k1_out, const double* sd) {
   const bool window = m.n_breaks > 0;
   double lo = 0, hi = 0;
   if (window) {
@@ -241,15 +264,15 @@ inline void rk4_lane(const Model& m, const Coef& c, const Clock& ck, TermCache& 
   if (k1_in) {
     for (int i = 0; i < 4; ++i) k1[i] = k1_in[i];
   } else {
-    field(c, terms_cached(m, ck, tc, tm(t)), y, k1);
+    field_piece(c, terms_cached(m, ck, tc, tm(t)), y, sd, k1);
   }
   for (int i = 0; i < 4; ++i) z[i] = y[i] + h2 * k1[i];
   const Terms qm = terms_cached(m, ck, tc, tm(t + h2));
-  field(c, qm, z, k2);
+  field_piece(c, qm, z, sd, k2);
   for (int i = 0; i < 4; ++i) z[i] = y[i] + h2 * k2[i];
-  field(c, qm, z, k3);
+  field_piece(c, qm, z, sd, k3);
   for (int i = 0; i < 4; ++i) z[i] = y[i] + h * k3[i];
-  field(c, terms_cached(m, ck, tc, tm(t + h)), z, k4);
+  field_piece(c, terms_cached(m, ck, tc, tm(t + h)), z, sd, k4);
   for (int i = 0; i < 4; ++i) out[i] = y[i] + (h / 6.0) * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
   if (k1_out)
     for (int i = 0; i < 4; ++i) k1_out[i] = k1[i];
@@ -284,12 +307,14 @@ inline double hermite_root(double s0, double s1, double d0, double d1) {
   return th - p(th) / (d != 0 ? d : 1.0);
 }
 
-// The earliest event of a trial step of one lane (as _kink._first_crossing).
+// The earliest event of a trial step of one lane (as _kink._first_crossing): theta, the
+// index of the crossed function (-1: a time break or none), and in `flips` every function
+// crossed at that same instant (b = 0, where both sides of a backlash coincide).
 inline void first_crossing(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, double h,
                            const double* y, const double* y1,
                            const double* k1, const double* S0, const double* S1, const double* sides, double thb,
-                           double* theta, int* which) {
-  double th_s = 2.0;
+                           double* theta, int* which, bool* flips) {
+  double th_s = 2.0, th[4] = {2.0, 2.0, 2.0, 2.0};
   int j = 0;
   bool any = false;
   for (int i = 0; i < 4; ++i)
@@ -301,42 +326,65 @@ inline void first_crossing(const Model& m, const Coef& c, const Clock& ck, TermC
     switching_rate(terms_cached(m, ck, tc, t).dE, k1, D0);
     switching_rate(qe.dE, F1, D1);
     for (int i = 0; i < 4; ++i) {
-      double th = 2.0;
       if (side(S1[i]) != sides[i] && std::isfinite(S1[i]) && std::isfinite(S0[i])) {
-        th = hermite_root(S0[i], S1[i], D0[i] * h, D1[i] * h);
-        th = std::min(std::max(th, 0.0), 1.0);
+        th[i] = hermite_root(S0[i], S1[i], D0[i] * h, D1[i] * h);
+        th[i] = std::min(std::max(th[i], 0.0), 1.0);
       }
-      if (th < th_s) {
-        th_s = th;
+      if (th[i] < th_s) {
+        th_s = th[i];
         j = i;
       }
     }
   }
   const bool use_break = thb < th_s;
-  double th = use_break ? thb : th_s;
   *which = (use_break || th_s > 1.0) ? -1 : j;
-  *theta = std::min(th, 1.0);
+  *theta = std::min(use_break ? thb : th_s, 1.0);
+  for (int i = 0; i < 4; ++i) flips[i] = *which >= 0 && th[i] <= th_s + kSimultaneous;
 }
 
-// A lane whose trial step holds an event (as _kink._split).
+// Put the end of the sub-step to a crossing on the crossed surface (as _kink._land): one
+// Newton correction along the piece being left.
+inline void land(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, double* Ym, double* h1,
+                 double h, int which, const double* sides) {
+  if (which < 0) return;
+  const double tm = t + *h1;
+  double te = tm;
+  if (m.n_breaks > 0) te = std::max(tm, t + std::min(kBreakTol * m.T, 0.25 * std::fabs(*h1)));
+  double F[4], S[4], D[4];
+  field_piece(c, terms_cached(m, ck, tc, te), Ym, sides, F);
+  const Terms qm = terms_cached(m, ck, tc, tm);
+  switching(c, qm.E, Ym, S);
+  switching_rate(qm.dE, F, D);
+  const double rate = D[which];
+  const double dt = -S[which] / (rate != 0 ? rate : 1.0);
+  if (!(rate != 0 && std::isfinite(dt) && std::fabs(dt) <= 0.25 * std::fabs(h))) return;
+  for (int i = 0; i < 4; ++i) Ym[i] += F[i] * dt;
+  *h1 += dt;
+}
+
+// A lane whose trial step holds an event (as _kink._split): sub-steps on their own pieces.
 inline void split_lane(const Model& m, const Coef& c, const Clock& ck, TermCache& tc, double t, double h,
                        const double* y, const double* k1,
-                       double th, int which, double* sides, int max_splits, double* out) {
+                       double th, int which, const bool* flips_in, double* sides, int max_splits, double* out) {
   const bool window = m.n_breaks > 0;
   double tt = t, hh = h, Y[4], K1[4];
+  bool flips[4];
   for (int i = 0; i < 4; ++i) {
     Y[i] = y[i];
     K1[i] = k1[i];
+    flips[i] = flips_in[i];
   }
   for (int it = 0; it < max_splits; ++it) {
-    const double h1 = th * hh;
+    double h1 = th * hh;
     double Ym[4];
-    rk4_lane(m, c, ck, tc, tt, Y, h1, (it == 0 && !window) ? K1 : nullptr, Ym, nullptr);
-    if (which >= 0) sides[which] = -sides[which];
+    rk4_lane(m, c, ck, tc, tt, Y, h1, window ? nullptr : K1, Ym, nullptr, sides);
+    land(m, c, ck, tc, tt, Ym, &h1, hh, which, sides);
+    for (int i = 0; i < 4; ++i)
+      if (flips[i]) sides[i] = -sides[i];
     tt = tt + h1;
     hh = hh - h1;
     double Y1[4];
-    rk4_lane(m, c, ck, tc, tt, Ym, hh, nullptr, Y1, K1);
+    rk4_lane(m, c, ck, tc, tt, Ym, hh, nullptr, Y1, K1, sides);
     if (it == max_splits - 1) {
       for (int i = 0; i < 4; ++i) out[i] = Y1[i];
       return;
@@ -347,19 +395,26 @@ inline void split_lane(const Model& m, const Coef& c, const Clock& ck, TermCache
     const double thb = break_fraction(m, tt, hh);
     double th2;
     int which2;
-    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, thb, &th2, &which2);
+    bool flips2[4];
+    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, thb, &th2, &which2, flips2);
     const bool more = th2 < 1.0;
     if (it == max_splits - 2) {
       if (!more) {
         for (int i = 0; i < 4; ++i) out[i] = Y1[i];
         return;
       }
-      double fin[4];
-      rk4_lane(m, c, ck, tc, tt, Ym, th2 * hh, nullptr, fin, nullptr);
-      rk4_lane(m, c, ck, tc, tt + th2 * hh, fin, (1.0 - th2) * hh, nullptr, out, nullptr);
+      double fin[4], h2 = th2 * hh;
+      rk4_lane(m, c, ck, tc, tt, Ym, h2, window ? nullptr : K1, fin, nullptr, sides);
+      land(m, c, ck, tc, tt, fin, &h2, hh, which2, sides);
+      for (int i = 0; i < 4; ++i)
+        if (flips2[i]) sides[i] = -sides[i];
+      rk4_lane(m, c, ck, tc, tt + h2, fin, hh - h2, nullptr, out, nullptr, sides);
       return;
     }
-    for (int i = 0; i < 4; ++i) Y[i] = Ym[i];
+    for (int i = 0; i < 4; ++i) {
+      Y[i] = Ym[i];
+      flips[i] = more && flips2[i];
+    }
     th = more ? th2 : 1.0;
     which = more ? which2 : -1;
   }
@@ -555,8 +610,9 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
           tc.q[1] = tb.stage[3 * s + 2];
           tc.n = 2;
         }
-        first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which);
-        split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, sides, max_splits, out4);
+        bool flips[4];
+        first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which, flips);
+        split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, flips, sides, max_splits, out4);
         for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
       }
       std::swap(x, x1);
@@ -571,13 +627,15 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
                        ffi::ResultBuffer<ffi::F64> out, int64_t periods, int64_t steps, int64_t max_splits,
                        int64_t shape) {
   // Y: (B..., 4, n); P: (B_P..., rows, NPARAM) with B_P in {1, B}; lane_row: (B_R..., n); t0: (B_T...,);
-  // n_active: (B_A...,). Leading batch dimensions come from vmap (expand_dims).
+  // n_active: (B_A...,). Leading batch dimensions come from vmap (broadcast_all: every input
+  // carries the whole batch, or none).
+  // The output's leading dimensions are the batch; an input with a batch of one is shared.
   auto yd = Y.dimensions();
   const int64_t rank = yd.size();
   if (rank < 2 || yd[rank - 2] != 4) return ffi::Error::InvalidArgument("states must have shape (..., 4, n)");
   const int64_t n = yd[rank - 1];
-  int64_t batch = 1;
-  for (int64_t i = 0; i < rank - 2; ++i) batch *= yd[i];
+  const int64_t batch = out->element_count() / std::max<int64_t>(4 * n, 1);
+  const int64_t ybatch = Y.element_count() / std::max<int64_t>(4 * n, 1);
   auto pd = P.dimensions();
   const int64_t prank = pd.size();
   if (prank < 2 || pd[prank - 1] != NPARAM) return ffi::Error::InvalidArgument("parameter rows must have 24 entries");
@@ -606,7 +664,7 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     }
     const int32_t* rowp = lr + (rbatch == 1 ? 0 : bi) * n;
     const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
-    const double* yb = y + bi * 4 * n;
+    const double* yb = y + (ybatch == 1 ? 0 : bi) * 4 * n;
     double* ob = o + bi * 4 * n;
     for (int64_t i = 0; i < 4; ++i)
       for (int64_t j = n_act; j < n; ++j) ob[i * n + j] = yb[i * n + j];

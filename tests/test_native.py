@@ -1,0 +1,116 @@
+"""The compiled CPU kernel of the reduced model equals the pure-JAX kink-aware steps.
+
+The pure-JAX path (``KinkAwareRK4(backend="jax")``) is the reference: it is what runs on
+GPUs and what supplies the derivatives. The kernel must give the same states to
+round-off for random states and random parameters, both mesh-stiffness shapes,
+``b = 0``, vmapped parameter batches and a partly active pool. (The N-planet model has
+no compiled kernel: it always runs the pure-JAX steps.)
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgear as jg
+from jaxgear.integrate import KinkAwareRK4
+from jaxgear.integrate._native import native_available
+
+pytestmark = pytest.mark.skipif(not native_available(), reason="no C++ compiler: the compiled kernel is not built")
+
+TOL = 1e-12
+
+
+def random_params(rng, shape):
+    p = jg.paper_params()
+    return p.replace(
+        Omega=rng.uniform(0.5, 1.6), b_sp=rng.choice([0.0, rng.uniform(0.2, 4.0)]), b_rp=rng.uniform(0.0, 4.0),
+        kappa_sp_amp=rng.uniform(0.0, 0.4), kappa_rp_amp=rng.uniform(0.0, 0.4), phi_sp=rng.uniform(0, 2 * math.pi),
+        phi_rp=rng.uniform(0, 2 * math.pi), e_sp_amp=rng.uniform(0.0, 0.8), e_rp_amp=rng.uniform(0.0, 0.8),
+        beta_sp=rng.uniform(0, 2 * math.pi), c_sp=rng.uniform(0.01, 0.2), c_rp=rng.uniform(0.01, 0.2),
+        f_D=rng.uniform(0.0, 1.0), contact_ratio_sp=rng.uniform(1.1, 1.9), contact_ratio_rp=rng.uniform(1.1, 1.9),
+        mesh_shape=shape)
+
+
+def random_states(rng, n):
+    return np.stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n), rng.uniform(-8, 8, n)])
+
+
+def rel_diff(a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    return np.max(np.abs(a - b) / (1.0 + np.abs(b)))
+
+
+@pytest.mark.parametrize("shape", ["sine", "rectangular"])
+def test_kernel_equals_pure_jax_on_random_states_and_parameters(shape):
+    rng = np.random.default_rng(7 if shape == "sine" else 8)
+    for _ in range(3):
+        p = random_params(rng, shape)
+        Y = jnp.asarray(random_states(rng, 700))  # not a multiple of the kernel's block
+        t0 = float(rng.uniform(0, 10))
+        native = jax.jit(lambda Y, p: KinkAwareRK4(100).advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
+        ref = jax.jit(lambda Y, p: KinkAwareRK4(100, backend="jax").advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
+        assert np.all(np.isfinite(np.asarray(ref)))
+        assert rel_diff(native, ref) <= TOL, (shape, rel_diff(native, ref))
+        assert rel_diff(native, Y) > 1e-3  # the states moved
+
+
+def test_kernel_equals_pure_jax_for_every_split_count():
+    rng = np.random.default_rng(11)
+    p = random_params(rng, "sine")
+    Y = jnp.asarray(random_states(rng, 300))
+    for max_splits in (1, 2, 3):
+        a = KinkAwareRK4(60, max_splits=max_splits).advance(jg.REDUCED, p, Y, 0.0, 1)
+        b = KinkAwareRK4(60, max_splits=max_splits, backend="jax").advance(jg.REDUCED, p, Y, 0.0, 1)
+        assert rel_diff(a, b) <= TOL, max_splits
+
+
+def test_kernel_under_vmap_over_parameters_and_with_a_partly_active_pool():
+    rng = np.random.default_rng(12)
+    ps = [random_params(rng, "sine") for _ in range(3)]
+    batch = jax.tree_util.tree_map(lambda *v: jnp.stack(v) if isinstance(v[0], jax.Array) else v[0], *ps)
+    Y = jnp.asarray(random_states(rng, 300))
+    integ = KinkAwareRK4(80)
+    out = jax.vmap(lambda p: integ.advance(jg.REDUCED, p, Y, 0.0, 1))(batch)
+    for i, p in enumerate(ps):
+        ref = KinkAwareRK4(80, backend="jax").advance(jg.REDUCED, p, Y, 0.0, 1)
+        assert rel_diff(out[i], ref) <= TOL, i
+    # lanes at or above n_active are returned unchanged, the others advanced as usual
+    part = integ.advance(jg.REDUCED, ps[0], Y, 0.0, 1, n_active=100)
+    np.testing.assert_array_equal(np.asarray(part[:, 100:]), np.asarray(Y[:, 100:]))
+    assert rel_diff(part[:, :100], out[0][:, :100]) <= TOL
+
+
+def test_kernel_derivatives_are_those_of_the_pure_jax_steps():
+    p = jg.paper_params()
+    x = jnp.asarray([5.36, -0.19, 8.28, -0.84])
+    f = lambda backend: (lambda x: KinkAwareRK4(100, backend=backend).advance(jg.REDUCED, p, x[:, None], 0.0, 1)[:, 0])  # noqa: E731
+    np.testing.assert_allclose(np.asarray(jax.jacfwd(f("auto"))(x)), np.asarray(jax.jacfwd(f("jax"))(x)), rtol=1e-12)
+
+
+def test_kernel_keeps_non_finite_lanes_to_themselves():
+    p = jg.paper_params()
+    Y = np.asarray(random_states(np.random.default_rng(3), 64))
+    Y[:, 5] = np.nan
+    Y[0, 9] = np.inf
+    out = np.asarray(KinkAwareRK4(50).advance(jg.REDUCED, p, jnp.asarray(Y), 0.0, 1))
+    assert not np.isfinite(out[:, 5]).any() and not np.isfinite(out[:, 9]).all()
+    good = np.setdiff1d(np.arange(64), [5, 9])
+    ref = np.asarray(KinkAwareRK4(50, backend="jax").advance(jg.REDUCED, p, jnp.asarray(Y[:, good]), 0.0, 1))
+    assert rel_diff(out[:, good], ref) <= TOL
+
+
+def test_kernel_under_nested_vmap_with_mixed_batching():
+    rng = np.random.default_rng(13)
+    ps = [random_params(rng, "sine") for _ in range(2)]
+    batch = jax.tree_util.tree_map(lambda *v: jnp.stack(v) if isinstance(v[0], jax.Array) else v[0], *ps)
+    Ys = jnp.asarray(np.stack([random_states(rng, 40) for _ in range(3)]))  # (3, 4, 40)
+    integ = KinkAwareRK4(50)
+    out = jax.vmap(lambda p: jax.vmap(lambda Y: integ.advance(jg.REDUCED, p, Y, 0.0, 1))(Ys))(batch)
+    assert out.shape == (2, 3, 4, 40)
+    for i, p in enumerate(ps):
+        for j in range(3):
+            ref = KinkAwareRK4(50, backend="jax").advance(jg.REDUCED, p, Ys[j], 0.0, 1)
+            assert rel_diff(out[i, j], ref) <= TOL, (i, j)
