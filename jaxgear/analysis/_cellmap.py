@@ -28,7 +28,7 @@ from .._poincare import check_section, section_kernel
 from .._status import Status
 from ._graph import analyze_cell_map
 from ._method import AbstractGlobalMethod, Classification, register_method
-from ._orbits import advance_states, follow, refine_orbit
+from ._orbits import advance_states, follow, refine_orbits
 from ._result import SINK
 
 __all__ = ["PoincareCellMap", "StroboscopicCellMap", "cell_images"]
@@ -189,14 +189,12 @@ def _classify_groups(system, params, grid, images, method: _AbstractCellMap):
     labels = np.where(groups[pos] == group_of_cell, group_label[pos], SINK)
     out, cycles = [], []
     periodic = cm["periodic"]
-    for a in range(int(ids.max(initial=-1)) + 1):
-        first = keep[np.argmax(ids == a)]
+    firsts = [keep[np.argmax(ids == a)] for a in range(int(ids.max(initial=-1)) + 1)]
+    to_refine = [(orbits[f, -1], int(periods[f])) for f in firsts if int(periods[f]) > 0]
+    refined = iter(refine_orbits(system, params, to_refine, method.integrator, max_period=M))
+    for a, first in enumerate(firsts):
         k = int(periods[first])
-        pts = orbits[first, -max(k, 1):]
-        if k > 0:
-            pts, res = refine_orbit(system, params, pts[-1], k, method.integrator)
-        else:
-            res = np.nan
+        pts, res = next(refined) if k > 0 else (orbits[first, -1:], np.nan)
         out.append((pts, k, res))
         cycles.append(np.nonzero(periodic & np.isin(group_of_cell, groups[group_label == a]))[0])
     return labels, out, cycles

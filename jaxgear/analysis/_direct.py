@@ -19,7 +19,7 @@ import numpy as np
 from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._method import AbstractGlobalMethod, Classification, register_method
-from ._orbits import refine_orbit
+from ._orbits import refine_orbits
 from ._pool import run_pool
 
 __all__ = ["Direct"]
@@ -74,10 +74,9 @@ class Direct(AbstractGlobalMethod):
                                       R=self.round_periods, max_periods=self.max_periods,
                                       max_period=self.max_period, tol=self.period_tol, capture=self.capture_radius,
                                       bound=self.escape_bound, merge_tol=self.merge_tol, progress=progress)
-        out = []
-        for pts, k in atts:
-            pts, res = refine_orbit(system, params, pts[-1], k, self.integrator, settle=200)
-            out.append((pts, k, res))
+        refined = refine_orbits(system, params, [(pts[-1], k) for pts, k in atts], self.integrator, settle=200,
+                                max_period=self.max_period)
+        out = [(pts, k, res) for (pts, res), (_, k) in zip(refined, atts)]
         return labels, out, float(used.mean()) if len(used) else 0.0
 
 

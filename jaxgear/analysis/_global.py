@@ -23,7 +23,7 @@ from .._version import __version__
 from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import section_points
+from ._orbits import section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
@@ -138,10 +138,11 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
         out_labels[labels == old] = new
     sec_idx = method.section_index if method.section_index is not None else system.section_index
     attractors = []
+    secs = section_points_of(system, params, [raw[old][0] if raw[old][1] > 0 else np.zeros((0, system.dim))
+                                              for old in order], method.integrator, sec_idx, method.direction)
     for new, old in enumerate(order):
         pts, per, res = raw[old]
-        sec = (section_points(system, params, pts, method.integrator, sec_idx, method.direction) if per > 0 else
-               np.zeros((0, system.dim)))
+        sec = secs[new]
         attractors.append(Attractor(id=new, period=int(per), points=np.asarray(pts, dtype=float),
                                     section_points=np.asarray(sec, dtype=float), cell_count=int(counts[old]),
                                     share=float(counts[old]) / n, residual=float(res),

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._poincare import sample_trajectory, section_map, stroboscopic_orbit
-from .._status import Status
+from .._poincare import stroboscopic_orbit
+from ..integrate import batch_field
 
-__all__ = ["detect_period", "follow", "refine_orbit", "section_points", "advance_states"]
+__all__ = ["detect_period", "follow", "refine_orbit", "refine_orbits", "section_points", "section_points_of",
+           "advance_states"]
 
 
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
@@ -57,38 +59,117 @@ def follow(system, params, X: np.ndarray, integrator, settle: int, max_period: i
     return detect_period(orbit, max_period, tol), orbit
 
 
-def refine_orbit(system, params, x: np.ndarray, k: int, integrator, settle: int = 0) -> tuple[np.ndarray, float]:
-    """The k stroboscopic points from ``x`` (after ``settle`` more periods, rounded to a
-    multiple of k) and the residual ``|P^k(p) - p|``; points start at the one with the
-    smallest first coordinate (a canonical order)."""
+def _pad_rows(X: np.ndarray, minimum: int = 8) -> np.ndarray:
+    """``X (n, dim)`` padded with copies of its last row to a power of two (at least
+    ``minimum``) rows, so that batches of a few states share one compiled shape."""
+    n = len(X)
+    size = max(minimum, 1 << max(0, n - 1).bit_length())
+    return np.concatenate([X, np.repeat(X[-1:], size - n, axis=0)]) if size > n else X
+
+
+def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_period: int | None = None):
+    """Refined points of several cycles at once: for each ``(x, k)`` (a state near a P-k
+    cycle), the k stroboscopic points after ``settle`` more periods and the residual
+    ``|P^k(p) - p|``; points start at the one with the smallest first coordinate (a
+    canonical order). Returns ``[(points (k, dim), residual)]``.
+
+    All cycles run in one batch (one compiled computation whatever their periods;
+    ``max_period`` bounds them, default the largest ``k``)."""
+    if not cycles:
+        return []
+    X = np.stack([np.asarray(x, np.float64) for x, _ in cycles])
+    ks = [int(k) for _, k in cycles]
+    K = max(ks) if max_period is None else int(max_period)
+    Xp = _pad_rows(X)
     if settle > 0:
-        x = advance_states(system, params, np.asarray(x)[None], int(-(-settle // k) * k), integrator)[0]
-    orb = np.asarray(stroboscopic_orbit(system, params, jnp.asarray(x), n_points=2 * k, integrator=integrator))
-    pts = orb[k - 1: 2 * k - 1]
-    res = float(np.max(np.linalg.norm(orb[2 * k - 1] - orb[k - 1])))
-    start = int(np.argmin(pts[:, 0]))
-    return np.roll(pts, -start, axis=0), res
-
-
-def section_points(system, params, points: np.ndarray, integrator, index, direction, samples=200) -> np.ndarray:
-    """Crossings of Σ = {x_index = 0} over the k periods of a periodic orbit (k = len(points))."""
-    if index is None or len(points) == 0 or not np.all(np.isfinite(points)):
-        return np.zeros((0, system.dim))
-    k = len(points)
-    ts, xs = sample_trajectory(system, params, jnp.asarray(points[0]), periods=k, samples_per_period=samples,
-                               integrator=integrator)
-    ts, xs = np.asarray(ts), np.asarray(xs)
-    g = xs[:, index]
-    if direction > 0:
-        hits = np.nonzero((g[:-1] < 0) & (g[1:] >= 0))[0]
-    elif direction < 0:
-        hits = np.nonzero((g[:-1] > 0) & (g[1:] <= 0))[0]
-    else:
-        hits = np.nonzero(np.sign(g[:-1]) * np.sign(g[1:]) < 0)[0]
+        Xp = advance_states(system, params, Xp, int(settle), integrator)
+    orb = np.asarray(stroboscopic_orbit(system, params, jnp.asarray(Xp), n_points=2 * K, integrator=integrator))
     out = []
-    for i in hits:
-        h = section_map(system, params, xs[i], periods=0, t0=ts[i], index=index, direction=direction,
-                        max_extra_periods=2.0 / samples, integrator=integrator)
-        if int(h.status) == Status.CONVERGED:
-            out.append(np.asarray(h.state))
-    return np.asarray(out).reshape(-1, system.dim)
+    for i, k in enumerate(ks):
+        pts = orb[i, k - 1: 2 * k - 1]
+        res = float(np.linalg.norm(orb[i, 2 * k - 1] - orb[i, k - 1]))
+        start = int(np.argmin(pts[:, 0]))
+        out.append((np.roll(pts, -start, axis=0), res))
+    return out
+
+
+def refine_orbit(system, params, x: np.ndarray, k: int, integrator, settle: int = 0) -> tuple[np.ndarray, float]:
+    """:func:`refine_orbits` of one cycle: ``(points (k, dim), residual)``."""
+    return refine_orbits(system, params, [(x, k)], integrator, settle)[0]
+
+
+@eqx.filter_jit
+def _crossings(system, params, X, stepper, index: int, direction: int):
+    """One forcing period from each state ``X (n, dim)`` at phase 0 with the fixed-step
+    ``stepper``, and at every step the crossing of ``x_index = 0`` inside it: whether the
+    step crosses (in ``direction``) ``(steps, n)`` and the state landed on the crossing
+    ``(steps, dim, n)``, by Newton's method on the length of a step from the step's start.
+
+    One call site of the step serves both the full step (iteration 0) and the Newton
+    iterations, so the step is traced once."""
+    n_steps = int(stepper.steps_per_period)
+    h = system.period(params) / n_steps
+    lanes = X.shape[0]
+
+    def one_step(Y, i):
+        t = jnp.full((lanes,), i * h)
+        g0 = Y[index]
+
+        def iterate(j, c):
+            dt, _, full = c
+            Z = stepper.step(system, params, t, Y, dt)
+            full = jnp.where(j == 0, Z, full)
+            F = batch_field(system, params, t + dt, Z)
+            g1 = full[index]
+            secant = h * g0 / jnp.where(g0 == g1, 1.0, g0 - g1)
+            newton = dt - Z[index] / jnp.where(F[index] == 0, 1.0, F[index])
+            return jnp.clip(jnp.where(j == 0, secant, newton), 0.0, h), Z, full
+
+        _, Z, full = jax.lax.fori_loop(0, 9, iterate, (jnp.full((lanes,), h), Y, Y))
+        g1 = full[index]
+        up, down = (g0 < 0) & (g1 >= 0), (g0 > 0) & (g1 <= 0)
+        hit = up if direction > 0 else down if direction < 0 else (up | down)
+        return full, (hit, Z)
+
+    _, (hits, Zs) = jax.lax.scan(one_step, X.T, jnp.arange(n_steps))
+    return hits, Zs
+
+
+def section_points_of(system, params, cycles, integrator, index, direction) -> list[np.ndarray]:
+    """Crossings of Σ = {x_index = 0} over the k periods of each periodic orbit (``cycles``:
+    a list of stroboscopic point arrays ``(k, dim)`` in cycle order), in time order:
+    ``[(m, dim)]``. ``direction`` > 0 keeps upward crossings, < 0 downward, 0 both.
+
+    Every point of every cycle is integrated one period in one batch with the
+    integrator's fixed-step stepper; a step that crosses Σ is redone with its length
+    found by Newton's method so that it ends on Σ (to round-off)."""
+    empty = np.zeros((0, system.dim))
+    if index is None:
+        return [empty for _ in cycles]
+    ok = [len(p) > 0 and bool(np.all(np.isfinite(p))) for p in cycles]
+    rows = [np.asarray(p, np.float64) for p, good in zip(cycles, ok) if good]
+    if not rows:
+        return [empty for _ in cycles]
+    X = np.concatenate(rows)
+    hits, Zs = _crossings(system, params, jnp.asarray(_pad_rows(X)), integrator.crossing_stepper, int(index),
+                          int(np.sign(direction)))
+    hits, Zs = np.asarray(hits)[:, : len(X)], np.asarray(Zs)[:, :, : len(X)]
+    lane, step = np.nonzero(hits.T)  # by state (cycle order), then time
+    found = Zs[step, :, lane]
+    found = np.array(found).reshape(-1, system.dim)
+    found[:, index] = 0.0  # on Σ by definition (Newton leaves round-off)
+    out, start = [], 0
+    for p, good in zip(cycles, ok):
+        if not good:
+            out.append(empty)
+            continue
+        k = len(p)
+        out.append(found[(lane >= start) & (lane < start + k)])
+        start += k
+    return out
+
+
+def section_points(system, params, points: np.ndarray, integrator, index, direction) -> np.ndarray:
+    """Crossings of Σ = {x_index = 0} over the k periods of a periodic orbit (k = len(points));
+    see :func:`section_points_of`."""
+    return section_points_of(system, params, [np.asarray(points)], integrator, index, direction)[0]

@@ -84,7 +84,7 @@ def _init(n: int, L: int, dim: int, M: int, X, att_pts, att_k, n_att) -> PoolSta
     cell = jnp.where(jnp.arange(L) < take, jnp.arange(L), -1).astype(jnp.int32)
     Y = jnp.zeros((dim, L)).at[:, :take].set(X[:take].T)
     return PoolState(
-        Y=Y, hist=jnp.full((2 * H, dim, L), jnp.nan), streak=jnp.zeros((M, L), jnp.int32), cell=cell,
+        Y=Y, hist=jnp.full((2 * H, dim, L), jnp.nan, dtype=jnp.float64), streak=jnp.zeros((M, L), jnp.int32), cell=cell,
         age=jnp.zeros(L, jnp.int32), labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32),
         next_cell=jnp.asarray(take, jnp.int32), n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32),
         att_pts=att_pts, att_k=att_k, n_att=jnp.asarray(n_att, jnp.int32), radius=jnp.asarray(0.0, jnp.float64),

@@ -11,6 +11,8 @@ import argparse
 import importlib
 import sys
 
+from .._cache import enable_compilation_cache
+
 # (sub-command, module under jaxgear.cli) — each module defines add_parser(subparsers).
 COMMANDS = (
     ("params", "params"),
@@ -38,32 +40,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _enable_compilation_cache() -> None:
-    """Keep compiled kernels on disk between runs (``$JAXGEAR_CACHE_DIR``, default
-    ``~/.cache/jaxgear/xla``; ``JAXGEAR_CACHE_DIR=off`` disables it): a repeated command
-    skips the seconds of XLA compilation a cold run spends."""
-    import os
-
-    path = os.environ.get("JAXGEAR_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "jaxgear", "xla"))
-    if path.lower() in ("", "0", "off", "none"):
-        return
-    import jax
-
-    try:
-        os.makedirs(path, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
-    except (OSError, AttributeError):  # read-only home or an older jax: run without the cache
-        pass
-
-
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
-    _enable_compilation_cache()
+    enable_compilation_cache()
     try:
         return int(args.func(args) or 0)
     except ValueError as exc:  # bad input: a clear message, no traceback

@@ -29,6 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._cache import native_dir
+
 __all__ = ["native_available", "native_advance", "PARAM_ORDER", "pack_params", "library_path"]
 
 PARAM_ORDER = ("N", "mu_s", "mu_p", "mu_c", "kappa_sp_mean", "kappa_sp_amp", "kappa_rp_mean", "kappa_rp_amp",
@@ -40,12 +42,6 @@ TARGET = "jaxgear_reduced_advance"
 _SOURCE = Path(__file__).parent / "native" / "gear_kernel.cc"
 _FLAGS = ("-O3", "-march=native", "-fopenmp", "-shared", "-fPIC", "-std=c++17", "-Wno-attributes",
           "-Wno-return-type")
-
-
-def _cache_dir() -> Path:
-    base = os.environ.get("JAXGEAR_CACHE_DIR")
-    root = Path(base) if base and base.lower() not in ("off", "0", "none") else Path.home() / ".cache" / "jaxgear"
-    return root / "native"
 
 
 def _cpu_model() -> str:
@@ -63,7 +59,7 @@ def library_path() -> Path:
     """Where the compiled kernel for this source, jax version, compiler flags and CPU lives."""
     key = hashlib.sha256(b"\0".join([_SOURCE.read_bytes(), jax.__version__.encode(), " ".join(_FLAGS).encode(),
                                      _cpu_model().encode()])).hexdigest()[:16]
-    return _cache_dir() / f"gear_kernel-{key}.so"
+    return native_dir() / f"gear_kernel-{key}.so"
 
 
 def _compile(path: Path) -> None:
@@ -143,6 +139,8 @@ def native_advance(integrator, system, params, Y, t0, periods: int, n_active=Non
 
     @jax.custom_jvp
     def advance(Y, t0, params, active):
+        if jax.default_backend() == "cpu":  # CPU devices only: the pure-JAX steps need not be traced
+            return cpu_path(Y, t0, params, active)
         return jax.lax.platform_dependent(Y, t0, params, active, cpu=cpu_path, default=jax_path)
 
     @advance.defjvp

@@ -1,0 +1,59 @@
+"""Where jaxgear keeps what it builds once per machine.
+
+One root folder, ``$JAXGEAR_CACHE_DIR`` (default ``~/.cache/jaxgear``), holds
+
+- ``xla/``: JAX's persistent compilation cache, enabled by the command line (a repeated
+  command loads its compiled computations instead of compiling them again);
+- ``native/``: the compiled CPU kernel of the gear models
+  (:mod:`jaxgear.integrate._native`), built on first use.
+
+``JAXGEAR_CACHE_DIR=off`` turns the compilation cache off; the kernel is then built in
+the default folder.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["cache_root", "native_dir", "enable_compilation_cache"]
+
+_OFF = ("", "0", "off", "none", "false", "no")
+
+
+def _default_root() -> Path:
+    return Path(os.path.expanduser("~")) / ".cache" / "jaxgear"
+
+
+def cache_root() -> Path | None:
+    """The cache folder, or ``None`` when ``JAXGEAR_CACHE_DIR`` turns caching off."""
+    value = os.environ.get("JAXGEAR_CACHE_DIR")
+    if value is None:
+        return _default_root()
+    return None if value.strip().lower() in _OFF else Path(value)
+
+
+def native_dir() -> Path:
+    """Folder of the compiled CPU kernel."""
+    return (cache_root() or _default_root()) / "native"
+
+
+def enable_compilation_cache() -> Path | None:
+    """Keep every compiled XLA computation in ``<cache root>/xla`` (whatever its compile
+    time: a run of the global analysis compiles a dozen computations of under a second
+    each, which together cost seconds). Returns the folder, or ``None`` when caching is off
+    or the folder cannot be created (then nothing changes)."""
+    root = cache_root()
+    if root is None:
+        return None
+    import jax
+
+    path = root / "xla"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(path))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    except (OSError, AttributeError):  # read-only home or an older jax: run without the cache
+        return None
+    return path
