@@ -383,3 +383,34 @@ def test_property_analysis_inside_range_has_no_nan_and_strict_json(tmp_path_fact
     shares = [a.share for a in r.attractors]
     assert all(math.isfinite(x) for x in shares)
     assert s["params"]["Omega"] == pytest.approx(omega)
+
+
+def test_readme_synopses_match_help():
+    """Every option of each command's --help is in the README's synopsis; required ones
+    are shown without brackets, optional ones inside them."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    block = text[text.index("```text\njaxgear --version"):]
+    block = block[: block.index("```\n", 8)]
+    synopses, cmd = {}, None
+    for line in block.splitlines()[1:]:
+        m = re.match(r"jaxgear (\w+)", line)
+        if m:
+            cmd = m.group(1)
+        if cmd:
+            synopses[cmd] = synopses.get(cmd, "") + " " + line
+    parser = build_parser()
+    subs = parser._subparsers._group_actions[0].choices
+    assert set(synopses) == set(subs)
+    for cmd, sub in subs.items():
+        for action in sub._actions:
+            longs = [o for o in action.option_strings if o.startswith("--") and o != "--help"]
+            if not longs:
+                continue
+            opt = longs[0]
+            assert re.search(re.escape(opt) + r"\b", synopses[cmd]), (cmd, opt)
+            bracketed = re.search(r"\[[^\]]*" + re.escape(opt) + r"\b", synopses[cmd]) is not None
+            in_group = re.search(r"\([^)]*" + re.escape(opt) + r"\b", synopses[cmd]) is not None
+            assert bracketed != (action.required or in_group), (cmd, opt)

@@ -61,7 +61,8 @@ def add_parser(sub) -> None:
     p.add_argument("--compare", nargs="?", type=int, const=500, default=None, metavar="N",
                    help="also run the direct method on N >= 1 random cells (500 if N is left out) and report "
                    "agreement")
-    p.add_argument("--out", default="jaxgear-out", help="output folder (default jaxgear-out)")
+    p.add_argument("--out", default="jaxgear-out", metavar="DIR",
+                   help="output folder (default jaxgear-out), replaced as a whole at the end of the run")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
