@@ -62,7 +62,21 @@ class CellGrid:
     def box(cls, bounds: Sequence[tuple[float, float]], counts: Sequence[int], *, axes: Sequence[int] | None = None,
             dim: int | None = None, base: Sequence[float] | None = None, names: Sequence[str] = ()) -> "CellGrid":
         """A grid from ``bounds=[(lo, hi), ...]`` and ``counts`` over ``axes`` (default: the first ones)."""
-        axes = tuple(range(len(bounds))) if axes is None else tuple(int(a) for a in axes)
+        from ._checks import check_int, check_number
+
+        try:
+            bounds = [tuple(b) for b in bounds]
+            counts = list(counts)
+        except TypeError:
+            raise ValueError(f"CellGrid.box needs bounds=[(lo, hi), ...] and counts=[n, ...], got bounds={bounds!r}, "
+                             f"counts={counts!r}.") from None
+        if len(bounds) != len(counts) or not all(len(b) == 2 for b in bounds):
+            raise ValueError(f"CellGrid.box needs one (lo, hi) pair and one count per axis, got bounds={bounds!r}, "
+                             f"counts={counts!r}.")
+        bounds = [(check_number(lo, f"bounds[{i}][0]"), check_number(hi, f"bounds[{i}][1]"))
+                  for i, (lo, hi) in enumerate(bounds)]
+        counts = [check_int(c, f"counts[{i}]", 1) for i, c in enumerate(counts)]
+        axes = tuple(range(len(bounds))) if axes is None else tuple(check_int(a, "axes", 0) for a in axes)
         dim = dim if dim is not None else (len(base) if base is not None else (len(names) or max(axes) + 1))
         base = tuple(float(b) for b in (base if base is not None else np.zeros(dim)))
         return cls(axes=axes, lower=tuple(float(b[0]) for b in bounds), upper=tuple(float(b[1]) for b in bounds),

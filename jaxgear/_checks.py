@@ -12,7 +12,12 @@ from typing import Any, Iterable
 
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array"]
+__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article"]
+
+
+def article(word: str) -> str:
+    """``word`` with its indefinite article: ``"an OrbitSearch"``, ``"a GlobalResult"``."""
+    return f"{'an' if word[:1].lower() in 'aeiou' and word[:1] else 'a'} {word}"
 
 
 def _show(value) -> str:

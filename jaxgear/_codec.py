@@ -371,7 +371,10 @@ def from_dataset(ds, expected: str | None = None):
     """Rebuild the result stored in ``ds`` (written by :func:`to_dataset`)."""
     kind = str(ds.attrs.get("jaxgear_type", ""))
     if expected is not None and kind != expected:
-        raise ValueError(f"the file holds a {kind or 'file of another kind'}, not a {expected}; "
+        from ._checks import article
+
+        raise ValueError(f"the file holds {article(kind) if kind else 'a file of another kind'}, "
+                         f"not {article(expected)}; "
                          "open it with jaxgear.load(path).")
     if kind not in RESULT_TYPES:
         raise ValueError(f"unknown jaxgear_type {kind!r}; known types: {', '.join(sorted(RESULT_TYPES))}.")

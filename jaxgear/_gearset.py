@@ -119,6 +119,9 @@ class GearSet:
             v = getattr(self, f.name)
             if v is None:
                 continue
+            if not _is_numeric(v):
+                raise ValueError(f"parameter {f.name}={v!r} must be a number (or one number per planet), "
+                                 f"not {type(v).__name__}.")
             a = np.asarray(v, dtype=float)
             require(bool(np.all(np.isfinite(a))), f.name, a, "must be finite (no NaN or inf)")
         for n in ("z_s", "z_p", "z_r", "N"):
@@ -305,3 +308,19 @@ class GearSet:
             rows.append((k, fmt_value(d[k]), unit, "derived"))
         return format_table(rows, ("name", "value", "unit", "source"))
 
+
+def _is_numeric(v) -> bool:
+    """A real number (not a bool or a string) or a flat sequence of them."""
+    import numbers
+
+    if isinstance(v, (bool, np.bool_)):
+        return False
+    if isinstance(v, numbers.Real):
+        return True
+    if isinstance(v, (str, bytes, dict)):
+        return False
+    try:
+        a = np.asarray(v)
+    except Exception:
+        return False
+    return a.ndim == 1 and a.dtype.kind in "iuf"

@@ -155,6 +155,7 @@ def load(path: str | Path, expected: str | None = None) -> Any:
             file, an unknown or unexpected result type).
     """
     from . import _registry  # noqa: F401  (registers every result type with the codec)
+    from ._checks import article
     from ._codec import FORMAT, from_dataset
     from ._legacy import legacy_type, load_legacy
 
@@ -163,7 +164,8 @@ def load(path: str | Path, expected: str | None = None) -> Any:
     if fmt is None:
         kind = legacy_type(ds, path)
         if expected is not None and kind != expected:
-            raise ValueError(f"{path} holds a {kind}, not a {expected}; open it with jaxgear.load(path).")
+            raise ValueError(f"{path} holds {article(kind)}, not {article(expected)}; open it with "
+                             "jaxgear.load(path).")
         return load_legacy(ds, kind)
     if int(fmt) > FORMAT:
         raise NotAResultFile(f"{path} was written by a newer jaxgear (format {fmt}, this one reads up to "

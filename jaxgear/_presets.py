@@ -13,7 +13,7 @@ import math
 from typing import Any, Mapping, Sequence
 
 from ._gearset import GearSet
-from ._params import PARAM_NAMES, GearParams
+from ._params import PARAM_ALIASES, PARAM_NAMES, GearParams
 
 __all__ = ["paper_gear_set", "paper_params", "PRESETS", "get_preset", "resolve_params", "parse_value"]
 
@@ -108,19 +108,26 @@ def resolve_params(preset: str = "paper", overrides: Mapping[str, Any] | Sequenc
             if "=" not in item:
                 raise ValueError(f"--set expects NAME=VALUE, got {item!r}")
             k, v = item.split("=", 1)
-            items[k.strip()] = parse_value(v)
+            try:
+                items[k.strip()] = parse_value(v)
+            except ValueError as exc:
+                raise ValueError(f"--set {k.strip()}={v.strip()}: {exc}") from None
         overrides = items
     gs = get_preset(preset)
     phys_names = {f.name for f in dataclasses.fields(GearSet)} - {"notes"}
     # Dimensionless names shared with physical ones but with different units
     # (b_sp, e_sp_amp, ...) are read as dimensionless only when prefixed 'dimless.'.
     phys = {k: v for k, v in overrides.items() if k in phys_names and k not in _DIMLESS_PREFERRED}
-    dimless = {k.removeprefix("dimless."): v for k, v in overrides.items() if k not in phys}
+    dimless = {}
+    for k, v in overrides.items():  # an alias (b = b_sp and b_rp, ...) sets each of its names
+        if k not in phys:
+            k = k.removeprefix("dimless.")
+            dimless.update(dict.fromkeys(PARAM_ALIASES.get(k, (k,)), v))
     unknown = [k for k in dimless if k not in PARAM_NAMES]
     if unknown:
         raise ValueError(
             f"unknown parameter(s) {unknown}. Physical fields: {', '.join(sorted(phys_names))}. "
-            f"Dimensionless: {', '.join(PARAM_NAMES)}."
+            f"Dimensionless: {', '.join(PARAM_NAMES)}; aliases: {', '.join(PARAM_ALIASES)}."
         )
     if phys:
         gs = gs.replace(**phys)

@@ -54,8 +54,13 @@ def advance_states(system, params, X, periods: int, integrator) -> np.ndarray:
 def follow(system, params, X: np.ndarray, integrator, settle: int, max_period: int, tol: float):
     """Integrate states ``X (n, dim)`` ``settle`` periods, then record ``2 max_period + 2``
     stroboscopic points; returns (periods (n,), recorded points (n, K, dim))."""
-    Xs = advance_states(system, params, X, settle, integrator) if settle > 0 else np.asarray(X)
-    orbit = np.asarray(stroboscopic_orbit(system, params, Xs, n_points=2 * max_period + 2, integrator=integrator))
+    Xs = np.array(advance_states(system, params, X, settle, integrator) if settle > 0 else X, dtype=float)
+    # a state that blew up while settling is escaped (period -1: the sink), like a
+    # sequence that blows up while it is recorded
+    blown = ~np.all(np.isfinite(Xs), axis=-1)
+    Xs[blown] = 0.0
+    orbit = np.array(stroboscopic_orbit(system, params, Xs, n_points=2 * max_period + 2, integrator=integrator))
+    orbit[blown] = np.nan
     return detect_period(orbit, max_period, tol), orbit
 
 

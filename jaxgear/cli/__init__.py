@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
+import warnings
 
 from .._cache import enable_compilation_cache
 
@@ -22,12 +24,30 @@ COMMANDS = (
 )
 
 
+class Parser(argparse.ArgumentParser):
+    """``argparse`` parser that takes a value beginning with ``-`` and a digit or a dot
+    (``--region -25:25,...``, ``--from -5,0,8,0``, ``--values -0.1:0.1:3``,
+    ``--tol -inf``) as the option's value, not as an unknown option: no option of
+    jaxgear starts with a digit. Sub-command parsers inherit the class."""
+
+    def __init__(self, *args, **kw):
+        super().__init__(*args, **kw)
+        self._negative_number_matcher = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
+    def error(self, message):
+        """One line: what is wrong and where the usage is (not the whole usage text)."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    from .._version import __version__
+
+    parser = Parser(
         prog="jaxgear",
         description="Global analysis of nonlinear planetary gear trains: every coexisting periodic "
         "motion and its domain of attraction (cell mapping, shooting, sweeps).",
     )
+    parser.add_argument("--version", action="version", version=f"jaxgear {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for _name, module in COMMANDS:
         try:
@@ -40,6 +60,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warnings(command: str):
+    """``warnings.showwarning`` printing ``jaxgear COMMAND: warning: message`` (no source line)."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        print(f"jaxgear {command}: warning: {text}", file=file or sys.stderr)
+
+    return show
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -47,11 +77,20 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     enable_compilation_cache()
+    previous = warnings.showwarning
+    warnings.showwarning = _one_line_warnings(args.command)
     try:
         return int(args.func(args) or 0)
     except ValueError as exc:  # bad input: a clear message, no traceback
-        print(f"jaxgear {args.command}: error: {exc}", file=sys.stderr)
+        text = " ".join(str(exc).split())
+        print(f"jaxgear {args.command}: error: {text}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a file could not be written (disk full, permissions)
+        where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
+        print(f"jaxgear {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 1
+    finally:
+        warnings.showwarning = previous
 
 
 if __name__ == "__main__":

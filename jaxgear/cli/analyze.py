@@ -12,7 +12,12 @@ import time
 from pathlib import Path
 
 from .._io import save_figure, write_json
-from .common import add_param_options, parse_counts, parse_ranges
+from .._outdir import OutputFolder, check_output_folder
+from .common import add_param_options, check_counts, check_options, check_region, parse_counts, parse_ranges
+
+OWNED = ("result.nc", "summary.json", "compare.json", "domains.png", "shares.png", "domains_3d.png",
+         "attractors.png")
+"""Files ``jaxgear analyze`` writes into ``--out`` (replaced as a whole by the next run)."""
 
 
 def add_parser(sub) -> None:
@@ -44,8 +49,8 @@ def add_parser(sub) -> None:
     p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
     p.add_argument("--direction", type=int, default=None, choices=(-1, 0, 1),
-                   help="poincare-like only: crossing direction of the section x4 = 0 (+1 increasing, the "
-                   "default; -1 decreasing; 0 both)")
+                   help="used by --method poincare-like only: crossing direction of the section x4 = 0 "
+                   "(default 1: increasing x4; -1 decreasing; 0 both)")
     p.add_argument("--max-period", type=int, default=None, metavar="K",
                    help=f"largest period P-k detected (default {Direct.max_period})")
     p.add_argument("--chunk-size", type=int, default=None, metavar="N",
@@ -54,11 +59,18 @@ def add_parser(sub) -> None:
                    help=f"cells sampled for the label uncertainty (default {DEFAULT_SAMPLES}; 0 skips it): the "
                    "share whose label changes with a halved step, and with the start moved by 1e-3 cell")
     p.add_argument("--compare", nargs="?", type=int, const=500, default=None, metavar="N",
-                   help="also run the direct method on N random cells (default 500) and report agreement")
-    p.add_argument("--out", default="jaxgear-out", help="output folder (default jaxgear-out)")
+                   help="also run the direct method on N >= 1 random cells (500 if N is left out) and report "
+                   "agreement")
+    p.add_argument("--out", default="jaxgear-out", metavar="DIR",
+                   help="output folder (default jaxgear-out), replaced as a whole at the end of the run")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
+
+
+OPTIONS = (("mapping_steps", "--mapping-steps", int, 0), ("steps_per_period", "--steps-per-period", int, 1),
+           ("max_period", "--max-period", int, 1), ("chunk_size", "--chunk-size", int, 1),
+           ("uncertainty_samples", "--uncertainty-samples", int, 0), ("compare", "--compare", int, 1))
 
 
 def build_method(args):
@@ -79,13 +91,13 @@ def build_method(args):
 
 
 def run(args) -> int:
-    import numpy as np
-
     from .._cells import CellGrid
     from .._model import REDUCED
     from .._presets import resolve_params
-    from ..analysis import analyze_global, compare_with_direct
 
+    # every option is checked before any integration and before --out is touched
+    check_options(args, OPTIONS)
+    check_output_folder(args.out)
     gear_set, params = resolve_params(args.preset, args.overrides)
     if params.N and not params.is_uniform:
         raise ValueError("analyze uses the reduced 2-DOF model, which needs identical planets; "
@@ -96,14 +108,26 @@ def run(args) -> int:
     region = args.region or tuple(zip(default.lower, default.upper))
     counts = args.grid or default.counts
     n_axes = len(default.axes)
-    if len(region) != n_axes or len(counts) != n_axes:
-        raise ValueError(f"--method {args.method} grids {n_axes} coordinates "
-                         f"({', '.join(default.axis_names)}): give {n_axes} counts and {n_axes} ranges.")
+    where = f"(--method {args.method} grids {', '.join(default.axis_names)})"
+    check_region(region, f"--region {where}", n_axes, default.axis_names)
+    check_counts(counts, f"--grid {where}", n_axes, default.axis_names)
     grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
+    method.check(REDUCED, grid)
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, preset {args.preset}, Omega={float(params.Omega):.4g}")
+    with OutputFolder(args.out, OWNED) as out:
+        written = _analyze(args, params, grid, method, out)
+    print(f"\nwrote {', '.join(written)} to {args.out}/")
+    return 0
+
+
+def _analyze(args, params, grid, method, out: Path) -> list[str]:
+    """The analysis, its report and its files (written into the staging folder ``out``)."""
+    import numpy as np
+
+    from .._model import REDUCED
+    from ..analysis import analyze_global, compare_with_direct
+
     t0 = time.perf_counter()
     result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet,
                             uncertainty=args.uncertainty_samples)
@@ -125,8 +149,7 @@ def run(args) -> int:
                   f"({d['cells']} of the sampled cells)")
     if not args.no_figures:
         written += _figures(result, out)
-    print(f"\nwrote {', '.join(written)} to {out}/")
-    return 0
+    return written
 
 
 def _figures(result, out: Path) -> list[str]:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .._checks import check_int, check_number
+
 
 def add_param_options(p: argparse.ArgumentParser) -> None:
     """``--preset`` and repeatable ``--set NAME=VALUE``."""
@@ -50,3 +52,46 @@ def parse_counts(text: str) -> tuple[int, ...]:
     if not vals or min(vals) < 1:
         raise argparse.ArgumentTypeError(f"--grid expects positive counts like 50,30,60, got {text!r}")
     return vals
+
+
+def check_options(args, spec) -> None:
+    """Check numeric options before any work: ``spec`` rows ``(dest, flag, kind, minimum)``
+    with ``kind`` ``int`` or ``float`` (``float`` minimums are exclusive); options left
+    unset (``None``) are skipped. ``ValueError`` names the option, its value and the range."""
+    for dest, flag, kind, minimum in spec:
+        value = getattr(args, dest, None)
+        if value is None:
+            continue
+        if kind is int:
+            check_int(value, flag, minimum)
+        else:
+            check_number(value, flag, minimum, strict_min=minimum is not None)
+
+
+def check_region(region, flag: str, n_axes: int, names) -> None:
+    """``--region`` ranges: ``n_axes`` of them, finite, ``LO < HI``."""
+    import math
+
+    if len(region) != n_axes:
+        raise ValueError(f"{flag} needs {n_axes} LO:HI ranges ({', '.join(names)}), got {len(region)}.")
+    for name, (lo, hi) in zip(names, region):
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            raise ValueError(f"{flag}: the range of {name} is {lo:g}:{hi:g}; it must be finite with LO < HI.")
+
+
+def check_point(point, flag: str, dim: int) -> None:
+    """A ``--from`` state: ``dim`` finite numbers."""
+    import math
+
+    if len(point) != dim:
+        raise ValueError(f"{flag} needs {dim} coordinates x1,...,x{dim}; got {len(point)}: "
+                         f"{','.join(f'{v:g}' for v in point)}.")
+    if not all(math.isfinite(v) for v in point):
+        raise ValueError(f"{flag}={','.join(f'{v:g}' for v in point)} must hold finite numbers.")
+
+
+def check_counts(counts, flag: str, n_axes: int, names) -> None:
+    """``--grid`` counts: ``n_axes`` of them (each >= 1 already)."""
+    if len(counts) != n_axes:
+        raise ValueError(f"{flag} needs {n_axes} counts ({', '.join(names)}), got {len(counts)}: "
+                         f"{','.join(map(str, counts))}.")

@@ -19,10 +19,18 @@ import numpy as np
 from pathlib import Path
 
 from .._io import save_figure, write_json
-from .common import add_param_options, parse_point, parse_ranges
+from .._outdir import OutputFolder, check_output_folder
+from .common import add_param_options, check_options, check_point, check_region, parse_point, parse_ranges
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
 DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
+
+OWNED = ("orbits.nc", "orbits.json", "orbit_*.png", "multipliers.png")
+"""Files ``jaxgear shoot --out`` writes (replaced as a whole by the next run)."""
+
+OPTIONS = (("random", "--random", int, 1), ("steps_per_period", "--steps-per-period", int, 1),
+           ("tol", "--tol", float, 0.0), ("max_iter", "--max-iter", int, 1), ("verify", "--verify", int, 1),
+           ("seed", "--seed", int, 0))
 
 
 def add_parser(sub) -> None:
@@ -55,8 +63,8 @@ def add_parser(sub) -> None:
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
     p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on ||P^K(x) - x|| (default 1e-10)")
     p.add_argument("--max-iter", type=int, default=40, help="Newton iteration limit (default 40)")
-    p.add_argument("--verify", type=int, default=0, metavar="PERIODS",
-                   help="check each orbit by direct integration over PERIODS periods from a perturbed start")
+    p.add_argument("--verify", type=int, default=None, metavar="PERIODS",
+                   help="check each orbit by direct integration over PERIODS >= 1 periods from a perturbed start")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="also write DIR/orbits.nc (every orbit and every shot; open with jaxgear.load or "
@@ -98,9 +106,20 @@ def run(args) -> int:
     from ..integrate import default_integrator
     from ..shooting import find_periodic_orbits, seeds_in_box, verify_orbit
 
+    from .._checks import check_int
+
+    # every option is checked before any integration and before --out is touched
+    check_options(args, OPTIONS)
     periods = args.period
-    if periods is not None and min(periods) < 1:
-        raise ValueError(f"--period must be >= 1, got {min(periods)}.")
+    for k in periods or ():
+        check_int(k, "--period", 1)
+    if args.points:
+        for pt in args.points:
+            check_point(pt, "--from", REDUCED.dim)
+    if args.random is not None:
+        check_region(args.region, "--region", REDUCED.dim, REDUCED.state_names)
+    if args.out is not None:
+        check_output_folder(args.out)
     source = None
     if args.seeds_from:
         result, groups = _load_seeds(args.seeds_from)
@@ -118,14 +137,8 @@ def run(args) -> int:
         params = resolve_params(args.preset, args.overrides)[1]
         if args.points:
             seeds = np.asarray(args.points, dtype=float)
-            if seeds.shape[1] != REDUCED.dim:
-                raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {seeds.shape[1]}.")
         else:
-            if args.random < 1:
-                raise ValueError(f"--random N needs N >= 1, got {args.random}.")
             region = np.asarray(args.region, dtype=float)
-            if region.shape != (REDUCED.dim, 2):
-                raise ValueError(f"--region needs {REDUCED.dim} LO:HI ranges (x1..x4), got {len(region)}.")
             seeds = seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)
     if not params.is_uniform:
         raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
@@ -136,7 +149,7 @@ def run(args) -> int:
                                   tol=args.tol, max_iter=args.max_iter, progress=not (args.quiet or args.json))
     n_seeds = search.n_seeds
     checks = []
-    if args.verify > 0:
+    if args.verify:
         checks = [verify_orbit(REDUCED, params, o, periods=args.verify, integrator=integ) for o in search.orbits]
 
     if args.json or args.out:
@@ -166,7 +179,7 @@ def run(args) -> int:
 
     names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
     print(f"jaxgear shoot: {REDUCED.name} model, {source or 'preset ' + args.preset}, "
-          f"Omega={float(params.Omega):.4g}, {n_seeds} seed runs, P^K for K in {sorted(search.shots)}, "
+          f"Omega={float(params.Omega):.4g}, {n_seeds} seed run{'s' if n_seeds != 1 else ''}, P^K for K in {sorted(search.shots)}, "
           f"{integ.name} {integ.steps_per_period} steps/period, tol {args.tol:g}")
     print("Newton: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
     if not search.orbits:
@@ -198,8 +211,11 @@ def run(args) -> int:
 
 def _write_outputs(search, summary: dict, args) -> list[str]:
     """``orbits.nc``, ``orbits.json`` and (unless ``--no-figures``) PNG figures in ``--out``."""
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    with OutputFolder(args.out, OWNED) as out:
+        return _write_files(search, summary, args, out)
+
+
+def _write_files(search, summary: dict, args, out: Path) -> list[str]:
     search.save(out / "orbits.nc")
     write_json(summary, out / "orbits.json")
     written = ["orbits.nc", "orbits.json"]

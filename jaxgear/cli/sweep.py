@@ -15,9 +15,24 @@ import time
 from pathlib import Path
 
 from .._io import save_figure, write_json
-from .common import add_param_options, parse_counts, parse_point, parse_ranges
+from .._outdir import OutputFolder, check_output_folder
+from .common import (add_param_options, check_counts, check_options, check_point, check_region, parse_counts,
+                     parse_point, parse_ranges)
 
 KINDS = ("bifurcation", "basins", "continuation")
+
+OWNED = ("bifurcation.nc", "basins.nc", "branch.nc", "summary.json", "bifurcation.png", "bifurcation_x3.png",
+         "shares.png", "branch.png")
+"""Files ``jaxgear sweep`` writes into ``--out`` (replaced as a whole by the next run; the
+resume state ``parts/`` and ``manifest.json`` is kept)."""
+
+OPTIONS = (("starts", "--starts", int, 1), ("seed", "--seed", int, 0), ("period", "--period", int, 1),
+           ("max_steps", "--max-steps", int, 1), ("transient", "--transient", int, 0),
+           ("record", "--record", int, 2), ("steps_per_period", "--steps-per-period", int, 1),
+           ("max_period", "--max-period", int, 1))
+
+SECTION_COUNTS = (20, 12, 24)
+STROBOSCOPIC_COUNTS = (10, 6, 12, 6)
 
 
 def _values(text: str):
@@ -70,17 +85,19 @@ def add_parser(sub) -> None:
     src.add_argument("--from", dest="points", type=parse_point, action="append", metavar="x1,x2,x3,x4",
                      help="a start (repeatable; continuation: the point on or near the orbit to follow)")
     p.add_argument("--seed", type=int, default=0, help="random seed of --starts (default 0)")
-    p.add_argument("--grid", type=parse_counts, default=(20, 12, 24), metavar="N1,N2,N3",
-                   help="basins: cells over x1, x2, x3 on x4 = 0 (default 20,12,24)")
+    p.add_argument("--grid", type=parse_counts, default=None, metavar="N1,N2,N3[,N4]",
+                   help="basins: cells over x1, x2, x3 on x4 = 0 (default 20,12,24); with --method "
+                   "stroboscopic over x1..x4 (default 10,6,12,6)")
     p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
-                   help="basins: box over x1, x2, x3 (default the paper's D: -25:25,-10:20,-10:50); "
-                   "bifurcation: the box of the random starts")
+                   help="basins: box over x1, x2, x3 (default the paper's D: -25:25,-10:20,-10:50; "
+                   "--method stroboscopic adds x4 in -12:12); bifurcation: the box of the random starts")
     p.add_argument("--method", default=DEFAULT_METHOD, choices=tuple(METHODS),
                    help=f"basins: the global-analysis method (default {DEFAULT_METHOD})")
     p.add_argument("--period", type=int, default=1, metavar="K", help="continuation: period of the orbit (default 1)")
     p.add_argument("--max-steps", type=int, default=500, help="continuation: step limit (default 500)")
     p.add_argument("--transient", type=int, default=400, help="bifurcation: periods dropped per value (default 400)")
-    p.add_argument("--record", type=int, default=64, help="bifurcation: stroboscopic points kept (default 64)")
+    p.add_argument("--record", type=int, default=64,
+                   help="bifurcation: stroboscopic points kept (default 64; at least 2 --max-period + 1)")
     p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
     p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
@@ -94,60 +111,98 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from .._cells import PAPER_REGION, CellGrid
+    from .._cells import CellGrid
+    from .._checks import check_int
     from .._model import REDUCED
     from .._params import param_targets
     from .._presets import resolve_params
     from ..analysis import method_from_name
     from ..integrate import default_integrator
-    from ..shooting import seeds_in_box
-    from ..sweep import basin_sweep, bifurcation_diagram, check_values
+    from ..sweep import check_values
 
+    # every option is checked before any integration and before --out is touched
     start, stop, count, values = _values(args.values)
+    check_options(args, OPTIONS)
+    if args.kind != "continuation" and start > stop:
+        raise ValueError(f"--values={args.values}: START must be < STOP for --kind {args.kind} (the values are "
+                         "swept up and down by --direction); only --kind continuation runs from START to STOP.")
+    for pt in args.points or ():
+        check_point(pt, "--from", REDUCED.dim)
+    xyz = REDUCED.state_names[:3]
+    if args.kind == "bifurcation" and args.region is not None:
+        check_region(args.region, "--region (the box of the starts)", 3, xyz)
+    check_output_folder(args.out)
     _, params = resolve_params(args.preset, args.overrides)
     if not params.is_uniform:
         raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
                          "the given parameters differ per planet.")
     params = params.uniform()
     param_targets(params, args.param)  # unknown name -> the list of valid ones
-    for name, v in (("--max-period", args.max_period), ("--period", args.period), ("--max-steps", args.max_steps)):
-        if v < 1:
-            raise ValueError(f"{name} must be >= 1, got {v}.")
     integ = default_integrator(args.steps_per_period)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
+    if args.kind == "continuation":
+        if not args.points or len(args.points) != 1:
+            raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
+                             "at the start value (e.g. from jaxgear shoot).")
+        check_values(REDUCED, params, (args.param,), np.array([[start], [stop]]))
+    elif args.kind == "bifurcation":
+        check_int(args.record, "--record", 2 * args.max_period + 1)
+        check_values(REDUCED, params, (args.param,), values[:, None])
+    else:
+        method = method_from_name(args.method, integrator=integ, max_period=args.max_period)
+        default = method.default_grid(REDUCED)
+        names = default.axis_names
+        where = f"(--method {args.method} grids {', '.join(names)})"
+        region = args.region or tuple(zip(default.lower, default.upper))
+        counts = args.grid or (STROBOSCOPIC_COUNTS if len(names) == 4 else SECTION_COUNTS)
+        check_region(region, f"--region {where}", len(names), names)
+        check_counts(counts, f"--grid {where}", len(names), names)
+        grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
+        method.check(REDUCED, grid)
+        check_values(REDUCED, params, (args.param,), values[:, None])
     head = (f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values), "
             f"preset {args.preset}, {REDUCED.name} model")
 
-    if args.kind == "continuation":
-        return _continuation(args, params, start, stop, count, integ, out, head)
+    with OutputFolder(args.out, OWNED, create=True) as work:
+        t0 = time.perf_counter()
+        if args.kind == "continuation":
+            files = _continuation(args, params, start, stop, count, integ, work, head)
+        else:
+            files = _sweep(args, params, values, integ, work, head, t0, grid if args.kind == "basins" else None,
+                           method if args.kind == "basins" else None)
+    print(f"\nwrote {', '.join(files)} to {args.out}/")
+    return 0
 
+
+def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, method) -> list[str]:
+    """A bifurcation or basin sweep: resume parts in ``--out``, its files into ``work``."""
+    import numpy as np
+
+    from .._cells import PAPER_REGION
+    from .._model import REDUCED
+    from ..shooting import seeds_in_box
+    from ..sweep import basin_sweep, bifurcation_diagram
+
+    out = Path(args.out)
     if args.kind == "bifurcation":
         if args.points:
             X0 = np.asarray(args.points, dtype=float)
-            if X0.shape[1] != REDUCED.dim:
-                raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {X0.shape[1]}.")
         else:
             n = 16 if args.starts is None else args.starts
-            if n < 1:
-                raise ValueError(f"--starts N needs N >= 1, got {n}.")
             region = np.asarray(args.region or PAPER_REGION, dtype=float)
-            if region.shape != (3, 2):
-                raise ValueError("--region for the starts needs three LO:HI ranges (x1, x2, x3; x4 = 0).")
             X0 = np.zeros((n, 4))  # on the section x4 = 0, like the paper's cells
             X0[:, :3] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
         print(head + f", {len(X0)} starts, direction {args.direction}")
         result = bifurcation_diagram(REDUCED, params, args.param, values, X0, transient=args.transient,
                                      record=args.record, direction=args.direction, integrator=integ,
                                      max_period=args.max_period, progress=not args.quiet, out=out,
-                                     restart=args.restart)
+                                     restart=args.restart, save=False)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         print(result.table())
         if "up" in result.directions and "down" in result.directions:
             diff = result.values[result.differs("up", "down")]
             print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
                   + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
+        result.save(work / "bifurcation.nc")
         files = ["bifurcation.nc", "summary.json"]
         figs = {}
         if not args.no_figures:
@@ -156,19 +211,14 @@ def run(args) -> int:
             figs = {"bifurcation.png": plot_bifurcation(result, "x1"),
                     "bifurcation_x3.png": plot_bifurcation(result, "x3")}
     else:  # basins
-        region = args.region or PAPER_REGION
-        if len(region) != 3:
-            raise ValueError("--region for basins needs three LO:HI ranges (x1, x2, x3 on x4 = 0).")
-        grid = CellGrid.box(region, args.grid, axes=(0, 1, 2), base=(0.0,) * 4, names=REDUCED.state_names)
-        check_values(REDUCED, params, (args.param,), values[:, None])
-        method = method_from_name(args.method, integrator=integ, max_period=args.max_period)
         print(head + f", {args.method} on {grid.n_cells} cells per value")
         result = basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=not args.quiet,
-                             out=out, restart=args.restart)
+                             out=out, restart=args.restart, save=False)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         print(result.shares_table())
         print()
         print(result.table())
+        result.save(work / "basins.nc")
         files = ["basins.nc", "summary.json"]
         figs = {}
         if not args.no_figures:
@@ -177,27 +227,20 @@ def run(args) -> int:
             figs = {"shares.png": plot_basin_shares(result)}
     summary = result.summary()
     summary["runtime_s"] = time.perf_counter() - t0  # in summary.json only, never in the result file
-    write_json(summary, out / "summary.json", indent=1)
+    write_json(summary, work / "summary.json", indent=1)
     for name, fig in figs.items():
-        save_figure(fig, out / name, dpi=120)
-    print(f"\nwrote {', '.join(files + list(figs))} to {out}/")
-    return 0
+        save_figure(fig, work / name, dpi=120)
+    return files + list(figs)
 
 
-def _continuation(args, params, start, stop, count, integ, out, head) -> int:
+def _continuation(args, params, start, stop, count, integ, out, head) -> list[str]:
     import numpy as np
 
     from .._model import REDUCED
     from .._params import with_param
     from ..continuation import continue_orbit
-    from ..sweep import check_values
-    if not args.points or len(args.points) != 1:
-        raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
-                         "at the start value (e.g. from jaxgear shoot).")
+
     x0 = np.asarray(args.points[0], dtype=float)
-    if x0.shape != (REDUCED.dim,):
-        raise ValueError(f"--from needs {REDUCED.dim} coordinates x1,x2,x3,x4; got {x0.size}.")
-    check_values(REDUCED, params, (args.param,), np.array([[start], [stop]]))
     p0 = with_param(params, args.param, start)
     ds = abs(stop - start) / (count - 1)
     print(head + f", P-{args.period} orbit from {x0.tolist()}, step {ds:g}")
@@ -220,5 +263,4 @@ def _continuation(args, params, start, stop, count, integ, out, head) -> int:
 
         save_figure(plot_branch(branch), out / "branch.png", dpi=120)
         files.append("branch.png")
-    print(f"\nwrote {', '.join(files)} to {out}/")
-    return 0
+    return files

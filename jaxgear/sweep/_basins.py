@@ -18,7 +18,7 @@ import numpy as np
 
 from .._batching import progress_bar
 from .._cells import CellGrid
-from .._checks import check_number
+from .._checks import check_bool, check_number
 from .._codec import array_field, result_type
 from .._format import format_table
 from .._matching import match_attractors
@@ -201,7 +201,7 @@ def _analyze_value(system, params, grid, method):
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
                 method: AbstractGlobalMethod | str | None = None, match_tol: float | None = None,
-                progress: bool = True, out=None, restart: bool = False) -> BasinSweep:
+                progress: bool = True, out=None, restart: bool = False, save: bool = True) -> BasinSweep:
     """Basin shares across a parameter, attractors continued from value to value.
 
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
@@ -218,7 +218,9 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
         method: a global-analysis method object (default :class:`~jaxgear.Direct`) or
             its name; it carries every option (integrator, ``max_period``, ...).
         out: kill-and-resume folder: each value's :class:`~jaxgear.GlobalResult` is saved
-            to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``.
+            to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``
+            (``save=False``: only the parts; the command line writes the result with its
+            summary and figures as one set); restart: discard a folder of other settings.
     Returns:
         :class:`BasinSweep`.
     """
@@ -250,6 +252,9 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     if match_tol is None:
         match_tol = 0.05 * float(np.linalg.norm(np.asarray(grid.upper) - np.asarray(grid.lower)))
     check_number(match_tol, "match_tol", 0, strict_min=True)
+    check_bool(progress, "progress")
+    check_bool(restart, "restart")
+    check_bool(save, "save")
     settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
                     match_tol=float(match_tol), version=__version__)
@@ -271,7 +276,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
                              {k: v for k, v in settings.items()
                               if k not in ("values", "params", "system", "param", "grid", "match_tol")},
                              __version__)
-    if out is not None:
+    if out is not None and save:
         sweep.save(Path(out) / "basins.nc")
     return sweep
 

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
-from .._checks import check_choice, check_int, check_number
+from .._checks import check_bool, check_choice, check_int, check_number
 from .._codec import array_field, result_type
 from .._format import format_table
 from .._params import param_targets, params_to_dict, with_param
@@ -239,7 +239,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                         record: int = 64, direction: str = "independent", integrator: AbstractIntegrator | None = None,
                         max_period: int = 16, tol: float = 1e-6, merge_tol: float = 1e-3,
                         escape_bound: float = 1e6, chunk_size: int = 1024, progress: bool = True,
-                        out=None, restart: bool = False) -> BifurcationDiagram:
+                        out=None, restart: bool = False, save: bool = True) -> BifurcationDiagram:
     """Bifurcation diagram: stroboscopic points against one parameter, classified by period.
 
     For each value of ``param`` and each initial state: ``transient`` forcing periods,
@@ -272,12 +272,16 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
         chunk_size: trajectories per compiled batch (values per block = chunk_size // S);
             also the block written to ``out``.
         out: folder for kill-and-resume (``DIR/parts``, ``DIR/manifest.json``) and the
-            final ``DIR/bifurcation.nc``; restart: discard a folder of other settings.
+            final ``DIR/bifurcation.nc``; restart: discard a folder of other settings;
+            save: ``False`` keeps only the resume parts in ``out`` (the command line writes
+            the result with its summary and figures as one set).
     Returns:
         :class:`BifurcationDiagram`.
     """
     system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
     check_choice(direction, "direction", DIRECTIONS)
+    check_bool(restart, "restart")
+    check_bool(save, "save")
     param_targets(params, param)
     vals = sorted_values(values, param)
     X0 = check_starts(system, x0s)
@@ -343,7 +347,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                                                if k not in ("values", "starts", "params", "system", "param")},
         version=__version__,
     )
-    if out is not None:
+    if out is not None and save:
         diagram.save(Path(out) / "bifurcation.nc")
     return diagram
 

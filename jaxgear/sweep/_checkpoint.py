@@ -10,6 +10,7 @@ from typing import Mapping
 
 import numpy as np
 
+from .._checks import article
 from .._io import atomic_write
 
 __all__ = ["Checkpoint", "diff_settings"]
@@ -35,11 +36,17 @@ class Checkpoint:
         man = self.dir / "manifest.json"
         key = _hash(settings)
         if man.is_file():
-            old = json.loads(man.read_text())
+            try:
+                old = json.loads(man.read_text())
+                if not isinstance(old, dict):
+                    raise ValueError
+            except (OSError, ValueError):  # unreadable manifest: its parts cannot be trusted
+                old = {"hash": None, "settings": {}}
+                restart = True
             if old.get("hash") != key:
                 if not restart:
                     diff = diff_settings(old.get("settings", {}), settings)
-                    raise ValueError(f"{self.dir} holds a {old.get('kind', '?')} sweep with other settings "
+                    raise ValueError(f"{self.dir} holds {article(str(old.get('kind', '?')))} sweep with other settings "
                                      f"(differing: {diff}); resume it with the same settings, use another "
                                      "output folder, or restart (restart=True, --restart) to discard it.")
                 shutil.rmtree(self.parts, ignore_errors=True)
@@ -72,7 +79,7 @@ class Checkpoint:
         (removed, to be computed again)."""
         try:
             return loader(self.parts / name)
-        except ValueError:
+        except Exception:  # truncated or corrupted part (any reader error): recompute it
             (self.parts / name).unlink(missing_ok=True)
             return None
 
@@ -93,6 +100,9 @@ def _save_part(path: Path, arrays: dict) -> None:
 
 
 def diff_settings(a: Mapping, b: Mapping) -> str:
+    """The settings that differ between ``a`` (saved) and ``b`` (now), compared as JSON
+    (so a tuple now and the list it was saved as are equal)."""
+    a, b = (json.loads(json.dumps(x, sort_keys=True)) for x in (a, b))
     keys = sorted(set(a) | set(b))
     out = []
     for k in keys:

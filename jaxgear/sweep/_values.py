@@ -40,7 +40,12 @@ def check_values(system: ForcedSystem, params, names: tuple[str, ...], V: np.nda
 
 
 def sorted_values(values, name: str) -> np.ndarray:
-    v = np.asarray(values, dtype=float).reshape(-1)
+    try:
+        v = np.asarray(values, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        text = repr(values)
+        raise ValueError(f"values={text if len(text) <= 60 else text[:57] + '...'} of {name} must be numbers."
+                         ) from None
     if v.size == 0:
         raise ValueError(f"the values of {name} are empty: give at least one value.")
     if not np.all(np.isfinite(v)):
