@@ -6,12 +6,18 @@ import dataclasses
 
 from typing import Any, ClassVar
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from ._base import AbstractFixedStep, AbstractIntegrator
+
+
+def _diffrax():
+    """diffrax, imported on first use (it adds half a second to every start otherwise)."""
+    import diffrax
+
+    return diffrax
 
 __all__ = ["Adaptive"]
 
@@ -27,7 +33,7 @@ class Adaptive(AbstractIntegrator):
     """
 
     name: ClassVar[str] = "Adaptive"
-    solver: Any = eqx.field(static=True, default_factory=diffrax.Tsit5)
+    solver: Any = eqx.field(static=True, default_factory=lambda: _diffrax().Tsit5())
     rtol: float = eqx.field(static=True, default=1e-10)
     atol: float = eqx.field(static=True, default=1e-10)
     max_steps: int = eqx.field(static=True, default=200_000)
@@ -42,6 +48,7 @@ class Adaptive(AbstractIntegrator):
     def solve(self, system, params, y0, t0, t1, ts=None, adjoint=None):
         """One state ``y0 (dim,)`` from ``t0`` to ``t1``: the final state, or the states at
         ``ts (m,)`` (``(m, dim)``); NaN where the solve failed."""
+        diffrax = _diffrax()
         term = diffrax.ODETerm(lambda t, y, args: system.vector_field(t, y, args))
         T = system.period(params)
         saveat = diffrax.SaveAt(t1=True) if ts is None else diffrax.SaveAt(ts=ts)
@@ -62,7 +69,7 @@ class Adaptive(AbstractIntegrator):
     def flow(self, system, params, x, t0, periods: int):
         # DirectAdjoint: forward mode (monodromy by jacfwd) and reverse mode (implicit gradients)
         t1 = t0 + periods * system.period(params)
-        return self.solve(system, params, x, t0, t1, adjoint=diffrax.DirectAdjoint())
+        return self.solve(system, params, x, t0, t1, adjoint=_diffrax().DirectAdjoint())
 
     def trajectory(self, system, params, Y, t0, periods: int, samples_per_period: int):
         T = system.period(params)
