@@ -1,7 +1,7 @@
 """Reference implementations of the paper-grid stroboscopic map, for the benchmark only.
 
 Each computes the same thing as ``jaxgear.stroboscopic_map(jaxgear.REDUCED, params, X,
-periods=1)``: the reduced 2-DOF gear model of MODEL.md §4 (paper §4.1) advanced over
+periods=1)``: the reduced 2-DOF gear model of docs/model.md §4 (paper §4.1) advanced over
 whole forcing periods ``T = 2 pi / Omega`` from ``t0``, in float64.
 
 - :func:`numba_blocked` — the strongest hand-written CPU style of

@@ -68,7 +68,7 @@ class SpurPairParams(eqx.Module):
     ``x'' + 2 zeta x' + (1 + kappa sin(Omega t)) f(x, b) = f_m + e_amp Omega^2 sin(Omega t)``
     with ``f`` the backlash function of paper eq. (3). Time in ``1/omega_n``
     (``omega_n`` the natural frequency of the mean mesh stiffness), lengths in a
-    characteristic length ``b_c`` (as MODEL.md §3): ``zeta`` damping ratio, ``kappa``
+    characteristic length ``b_c`` (as docs/model.md §3): ``zeta`` damping ratio, ``kappa``
     relative stiffness amplitude, ``b`` half backlash, ``f_m`` mean load (static
     deflection), ``e_amp`` transmission-error amplitude, ``Omega`` mesh frequency
     (forcing period ``2 pi / Omega``). All fields are float64 arrays.

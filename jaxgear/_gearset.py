@@ -22,9 +22,9 @@ __all__ = ["GearSet"]
 class GearSet:
     """A 2K-H planetary set in physical units (ring fixed, sun input, carrier output).
 
-    Geometry follows MODEL.md §1 (pitch radii ``r = m z / 2``, base radii ``r cos(alpha)``,
-    carrier radius ``r_s + r_p``); masses and forces follow MODEL.md §2; the
-    dimensionless form MODEL.md §3. Per-mesh quantities may be a number (identical
+    Geometry follows docs/model.md §1 (pitch radii ``r = m z / 2``, base radii ``r cos(alpha)``,
+    carrier radius ``r_s + r_p``); masses and forces follow docs/model.md §2; the
+    dimensionless form docs/model.md §3. Per-mesh quantities may be a number (identical
     planets) or a sequence of ``N`` numbers.
 
     Units: lengths in m except transmission errors, backlashes and ``b_c`` in µm;
@@ -195,7 +195,7 @@ class GearSet:
         return (float(given[0]) if given[0] is not None else sp, float(given[1]) if given[1] is not None else rp)
 
     def derived(self) -> dict[str, Any]:
-        """Geometry, equivalent masses and ``omega_n`` (MODEL.md §1-§3), SI units."""
+        """Geometry, equivalent masses and ``omega_n`` (docs/model.md §1-§3), SI units."""
         alpha = math.radians(self.pressure_angle_deg)
         r_s, r_p, r_r = (self.module * z / 2 for z in (self.z_s, self.z_p, self.z_r))
         r_bs, r_bp = r_s * math.cos(alpha), r_p * math.cos(alpha)
@@ -229,7 +229,7 @@ class GearSet:
                     mesh_frequency_hz=omega / (2 * math.pi))
 
     def to_params(self) -> GearParams:
-        """The canonical dimensionless set (MODEL.md §3-§4)."""
+        """The canonical dimensionless set (docs/model.md §3-§4)."""
         d = self.derived()
         k_ref = float(self._per_planet("k_sp_mean")[0])
         bc = self.b_c * 1e-6

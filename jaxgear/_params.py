@@ -111,7 +111,7 @@ def require(cond: bool, name: str, value, allowed: str) -> None:
 
 
 class GearParams(eqx.Module):
-    """Canonical dimensionless parameters of the planetary set (MODEL.md §4).
+    """Canonical dimensionless parameters of the planetary set (docs/model.md §4).
 
     All fields but ``N`` are float64 arrays, so ``jit``/``vmap``/``grad`` apply and a
     change of value never recompiles. Per-mesh fields (``PER_PLANET_NAMES``) may be
@@ -293,7 +293,7 @@ def _field_names(params) -> tuple[str, ...]:
 def param_names(params) -> tuple[str, ...]:
     """Names accepted by :func:`with_param` / :func:`get_param` for ``params``.
 
-    The numeric fields (for :class:`GearParams` the canonical names of MODEL.md §4 but
+    The numeric fields (for :class:`GearParams` the canonical names of docs/model.md §4 but
     ``N``) plus the aliases of :data:`PARAM_ALIASES` whose fields all exist
     (``"b"`` = ``b_sp`` and ``b_rp``, ``"kappa_amp"`` = ``kappa_sp_amp`` and
     ``kappa_rp_amp``, ``"e_amp"`` = ``e_sp_amp`` and ``e_rp_amp``).

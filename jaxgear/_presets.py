@@ -18,7 +18,7 @@ from ._params import PARAM_ALIASES, PARAM_NAMES, GearParams
 __all__ = ["paper_gear_set", "paper_params", "PRESETS", "get_preset", "resolve_params", "parse_value"]
 
 def paper_gear_set(**overrides) -> GearSet:
-    """The gear set of paper §4.1 with the missing values of MODEL.md §6-§7.
+    """The gear set of paper §4.1 with the missing values of docs/model.md §6-§7.
 
     Values from the paper: module 3 mm, pressure angle 20°, teeth 15/24/63, N = 3,
     k_msp = 0.8256e9 and k_mrp = 1.06e9 N/m, k_asp = k_arp = 0.3e9 N/m,
@@ -33,7 +33,7 @@ def paper_gear_set(**overrides) -> GearSet:
     - T_D such that f_D = 2 (mean mesh force ≈ 2/3 of k_msp b_c per planet, a moderate
       load), and T_L from static torque balance T_L = T_D (1 + z_r/z_s) (f_L = 2 f_D);
     - Omega = 0.87: the excitation frequency at which the reduced model shows the
-      paper's structure (unstable P-1 and P-2, dominant P-4, minority P-8), MODEL.md §7;
+      paper's structure (unstable P-1 and P-2, dominant P-4, minority P-8), docs/model.md §7;
     - gamma_sr = 0 (the paper sets all other phases to zero).
     """
     paper = "paper §4.1"
@@ -72,7 +72,7 @@ PRESETS = {"paper": paper_gear_set}
 def get_preset(name: str) -> GearSet:
     """The named physical preset (see ``PRESETS``) as a :class:`GearSet` in physical units.
 
-    ``"paper"`` is the gear set of paper §4.1 completed by MODEL.md §6-§7 (see
+    ``"paper"`` is the gear set of paper §4.1 completed by docs/model.md §6-§7 (see
     :func:`paper_gear_set`). Raises ``ValueError`` naming the available presets.
     """
     if name not in PRESETS:
@@ -98,7 +98,7 @@ def resolve_params(preset: str = "paper", overrides: Mapping[str, Any] | Sequenc
 
     ``overrides`` is a mapping or ``["NAME=VALUE", ...]`` (the CLI's ``--set``).
     A NAME that is a physical field of :class:`GearSet` changes the physical set
-    before conversion; a canonical dimensionless name (MODEL.md §4, e.g. ``Omega``,
+    before conversion; a canonical dimensionless name (docs/model.md §4, e.g. ``Omega``,
     ``b_sp``, ``kappa_sp_amp``) overrides the converted value directly. ``Omega``
     is both and is applied as a physical field.
     """
@@ -139,7 +139,7 @@ def resolve_params(preset: str = "paper", overrides: Mapping[str, Any] | Sequenc
     return gs, params
 
 
-# Names that exist in both tables: the CLI reads them as dimensionless (MODEL.md §4),
+# Names that exist in both tables: the CLI reads them as dimensionless (docs/model.md §4),
 # which is what users sweeping the paper's b̄ and Ω expect.
 _DIMLESS_PREFERRED = {"b_sp", "b_rp", "e_sp_amp", "e_rp_amp", "phi_sp", "phi_rp", "beta_sp",
                       "beta_rp", "gamma_sr"}

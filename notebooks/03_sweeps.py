@@ -101,7 +101,7 @@ assert {"P-4", "P-8"} <= {a["label"] for a in at_b0}
 # Above `b ≈ 3` the P-4 does not change shape at all: its points move by exactly
 # `(Δb, 0, 2Δb, 0)`. As long as the teeth never reach the back flank (`x1 > -b_sp` and
 # `X_rp > -b_rp` all along the orbit) the backlash function is `max(X - b, 0)`, so only
-# `x1 - b_sp` and `x3 - x1 - b_rp` enter the mesh forces (MODEL.md §4) and the equations
+# `x1 - b_sp` and `x3 - x1 - b_rp` enter the mesh forces (docs/model.md §4) and the equations
 # are invariant under `x1 → x1 + Δb`, `x3 → x3 + 2Δb`. The sweep confirms it to round-off:
 
 # %%
@@ -174,7 +174,7 @@ plotting.plot_bifurcation(bif_k, "x1")
 # %% [markdown]
 # Weak stiffness modulation gives aperiodic motion, strong modulation a P-2; the paper's
 # P-4/P-8 structure lives in a narrow window around the preset's `kappa_amp ≈ 0.363`
-# (MODEL.md §7 found the same by exploration). At the preset's own value:
+# (docs/model.md §7 found the same by exploration). At the preset's own value:
 
 # %%
 at_k0 = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", [k0], starts, direction="independent", progress=False)

@@ -13,7 +13,7 @@
 # 21/29/79, an input speed in rpm instead of the dimensionless Ω, and the mesh phasing
 # that equal spacing imposes on the planets. Because the planets are no longer in phase,
 # the reduced 2-DOF model of the paper does not apply: we use the general N-planet model
-# (paper eq. 5, MODEL.md §2) and the same analysis calls as for the paper's set.
+# (paper eq. 5, docs/model.md §2) and the same analysis calls as for the paper's set.
 
 # %%
 FULL = False  # True: full-size grids (minutes); False: reduced grids for a quick run
@@ -52,7 +52,7 @@ phased = gear_set(sequential)
 print(phased.table())
 
 # %% [markdown]
-# The conversion to the canonical dimensionless set (MODEL.md §3-§4) keeps per-planet
+# The conversion to the canonical dimensionless set (docs/model.md §3-§4) keeps per-planet
 # values as arrays; the input speed became Ω = ω_mesh / ω_n.
 
 # %%

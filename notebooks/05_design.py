@@ -64,7 +64,7 @@ print("P-4 point:", np.round(x4, 4), " max |multiplier|:", float(jnp.max(jnp.abs
 assert int(shot.status) == 0 and int(shot.min_period) == 4 and bool(shot.stable)
 
 # %% [markdown]
-# ## 2. Mesh forces along the orbit (MODEL.md §4)
+# ## 2. Mesh forces along the orbit (docs/model.md §4)
 #
 # `g_sp = k_sp(t) f(x1, b_sp) + c_sp x2` and `g_rp = k_rp(t) f(X_rp, b_rp) + c_rp V_rp`,
 # in units of `k_msp b_c`; their static mean is `f_D / N = 0.667`. The ring-planet mesh

@@ -76,7 +76,7 @@ def test_duffing_multistable_all_methods_confirmed_by_shooting():
     assert d[big] > 0.5
     # the paper's poincare-like map on the section {v = 0} (a 1-D grid over x at phase 0),
     # against direct integration of the same cell centres: within 7 percentage points (the
-    # section map restarts each crossing at phase 0, an approximation: MODEL.md §6)
+    # section map restarts each crossing at phase 0, an approximation: docs/model.md §6)
     line = jg.CellGrid.box([(-2.5, 2.5)], (40,), axes=(0,), base=(0.0, 0.0), names=("x", "v"))
     pl = jg.analyze_global(MY_DUFFING, p, line, method=jg.PoincareCellMap(mapping_steps=10, integrator=RK), progress=False)
     dl = jg.analyze_global(MY_DUFFING, p, line, method=jg.Direct(integrator=RK), progress=False)

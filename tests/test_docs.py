@@ -153,6 +153,6 @@ def test_docstring_extension_rewrites():
     doc = "Summary.\n\nArgs:\n    x: a value.\nReturns:\n    y.\n"
     assert ext.separate_sections(doc) == "Summary.\n\nArgs:\n    x: a value.\n\nReturns:\n    y.\n"
     assert ext.separate_sections(ext.separate_sections(doc)) == ext.separate_sections(doc)
-    assert ext.rewrite_model_refs("(MODEL.md §4) and docs/model.md §2-§4") == (
+    assert ext.rewrite_model_refs("(docs/model.md §4) and docs/model.md §2-§4") == (
         "([model §4][section-4]) and [model §2–§4][section-2]"
     )

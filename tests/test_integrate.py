@@ -1,4 +1,4 @@
-"""Integration: RK4 order (smooth cases and with backlash, MODEL.md §8), Adaptive (diffrax)
+"""Integration: RK4 order (smooth cases and with backlash, docs/model.md §8), Adaptive (diffrax)
 accuracy, RK4/Adaptive agreement on the paper preset, sampling, failures as data.
 
 References: the closed-form periodic response of the forced linear oscillator
@@ -100,7 +100,7 @@ def test_rk4_fourth_order_gear_model_without_backlash(paper_reference):
 def test_rk4_and_adaptive_agree_on_paper_preset(paper_reference):
     """Stroboscopic map P^2 of the paper preset, 16 starts over the region D.
 
-    With backlash the error of fixed-step RK4 behaves like C h^2 (MODEL.md §8); measured
+    With backlash the error of fixed-step RK4 behaves like C h^2 (docs/model.md §8); measured
     C is 5-12 for these starts. The tolerance is 40 h^2, h = T / steps_per_period.
     """
     p, errs = paper_reference
@@ -112,7 +112,7 @@ def test_rk4_and_adaptive_agree_on_paper_preset(paper_reference):
 
 
 def test_rk4_order_drops_with_backlash(paper_reference):
-    """Documentation of MODEL.md §8: the backlash kinks cut fixed-step RK4 to ~2nd order."""
+    """Documentation of docs/model.md §8: the backlash kinks cut fixed-step RK4 to ~2nd order."""
     _, errs = paper_reference
     n = np.array(sorted(errs), float)
     e = np.array([errs[k] for k in sorted(errs)])

@@ -1,8 +1,8 @@
-"""Gear models (MODEL.md §2-§4): equations, symmetry, linear limits, JAX transforms.
+"""Gear models (docs/model.md §2-§4): equations, symmetry, linear limits, JAX transforms.
 
-References: Newton's equations of MODEL.md §2 written in the tests in the physical
+References: Newton's equations of docs/model.md §2 written in the tests in the physical
 coordinates u_s, u_pi, u_c (before elimination), hand-solved linear equilibria and the
-closed-form forced response of the linear limit (MODEL.md §4 written out by hand).
+closed-form forced response of the linear limit (docs/model.md §4 written out by hand).
 """
 
 import math
@@ -20,7 +20,7 @@ S3 = nplanet_system(3)
 
 
 def _rand_states(n, seed=0):
-    """States spread over the paper's region D (MODEL.md §5), x4 in [-5, 5]."""
+    """States spread over the paper's region D (docs/model.md §5), x4 in [-5, 5]."""
     rng = np.random.default_rng(seed)
     return np.stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n),
                      rng.uniform(-5, 5, n)], -1)
@@ -37,7 +37,7 @@ def f_dead(X, b):
 
 
 def newton_nplanet(t, x, p):
-    """N-planet accelerations from Newton's equations in u_s, u_pi, u_c (MODEL.md §2).
+    """N-planet accelerations from Newton's equations in u_s, u_pi, u_c (docs/model.md §2).
 
     The rigid-body rotation is free: put u_c = 0 and rebuild u_s, u_pi from the mesh
     deflections, apply the mesh forces of eq. (3), and form X_spi'' = u_s'' - u_pi'' -
@@ -73,7 +73,7 @@ def newton_nplanet(t, x, p):
 
 
 def linear_matrices(p):
-    """Reduced model, linear limit (b = 0, constant stiffness), from MODEL.md §4 by hand.
+    """Reduced model, linear limit (b = 0, constant stiffness), from docs/model.md §4 by hand.
 
     With q = (x1, x3): q'' + C q' + K q = F0 + forcing(t), where
     x1'' = -(N + mu_p) g_sp + A g_rp + ..., x3'' = -B g_sp - D g_rp + ...,
@@ -214,7 +214,7 @@ def test_nplanet_per_planet_phases_break_symmetry():
 # ----------------------------------------------------------------------------- linear limits
 @pytest.mark.parametrize("f_L_factor", [2.0, 0.0, 1.3])
 def test_static_equilibrium_linear_limit(f_L_factor):
-    """b = 0, constant stiffness, no errors: the static equilibrium by hand (MODEL.md §4)."""
+    """b = 0, constant stiffness, no errors: the static equilibrium by hand (docs/model.md §4)."""
     f_D = 2.0
     f_L = f_L_factor * f_D
     p = linear_params(f_D=f_D, f_L=f_L, c_sp=1.0, c_rp=1.2)
@@ -228,7 +228,7 @@ def test_static_equilibrium_linear_limit(f_L_factor):
     det = a11 * a22 - a12 * a21
     g_sp = (r1 * a22 - a12 * r2) / det
     g_rp = (a11 * r2 - a21 * r1) / det
-    if f_L_factor == 2.0:  # torque balance: both mean mesh forces are f_D / N (MODEL.md §7)
+    if f_L_factor == 2.0:  # torque balance: both mean mesh forces are f_D / N (docs/model.md §7)
         assert abs(g_sp - f_D / N) < 1e-13 and abs(g_rp - f_D / N) < 1e-13
     x1 = g_sp / ksp                 # g_sp = k_sp x1
     x3 = x1 + g_rp / krp            # g_rp = k_rp (x3 - x1)

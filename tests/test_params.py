@@ -1,6 +1,6 @@
-"""Parameters: physical -> dimensionless (MODEL.md §1-§3, §7), presets, validation.
+"""Parameters: physical -> dimensionless (docs/model.md §1-§3, §7), presets, validation.
 
-References are hand calculations from MODEL.md written out in the tests (solid steel
+References are hand calculations from the model document (docs/model.md) written out in the tests (solid steel
 disks of the pitch diameters, equivalent masses of §2, scaling of §3), never values
 read back from the code.
 """
@@ -22,7 +22,7 @@ B_C = 10e-6
 
 
 def hand_paper_numbers(z_s=15, z_p=24, z_r=63, m=3e-3, N=3):
-    """Equivalent masses and omega_n of MODEL.md §2 for solid steel disks (MODEL.md §7)."""
+    """Equivalent masses and omega_n of docs/model.md §2 for solid steel disks (docs/model.md §7)."""
     r_s, r_p = m * z_s / 2, m * z_p / 2
     r_c = r_s + r_p
     J_s = 0.5 * RHO * math.pi * r_s**4 * WIDTH
@@ -38,7 +38,7 @@ def hand_paper_numbers(z_s=15, z_p=24, z_r=63, m=3e-3, N=3):
 
 def test_paper_preset_matches_model_md_numbers():
     p = jg.paper_params()
-    # MODEL.md §7 (independent exploration): rounded values
+    # docs/model.md §7 (independent exploration): rounded values
     assert p.N == 3
     assert abs(float(p.mu_s) - 0.9715) < 5e-4
     assert abs(float(p.mu_c) - 0.0285) < 5e-4
@@ -55,7 +55,7 @@ def test_paper_preset_matches_hand_calculation():
     np.testing.assert_allclose(float(p.mu_p), h["m_eq1"] / h["m_p"], rtol=1e-12)
     assert abs(float(p.mu_s) + float(p.mu_c) - 1.0) < 1e-14
     np.testing.assert_allclose(jg.paper_gear_set().derived()["omega_n"], h["omega_n"], rtol=1e-12)
-    # stiffness, errors, backlash (MODEL.md §3-§5): ratios to k_msp and to b_c = 10 um
+    # stiffness, errors, backlash (docs/model.md §3-§5): ratios to k_msp and to b_c = 10 um
     np.testing.assert_allclose(float(p.kappa_sp_mean), 1.0, rtol=1e-15)
     np.testing.assert_allclose(float(p.kappa_rp_mean), K_RP / K_SP, rtol=1e-14)
     np.testing.assert_allclose(float(p.kappa_sp_amp), K_AMP / K_SP, rtol=1e-14)
@@ -67,7 +67,7 @@ def test_paper_preset_matches_hand_calculation():
     # damping ratio 0.04: c = 2 zeta sqrt(k m_eq1) -> c/(m_eq1 omega_n) = 2 zeta sqrt(k/k_msp)
     np.testing.assert_allclose(float(p.c_sp), 2 * 0.04, rtol=1e-14)
     np.testing.assert_allclose(float(p.c_rp), 2 * 0.04 * math.sqrt(K_RP / K_SP), rtol=1e-14)
-    # load: f_D = 2; torque balance T_L = T_D (1 + z_r/z_s) gives f_L = 2 f_D (MODEL.md §7)
+    # load: f_D = 2; torque balance T_L = T_D (1 + z_r/z_s) gives f_L = 2 f_D (docs/model.md §7)
     np.testing.assert_allclose(float(p.f_D), 2.0, rtol=1e-12)
     np.testing.assert_allclose(float(p.f_L), 2.0 * float(p.f_D), rtol=1e-12)
     np.testing.assert_allclose(float(p.Omega), 0.87, rtol=1e-15)

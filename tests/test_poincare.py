@@ -110,7 +110,7 @@ def test_section_agrees_with_four_times_finer_step(hits):
     at_boundary = np.minimum(fine.time, coarse.time) - PERIODS * T < T / STEPS
     assert np.all(same | at_boundary)
     assert same.sum() >= NX - 2
-    h2 = (T / STEPS) ** 2  # error ~ C h^2 with backlash (MODEL.md §8), C ~ 5-12 measured
+    h2 = (T / STEPS) ** 2  # error ~ C h^2 with backlash (docs/model.md §8), C ~ 5-12 measured
     assert np.abs(fine.state - coarse.state)[same].max() < 40 * h2
     assert np.abs(fine.time - coarse.time)[same].max() < 4 * h2
 

@@ -8,7 +8,7 @@ def test_float64_enabled_on_import():
 
 
 def test_paper_mass_ratios_match_model_md():
-    # MODEL.md §7, derived independently: mu_s ~ 0.9715, mu_c ~ 0.0285, mu_p ~ 0.3795
+    # docs/model.md §7, derived independently: mu_s ~ 0.9715, mu_c ~ 0.0285, mu_p ~ 0.3795
     p = jg.paper_params()
     assert abs(float(p.mu_s) - 0.9715) < 5e-4
     assert abs(float(p.mu_c) - 0.0285) < 5e-4
