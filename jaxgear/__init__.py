@@ -78,6 +78,7 @@ from .analysis import (  # noqa: E402
     cell_images as cell_images,
     compare_with_direct as compare_with_direct,
     label_uncertainty as label_uncertainty,
+    with_label_uncertainty as with_label_uncertainty,
     detect_period as detect_period,
     Attractor as Attractor,
     GlobalResult as GlobalResult,

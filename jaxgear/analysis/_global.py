@@ -99,14 +99,23 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     result = _assemble(system, params, grid, method, labels, raw, cycles, mean_periods,
                        time.perf_counter() - t_start)
     if uncertainty:
-        direct = method if isinstance(method, Direct) else Direct(
-            integrator=method.integrator, max_period=method.max_period, period_tol=method.period_tol,
-            merge_tol=method.merge_tol, chunk_size=method.chunk_size)
-        u = label_uncertainty(system, params, grid, result.labels, result.attractors, direct, samples=uncertainty,
-                              progress=progress)
-        result = dataclasses.replace(result, uncertainty=u, runtime_s=time.perf_counter() - t_start)
+        result = with_label_uncertainty(result, system, params, method, uncertainty, progress)
+        result = dataclasses.replace(result, runtime_s=time.perf_counter() - t_start)
     warn_if_unreliable(result)
     return result
+
+
+def with_label_uncertainty(result: GlobalResult, system, params, method: AbstractGlobalMethod, samples: int,
+                           progress: bool = False) -> GlobalResult:
+    """``result`` with its label uncertainty measured on ``samples`` cells
+    (:func:`~jaxgear.analysis.label_uncertainty`, by the direct method with the options of
+    ``method``, the method that produced the result)."""
+    direct = method if isinstance(method, Direct) else Direct(
+        integrator=method.integrator, max_period=method.max_period, period_tol=method.period_tol,
+        merge_tol=method.merge_tol, chunk_size=method.chunk_size)
+    u = label_uncertainty(system, params, result.grid, result.labels, result.attractors, direct, samples=samples,
+                          progress=progress)
+    return dataclasses.replace(result, uncertainty=u)
 
 
 def _merge_same(labels, raw, cycles, method):

@@ -8,7 +8,9 @@ writes ``result.nc``, ``summary.json`` and figures into ``--out``.
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from .._io import save_figure, write_json
@@ -126,16 +128,25 @@ def _analyze(args, params, grid, method, out: Path) -> list[str]:
     import numpy as np
 
     from .._model import REDUCED
-    from ..analysis import analyze_global, compare_with_direct
+    from ..analysis import analyze_global, compare_with_direct, with_label_uncertainty
 
     t0 = time.perf_counter()
-    result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet,
-                            uncertainty=args.uncertainty_samples)
-    print(f"done in {time.perf_counter() - t0:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
-    print(result.table())
-    result.save(out / "result.nc")
-    result.write_summary(out / "summary.json")
-    written = ["result.nc", "summary.json"]
+    # A second thread imports the output libraries while the analysis runs, then draws the
+    # figures while the label uncertainty is measured (compiled code releases the GIL).
+    with ThreadPoolExecutor(1) as side:
+        side.submit(_import_output_libraries, not args.no_figures)
+        result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet, uncertainty=0)
+        figures = None if args.no_figures else side.submit(_figures, result, out)
+        if args.uncertainty_samples:
+            result = with_label_uncertainty(result, REDUCED, params, method, args.uncertainty_samples,
+                                            progress=not args.quiet)
+        result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
+        print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
+        print(result.table())
+        result.save(out / "result.nc")
+        result.write_summary(out / "summary.json")
+        written = ["result.nc", "summary.json"]
+        figure_names = figures.result() if figures is not None else []
     if args.compare:
         rep = compare_with_direct(result, REDUCED, params, n_samples=args.compare, progress=not args.quiet)
         write_json(rep, out / "compare.json")
@@ -147,9 +158,14 @@ def _analyze(args, params, grid, method, out: Path) -> list[str]:
         for d in rep["direct_only"]:
             print(f"  found only by direct integration: P-{d['period']} at {np.round(d['point'], 4).tolist()} "
                   f"({d['cells']} of the sampled cells)")
-    if not args.no_figures:
-        written += _figures(result, out)
-    return written
+    return written + figure_names
+
+
+def _import_output_libraries(figures: bool) -> None:
+    import xarray  # noqa: F401
+
+    if figures:
+        from .. import plotting  # noqa: F401
 
 
 def _figures(result, out: Path) -> list[str]:
