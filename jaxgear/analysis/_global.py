@@ -27,7 +27,7 @@ from ._orbits import section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
-__all__ = ["analyze_global", "default_method", "DEFAULT_METHOD"]
+__all__ = ["analyze_global", "default_method", "DEFAULT_METHOD", "with_label_uncertainty"]
 
 DEFAULT_METHOD = "direct"
 """Name of the default method: the library, the CLI and the README use the same."""
