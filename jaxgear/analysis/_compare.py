@@ -45,12 +45,7 @@ def compare_with_direct(result: GlobalResult, system=None, params=None, *, n_sam
     if result.grid.dim != system.dim:
         raise ValueError(f"compare_with_direct: the result's grid has {result.grid.dim} coordinates, "
                          f"the system {system.dim}.")
-    s = dict(result.settings)
-    if integrator is None:
-        integrator = method_from_dict({**s, "name": result.method}).integrator
-    direct = Direct(integrator=integrator, max_period=int(s.get("max_period", 16)),
-                    period_tol=float(s.get("period_tol", 1e-6)), merge_tol=float(s.get("merge_tol", 1e-4)),
-                    chunk_size=int(s.get("chunk_size", 131072)))
+    direct = Direct.like(method_from_dict({**dict(result.settings), "name": result.method}), integrator)
     rng = np.random.default_rng(seed)
     n = result.n_cells
     cells = rng.choice(n, size=min(n_samples, n), replace=False)

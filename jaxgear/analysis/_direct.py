@@ -12,8 +12,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .._cells import CellGrid
@@ -62,6 +60,15 @@ class Direct(AbstractGlobalMethod):
 
     def check(self, system, grid: CellGrid) -> None:
         return None
+
+    @classmethod
+    def like(cls, method: AbstractGlobalMethod, integrator=None) -> "Direct":
+        """The direct method with the options every method shares (integrator, periods,
+        tolerances, batch size) taken from ``method``; ``method`` itself when it is one."""
+        if isinstance(method, Direct) and integrator is None:
+            return method
+        return cls(integrator=method.integrator if integrator is None else integrator, max_period=method.max_period,
+                   period_tol=method.period_tol, merge_tol=method.merge_tol, chunk_size=method.chunk_size)
 
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         labels, atts, mean = self.label_states(system, params, grid.centres(), progress)

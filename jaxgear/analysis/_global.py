@@ -110,9 +110,7 @@ def with_label_uncertainty(result: GlobalResult, system, params, method: Abstrac
     """``result`` with its label uncertainty measured on ``samples`` cells
     (:func:`~jaxgear.analysis.label_uncertainty`, by the direct method with the options of
     ``method``, the method that produced the result)."""
-    direct = method if isinstance(method, Direct) else Direct(
-        integrator=method.integrator, max_period=method.max_period, period_tol=method.period_tol,
-        merge_tol=method.merge_tol, chunk_size=method.chunk_size)
+    direct = Direct.like(method)
     u = label_uncertainty(system, params, result.grid, result.labels, result.attractors, direct, samples=samples,
                           progress=progress)
     return dataclasses.replace(result, uncertainty=u)
