@@ -20,6 +20,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._checks import check_choice, check_int, check_number
 from ._status import Status
@@ -46,8 +47,8 @@ def _strobe_kernel(system, params, Y, t0, periods, integrator):
     return integrator.advance(system, params, Y, t0, periods)
 
 
-def stroboscopic_map(system: ForcedSystem, params, x0, *, periods: int = 1, t0=0.0,
-                     integrator: AbstractIntegrator | None = None):
+def stroboscopic_map(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch dim"], *, periods: int = 1,
+                     t0: float = 0.0, integrator: AbstractIntegrator | None = None) -> Float[Array, "*batch dim"]:
     """Stroboscopic (exact) Poincaré map ``P^periods``: ``x(t0) -> x(t0 + periods*T)``.
 
     The exact Poincaré map of a forced system (paper eq. 6; model document §6), the map
@@ -81,8 +82,9 @@ def _orbit_kernel(system, params, Y, t0, n_points, periods_between, integrator):
     return Ys  # (n_points, dim, n)
 
 
-def stroboscopic_orbit(system: ForcedSystem, params, x0, *, n_points: int, periods_between: int = 1,
-                       t0=0.0, integrator: AbstractIntegrator | None = None):
+def stroboscopic_orbit(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch dim"], *, n_points: int,
+                       periods_between: int = 1, t0: float = 0.0,
+                       integrator: AbstractIntegrator | None = None) -> Float[Array, "*batch n_points dim"]:
     """The iterates ``P(x0), ..., P^n(x0)`` of the stroboscopic map: shape ``(..., n, dim)``.
 
     ``P`` advances ``periods_between`` forcing periods (the exact Poincaré map of a
@@ -106,10 +108,10 @@ class SectionHit(NamedTuple):
     ``DIVERGED`` or ``NO_CROSSING``.
     """
 
-    state: jax.Array
-    time: jax.Array
-    phase: jax.Array
-    status: jax.Array
+    state: Float[Array, "*batch dim"]
+    time: Float[Array, "*batch"]
+    phase: Float[Array, "*batch"]
+    status: Int[Array, "*batch"]
 
 
 def _crossed(g_old, g_new, direction):
@@ -197,7 +199,8 @@ def check_section(system: ForcedSystem, index, direction) -> int:
     return check_int(index, "index", 0, system.dim - 1)
 
 
-def section_map(system: ForcedSystem, params, x0, *, periods: int = 1, t0=0.0, index: int | None = None,
+def section_map(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch dim"], *, periods: int = 1,
+                t0: float = 0.0, index: int | None = None,
                 direction: int = 1, max_extra_periods: float = 4.0,
                 integrator: AbstractIntegrator | None = None) -> SectionHit:
     """The paper's Poincaré-like map on the hyperplane Σ = {x_index = 0} (paper §3, §4.1).
@@ -236,8 +239,9 @@ def _sample_kernel(system, params, x0, t0, periods, samples_per_period, integrat
     return ts, jnp.moveaxis(Ys, 2, 0).reshape(*lead, Ys.shape[0], system.dim)
 
 
-def sample_trajectory(system: ForcedSystem, params, x0, *, periods: int = 1, samples_per_period: int = 100,
-                      t0=0.0, integrator: AbstractIntegrator | None = None):
+def sample_trajectory(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch dim"], *, periods: int = 1,
+                      samples_per_period: int = 100, t0: float = 0.0, integrator: AbstractIntegrator | None = None
+                      ) -> tuple[Float[Array, " m"], Float[Array, "*batch m dim"]]:
     """Trajectory samples for figures: ``(times (m,), states (..., m, dim))``,
     ``m = periods*samples_per_period + 1``, from ``t0`` to ``t0 + periods*T``.
 
