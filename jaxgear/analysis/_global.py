@@ -25,9 +25,9 @@ from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
 from ._orbits import section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
-from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
+from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
 
-__all__ = ["analyze_global", "default_method", "DEFAULT_METHOD"]
+__all__ = ["analyze_global", "analyze_global_values", "default_method", "DEFAULT_METHOD"]
 
 DEFAULT_METHOD = "direct"
 """Name of the default method: the library, the CLI and the README use the same."""
@@ -99,14 +99,53 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     result = _assemble(system, params, grid, method, labels, raw, cycles, mean_periods,
                        time.perf_counter() - t_start)
     if uncertainty:
-        direct = method if isinstance(method, Direct) else Direct(
-            integrator=method.integrator, max_period=method.max_period, period_tol=method.period_tol,
-            merge_tol=method.merge_tol, chunk_size=method.chunk_size)
-        u = label_uncertainty(system, params, grid, result.labels, result.attractors, direct, samples=uncertainty,
-                              progress=progress)
+        u = label_uncertainty(system, params, grid, result.labels, result.attractors, _direct_of(method),
+                              samples=uncertainty, progress=progress)
         result = dataclasses.replace(result, uncertainty=u, runtime_s=time.perf_counter() - t_start)
     warn_if_unreliable(result)
     return result
+
+
+def _direct_of(method) -> Direct:
+    """The direct method whose pool measures a result's label uncertainty."""
+    return method if isinstance(method, Direct) else Direct(
+        integrator=method.integrator, max_period=method.max_period, period_tol=method.period_tol,
+        merge_tol=method.merge_tol, chunk_size=method.chunk_size)
+
+
+def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, method: AbstractGlobalMethod, *,
+                          progress: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> list[GlobalResult]:
+    """:func:`analyze_global` at several parameter sets of one system on one grid (the
+    arguments already checked): one :class:`~jaxgear.GlobalResult` per set, each the
+    result :func:`analyze_global` gives at that set alone.
+
+    A method with ``classify_values`` (:class:`~jaxgear.Direct`) runs every value in one
+    lane pool, and the label uncertainties in one pool each; other methods run value
+    after value. ``runtime_s`` of each result is its share of the whole.
+    """
+    params_list = list(params_list)
+    if not hasattr(method, "classify_values") or len(params_list) == 1:
+        return [analyze_global(system, p, grid, method, progress=progress, uncertainty=uncertainty)
+                for p in params_list]
+    t_start = time.perf_counter()
+    for params in params_list:
+        check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+    results = []
+    for params, (labels, raw, cycles, mean_periods) in zip(params_list,
+                                                           method.classify_values(system, params_list, grid,
+                                                                                  progress)):
+        labels, raw, cycles = _merge_same(labels, raw, cycles, method)
+        results.append(_assemble(system, params, grid, method, labels, raw, cycles, mean_periods, 0.0))
+    if uncertainty:
+        us = label_uncertainties(system, params_list, grid, [r.labels for r in results],
+                                 [r.attractors for r in results], _direct_of(method), samples=uncertainty,
+                                 progress=progress)
+        results = [dataclasses.replace(r, uncertainty=u) for r, u in zip(results, us)]
+    runtime = (time.perf_counter() - t_start) / len(results)
+    results = [dataclasses.replace(r, runtime_s=runtime) for r in results]
+    for r in results:
+        warn_if_unreliable(r)
+    return results
 
 
 def _merge_same(labels, raw, cycles, method):
