@@ -291,24 +291,67 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
     values = [1.30, 1.35, 1.40, 1.45]
     kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
     basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "full", **kw)
-    real = basins_module._analyze_value
+    real = basins_module._analyze_values
     calls = []
 
-    def analyze(system, params, *a, **k):
-        calls.append(float(params.omega))
-        if kill and len(calls) == 3:
+    def analyze(system, params_list, *a, **k):
+        calls.append([float(q.omega) for q in params_list])
+        if kill and len(calls) == 2:
             raise _Kill()
-        return real(system, params, *a, **k)
+        return real(system, params_list, *a, **k)
 
-    monkeypatch.setattr(basins_module, "_analyze_value", analyze)
+    monkeypatch.setattr(basins_module, "_analyze_values", analyze)
+    monkeypatch.setattr(basins_module, "BLOCK_CELLS", 2 * grid.n_cells)  # blocks of two values
     kill = True
     with pytest.raises(_Kill):
         basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
+    assert calls == [values[:2], values[2:]]
     calls.clear()
     kill = False
     basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
-    assert calls == values[2:]
+    assert calls == [values[2:]]  # the killed block only
     _assert_same_file(tmp_path / "full" / "basins.nc", tmp_path / "run" / "basins.nc")
+
+
+def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method):
+    """Every value of the (one-pool) basin sweep ``s`` holds what :func:`analyze_global`
+    gives at that value alone: the same shares, periods, uncertainty and labels."""
+    for i, v in enumerate(values):
+        r = jg.analyze_global(system, jg.with_param(p, param, v), grid, method, progress=False)
+        present = np.flatnonzero(s.present[i])
+        assert len(present) == len(r.attractors)
+        # the local attractor of each global id, read off the labels
+        lut = {}
+        for a, b in zip(np.asarray(r.labels).ravel(), s.labels[i].ravel()):
+            assert lut.setdefault(int(a), int(b)) == int(b)
+        for a in r.attractors:
+            g = lut[a.id]
+            assert s.shares[i, g] == a.share and s.period[i, g] == a.period
+        assert s.sink_share[i] == r.n_sink / r.n_cells and s.unresolved_share[i] == r.n_unresolved / r.n_cells
+
+
+def test_basin_sweep_in_one_pool_is_each_value_alone():
+    """The basin sweep runs all values of the gear model in one lane pool (each lane with
+    its value's parameters, in the compiled kernel); every value's labels and shares are
+    those of the global analysis at that value alone."""
+    p = jg.paper_params()
+    grid = jg.CellGrid.paper((10, 6, 12))
+    values = [4.5, 5.5]
+    s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False)
+    assert not np.allclose(s.shares[0], s.shares[-1])  # the values differ
+    _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct())
+
+
+def test_basin_sweep_in_one_pool_pure_jax():
+    """The same through the pure-JAX integrator (each lane's parameters mapped over the
+    lanes), with a value where one of the Duffing's two attractors is gone."""
+    p = jg.DuffingParams(**DUFF, omega=1.3)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
+    values = [1.0, 1.3, 1.4]
+    method = jg.Direct(integrator=jg.RK4(64), max_period=4)
+    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=method, progress=False)
+    assert s.present.sum(axis=1).tolist() != [s.present.shape[1]] * 3
+    _assert_sweep_is_separate_analyses(s, jg.DUFFING, p, "omega", values, grid, method)
 
 
 # ----------------------------------------------------------------- parameter map

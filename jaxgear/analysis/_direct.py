@@ -18,7 +18,7 @@ from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import refine_orbits
-from ._pool import run_pool
+from ._pool import run_pools
 
 __all__ = ["Direct"]
 
@@ -74,17 +74,34 @@ class Direct(AbstractGlobalMethod):
         labels, atts, mean = self.label_states(system, params, grid.centres(), progress)
         return Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean)
 
+    def classify_values(self, system, params_list, grid: CellGrid, progress: bool) -> list[Classification]:
+        """:meth:`classify` at several parameter sets in one lane pool (each lane carries
+        its value's parameters; attractor tables per value): one classification per
+        value, each that of :meth:`classify` at that value."""
+        out = []
+        for labels, atts, mean in self.label_states_values(system, params_list, grid.centres(), progress):
+            out.append(Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean))
+        return out
+
     def label_states(self, system, params, X: np.ndarray, progress: bool = False):
         """Label the states ``X (n, dim)`` (at forcing phase 0): ``(labels (n,), [(points,
         period, residual)], mean periods per state)``."""
-        labels, atts, used = run_pool(system, params, X, self.integrator, chunk=self.chunk_size,
-                                      R=self.round_periods, max_periods=self.max_periods,
-                                      max_period=self.max_period, tol=self.period_tol, capture=self.capture_radius,
-                                      bound=self.escape_bound, merge_tol=self.merge_tol, progress=progress)
-        refined = refine_orbits(system, params, [(pts[-1], k) for pts, k in atts], self.integrator, settle=200,
-                                max_period=self.max_period)
-        out = [(pts, k, res) for (pts, res), (_, k) in zip(refined, atts)]
-        return labels, out, float(used.mean()) if len(used) else 0.0
+        return self.label_states_values(system, [params], X, progress)[0]
+
+    def label_states_values(self, system, params_list, X: np.ndarray, progress: bool = False, label="direct"):
+        """:meth:`label_states` of the same states ``X (n, dim)`` under each parameter set of
+        ``params_list``, in one lane pool: a list of its results, one per value."""
+        pooled = run_pools(system, params_list, [X] * len(params_list), self.integrator, chunk=self.chunk_size,
+                           R=self.round_periods, max_periods=self.max_periods, max_period=self.max_period,
+                           tol=self.period_tol, capture=self.capture_radius, bound=self.escape_bound,
+                           merge_tol=self.merge_tol, progress=progress, label=label)
+        out = []
+        for params, (labels, atts, used) in zip(params_list, pooled):
+            refined = refine_orbits(system, params, [(pts[-1], k) for pts, k in atts], self.integrator, settle=200,
+                                    max_period=self.max_period)
+            res = [(pts, k, r) for (pts, r), (_, k) in zip(refined, atts)]
+            out.append((labels, res, float(used.mean()) if len(used) else 0.0))
+        return out
 
 
 def capture_radius(attractors: list, capture) -> float:

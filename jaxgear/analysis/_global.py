@@ -25,9 +25,9 @@ from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
 from ._orbits import section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
-from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
+from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
 
-__all__ = ["analyze_global", "default_method", "DEFAULT_METHOD", "with_label_uncertainty"]
+__all__ = ["analyze_global", "analyze_global_values", "default_method", "DEFAULT_METHOD", "with_label_uncertainty"]
 
 DEFAULT_METHOD = "direct"
 """Name of the default method: the library, the CLI and the README use the same."""
@@ -114,6 +114,41 @@ def with_label_uncertainty(result: GlobalResult, system, params, method: Abstrac
     u = label_uncertainty(system, params, result.grid, result.labels, result.attractors, direct, samples=samples,
                           progress=progress)
     return dataclasses.replace(result, uncertainty=u)
+
+
+def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, method: AbstractGlobalMethod, *,
+                          progress: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> list[GlobalResult]:
+    """:func:`analyze_global` at several parameter sets of one system on one grid (the
+    arguments already checked): one :class:`~jaxgear.GlobalResult` per set, each the
+    result :func:`analyze_global` gives at that set alone.
+
+    A method with ``classify_values`` (:class:`~jaxgear.Direct`) runs every value in one
+    lane pool, and the label uncertainties in one pool each; other methods run value
+    after value. ``runtime_s`` of each result is its share of the whole.
+    """
+    params_list = list(params_list)
+    if not hasattr(method, "classify_values") or len(params_list) == 1:
+        return [analyze_global(system, p, grid, method, progress=progress, uncertainty=uncertainty)
+                for p in params_list]
+    t_start = time.perf_counter()
+    for params in params_list:
+        check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+    results = []
+    for params, (labels, raw, cycles, mean_periods) in zip(params_list,
+                                                           method.classify_values(system, params_list, grid,
+                                                                                  progress)):
+        labels, raw, cycles = _merge_same(labels, raw, cycles, method)
+        results.append(_assemble(system, params, grid, method, labels, raw, cycles, mean_periods, 0.0))
+    if uncertainty:
+        us = label_uncertainties(system, params_list, grid, [r.labels for r in results],
+                                 [r.attractors for r in results], Direct.like(method), samples=uncertainty,
+                                 progress=progress)
+        results = [dataclasses.replace(r, uncertainty=u) for r, u in zip(results, us)]
+    runtime = (time.perf_counter() - t_start) / len(results)
+    results = [dataclasses.replace(r, runtime_s=runtime) for r in results]
+    for r in results:
+        warn_if_unreliable(r)
+    return results
 
 
 def _merge_same(labels, raw, cycles, method):

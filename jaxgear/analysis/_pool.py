@@ -22,6 +22,13 @@ decides happens on the device inside one ``lax.while_loop`` over rounds of
 
 The host only reads a few scalars per call (progress, a full attractor table, a pool
 to shrink).
+
+Several parameter sets (the values of a sweep) run in one pool (:func:`run_pools`): each
+cell carries its value's row, a lane integrates with its row's parameters
+(``integrator.advance_rows``; the compiled kernel reads per-lane rows) and decides
+against its row's own attractor table (one table, capture radius and new attractor per
+row and round), so every value is labelled as it would be alone, while the pool stays
+full from one value to the next.
 """
 
 from __future__ import annotations
@@ -36,7 +43,7 @@ import numpy as np
 
 from .._batching import progress_bar
 
-__all__ = ["PoolState", "run_pool", "NOT_DONE"]
+__all__ = ["PoolState", "run_pool", "run_pools", "NOT_DONE"]
 
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
@@ -51,16 +58,17 @@ class PoolState(NamedTuple):
     #                  (c = clock % H), so any M consecutive points back are one contiguous slice
     streak: jax.Array  # (M, L) int32 recurrence streaks
     cell: jax.Array  # (L,) int32 cell held, -1 idle
+    row: jax.Array  # (L,) int32 parameter row (value) of the cell held
     age: jax.Array  # (L,) int32 periods integrated for the cell held
     labels: jax.Array  # (n,) int32
     used: jax.Array  # (n,) int32 periods integrated per cell
     next_cell: jax.Array  # () int32
     n_done: jax.Array  # () int32
     clock: jax.Array  # () int32
-    att_pts: jax.Array  # (A, M, dim) attractor points in cycle order (NaN padded)
-    att_k: jax.Array  # (A,) int32 periods (0: empty slot)
-    n_att: jax.Array  # () int32
-    radius: jax.Array  # () capture radius
+    att_pts: jax.Array  # (V, A, M, dim) attractor points in cycle order (NaN padded), per parameter row
+    att_k: jax.Array  # (V, A) int32 periods (0: empty slot)
+    n_att: jax.Array  # (V,) int32
+    radius: jax.Array  # (V,) capture radius
     n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
     overflow: jax.Array  # () bool: a new attractor found no free slot
     rounds: jax.Array  # () int32 rounds run
@@ -78,16 +86,18 @@ class _Options(NamedTuple):
 
 
 @eqx.filter_jit
-def _init(n: int, L: int, dim: int, M: int, X, att_pts, att_k, n_att) -> PoolState:
+def _init(n: int, L: int, dim: int, M: int, X, Xrow, att_pts, att_k, n_att) -> PoolState:
     H = 2 * M + 1
     take = min(L, n)
     cell = jnp.where(jnp.arange(L) < take, jnp.arange(L), -1).astype(jnp.int32)
     Y = jnp.zeros((dim, L)).at[:, :take].set(X[:take].T)
+    row = jnp.zeros(L, jnp.int32).at[:take].set(Xrow[:take])
     return PoolState(
         Y=Y, hist=jnp.full((2 * H, dim, L), jnp.nan, dtype=jnp.float64), streak=jnp.zeros((M, L), jnp.int32), cell=cell,
-        age=jnp.zeros(L, jnp.int32), labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32),
+        row=row, age=jnp.zeros(L, jnp.int32), labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32),
         next_cell=jnp.asarray(take, jnp.int32), n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32),
-        att_pts=att_pts, att_k=att_k, n_att=jnp.asarray(n_att, jnp.int32), radius=jnp.asarray(0.0, jnp.float64),
+        att_pts=att_pts, att_k=att_k, n_att=jnp.asarray(n_att, jnp.int32),
+        radius=jnp.zeros(att_k.shape[0], jnp.float64),
         n_active=jnp.asarray(take, jnp.int32), overflow=jnp.asarray(False), rounds=jnp.asarray(0, jnp.int32))
 
 
@@ -110,7 +120,10 @@ def _back(hist, g, start: int, count: int, extra=0):
 
 def _one_period(system, params, integrator, o: _Options, s: PoolState) -> PoolState:
     H = s.hist.shape[0] // 2
-    Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
+    if s.att_k.shape[0] == 1:  # one parameter set
+        Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
+    else:  # params holds one row per value; each lane uses its cell's
+        Y = integrator.advance_rows(system, params, s.row, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
     g = s.clock + 1
     c = g % H
     hist = jax.lax.dynamic_update_slice_in_dim(s.hist, Y[None], c, axis=0)
@@ -138,11 +151,18 @@ def _capture_radius(att_pts, att_k, capture):
     return jnp.minimum(0.01 * scale, 0.25 * gap)
 
 
-def _decide(o: _Options, s: PoolState, X, n: int) -> PoolState:
+def _lanes(tbl, row):
+    """Each lane's entry of a per-row table ``tbl (V, ...)``, lanes last: ``(..., L)``
+    (``(..., 1)``, broadcast over the lanes, when there is one row)."""
+    x = tbl[:1] if tbl.shape[0] == 1 else tbl[row]
+    return jnp.moveaxis(x, 0, -1)
+
+
+def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     H2, dim, L = s.hist.shape
     H = H2 // 2
     M = o.M
-    A = s.att_k.shape[0]
+    V, A = s.att_k.shape
     g = s.clock
     Y = s.Y
     busy = s.cell >= 0
@@ -155,50 +175,64 @@ def _decide(o: _Options, s: PoolState, X, n: int) -> PoolState:
     label = jnp.full(L, -1, jnp.int32)
     i = jnp.arange(M)
     W_now = _back(s.hist, g, 0, M)  # (M, dim, L): the point i periods back
+    radius = _lanes(s.radius, s.row)  # (L,) or (1,)
 
-    def against(a, label, P, k, r):
-        """Lanes captured by (or recurring onto) the P-k attractor ``P (M, dim)`` in slot ``a``."""
-        if True:
-            valid = i < k
-            dn = jnp.sqrt(_sqdist(Y[None], P[:, :, None]))  # (M, L)
-            dn = jnp.where(valid[:, None], dn, jnp.inf)
-            m = jnp.argmin(dn, axis=0)  # the newest point is near P[m] ...
-            dmin = jnp.min(dn, axis=0)
-            Q = jnp.moveaxis(P[jnp.mod(m[None] - i[:, None], jnp.maximum(k, 1))], 2, 1)  # ... the one i back near
-            W_bef = _back(s.hist, g, 0, M, extra=k)  # the k points before those          # P[m - i]: (M, dim, L)
-            now = jnp.sqrt(_sqdist(W_now, Q))  # (M, L)
-            before = jnp.sqrt(_sqdist(W_bef, Q))
-            d_now = jnp.where(s.age >= k, jnp.max(jnp.where(valid[:, None], now, 0.0), axis=0), jnp.inf)
-            d_bef = jnp.where(s.age >= 2 * k, jnp.max(jnp.where(valid[:, None], before, 0.0), axis=0), jnp.inf)
-            cap = live & (d_now <= r) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
-            scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0))
-            same = rec & (per == k) & (dmin <= o.merge_tol * scale)
-            return jnp.where((label < 0) & (cap | same), a, label).astype(jnp.int32)
+    def against(a, label):
+        """Lanes captured by (or recurring onto) the attractor in slot ``a`` of their row's
+        table: a P-k cycle ``P (M, dim)`` (per lane ``P (M, dim, L)``, ``k (L,)``)."""
+        P = _lanes(s.att_pts[:, a], s.row)  # (M, dim, L) or (M, dim, 1)
+        k = _lanes(s.att_k[:, a], s.row)
+        valid = i[:, None] < k[None]  # (M, L) or (M, 1)
+        dn = jnp.sqrt(_sqdist(Y[None], P))  # (M, L)
+        dn = jnp.where(valid, dn, jnp.inf)
+        m = jnp.argmin(dn, axis=0)  # the newest point is near P[m] ...
+        dmin = jnp.min(dn, axis=0)
+        back = jnp.mod(m[None] - i[:, None], jnp.maximum(k, 1)[None])  # ... the one i back near P[m - i]
+        if V == 1:
+            Q = jnp.moveaxis(P[:, :, 0][back], 2, 1)  # (M, dim, L)
+            W_bef = _back(s.hist, g, 0, M, extra=k[0])  # the k points before those
+        else:
+            Q = jnp.take_along_axis(P, jnp.broadcast_to(back[:, None, :], (M, dim, L)), axis=0)
+            slot = g % H + H - i[:, None] - k[None]  # (M, L): the point i + k periods back
+            W_bef = jnp.take_along_axis(s.hist, jnp.broadcast_to(slot[:, None, :], (M, dim, L)), axis=0)
+        now = jnp.sqrt(_sqdist(W_now, Q))  # (M, L)
+        before = jnp.sqrt(_sqdist(W_bef, Q))
+        d_now = jnp.where(s.age >= k, jnp.max(jnp.where(valid, now, 0.0), axis=0), jnp.inf)
+        d_bef = jnp.where(s.age >= 2 * k, jnp.max(jnp.where(valid, before, 0.0), axis=0), jnp.inf)
+        cap = live & (k > 0) & (d_now <= radius) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
+        scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0), axis=(0, 1))
+        same = rec & (k > 0) & (per == k) & (dmin <= o.merge_tol * scale)
+        return jnp.where((label < 0) & (cap | same), a, label).astype(jnp.int32)
 
-    label = jax.lax.fori_loop(0, s.n_att, lambda a, lab: against(a, lab, s.att_pts[a], s.att_k[a], s.radius), label)
+    label = jax.lax.fori_loop(0, jnp.max(s.n_att), against, label)
 
-    # a recurring lane on no known attractor registers a new one (one per round)
+    # a recurring lane on no known attractor of its row registers a new one (one per row and round)
     new = rec & (label < 0)
-    has_new = jnp.any(new)
+    vs = jnp.arange(V)
+    new_v = new[None] & (s.row[None] == vs[:, None])  # (V, L)
+    has_new = jnp.any(new_v, axis=1)
     room = s.n_att < A
-    l0 = jnp.argmax(new)
+    l0 = jnp.argmax(new_v, axis=1)  # (V,)
     k0 = per[l0]
-    last = _back(s.hist, g, 0, M)[:, :, l0]  # (M, dim), newest first
-    pts0 = last[jnp.clip(k0 - 1 - i, 0, M - 1)]  # oldest of the last k0 first
-    pts0 = jnp.where((i < k0)[:, None], pts0, jnp.nan)
+    last = jnp.moveaxis(_back(s.hist, g, 0, M)[:, :, l0], 2, 0)  # (V, M, dim), newest first
+    pts0 = jax.vmap(lambda p, k: p[jnp.clip(k - 1 - i, 0, M - 1)])(last, k0)  # oldest of the last k0 first
+    valid0 = i[None] < k0[:, None]  # (V, M)
+    pts0 = jnp.where(valid0[..., None], pts0, jnp.nan)
     add = has_new & room
     slot = jnp.minimum(s.n_att, A - 1)
-    att_pts = jnp.where(add, s.att_pts.at[slot].set(pts0), s.att_pts)
-    att_k = jnp.where(add, s.att_k.at[slot].set(k0), s.att_k)
+    att_pts = jnp.where(add[:, None, None, None], s.att_pts.at[vs, slot].set(pts0), s.att_pts)
+    att_k = jnp.where(add[:, None], s.att_k.at[vs, slot].set(k0), s.att_k)
     n_att = s.n_att + add.astype(jnp.int32)
-    # the other recurring lanes whose newest point lies on the new attractor join it
-    P0 = att_pts[slot]
-    scale0 = 1.0 + jnp.max(jnp.where((i < k0)[:, None], jnp.abs(P0), 0.0))
-    d0 = jnp.where((i < k0)[:, None], _sqdist(Y[None], P0[:, :, None]), jnp.inf)  # (M, L)
-    joins = add & new & (per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
-    label = jnp.where(joins, slot, label).astype(jnp.int32)
-    radius = _capture_radius(att_pts, att_k, o.capture)
-    overflow = s.overflow | (has_new & ~room)
+    # the other recurring lanes of the row whose newest point lies on its new attractor join it
+    P0 = att_pts[vs, slot]  # (V, M, dim)
+    scale0 = 1.0 + jnp.max(jnp.where(valid0[..., None], jnp.abs(P0), 0.0), axis=(1, 2))
+    P0l, k0l = _lanes(P0, s.row), _lanes(k0, s.row)
+    d0 = jnp.where(i[:, None] < k0l[None], _sqdist(Y[None], P0l), jnp.inf)  # (M, L)
+    joins = (_lanes(add, s.row) & new & (per == k0l)
+             & (jnp.min(d0, axis=0) <= (o.merge_tol * _lanes(scale0, s.row)) ** 2))
+    label = jnp.where(joins, _lanes(slot, s.row), label).astype(jnp.int32)
+    radius = jax.vmap(lambda p, k: _capture_radius(p, k, o.capture))(att_pts, att_k)
+    overflow = s.overflow | jnp.any(has_new & ~room)
 
     unres = live & (label < 0) & (s.age >= o.max_periods)
     decided = esc | (label >= 0) | unres
@@ -214,15 +248,16 @@ def _decide(o: _Options, s: PoolState, X, n: int) -> PoolState:
     nc = s.next_cell + rank
     take = free & (nc < n)
     cell = jnp.where(take, nc, jnp.where(free, -1, s.cell)).astype(jnp.int32)
+    row = jnp.where(take, Xrow[jnp.clip(nc, 0, n - 1)], s.row).astype(jnp.int32)
     Ynew = jnp.where(take[None], X[jnp.clip(nc, 0, n - 1)].T, jnp.where(free[None], 0.0, Y))
     age = jnp.where(free, 0, s.age)
     streak = jnp.where(free[None], 0, s.streak)
     next_cell = jnp.minimum(s.next_cell + jnp.sum(take), n).astype(jnp.int32)
     highest = jnp.max(jnp.where(cell >= 0, jnp.arange(L), -1)) + 1  # busy lanes lie below it
     n_active = jnp.where(s.next_cell < n, jnp.maximum(s.n_active, highest), s.n_active).astype(jnp.int32)
-    s = s._replace(Y=Ynew, cell=cell, age=age, streak=streak, labels=labels, used=used, next_cell=next_cell,
-                   n_done=n_done, att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius, overflow=overflow,
-                   rounds=s.rounds + 1, n_active=n_active)
+    s = s._replace(Y=Ynew, cell=cell, row=row, age=age, streak=streak, labels=labels, used=used,
+                   next_cell=next_cell, n_done=n_done, att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius,
+                   overflow=overflow, rounds=s.rounds + 1, n_active=n_active)
     return s
 
 
@@ -233,12 +268,12 @@ def _compact(s: PoolState) -> PoolState:
     busy = s.cell >= 0
     order = jnp.argsort(~busy, stable=True)
     t = lambda a, ax: jnp.take(a, order, axis=ax)  # noqa: E731
-    return s._replace(Y=t(s.Y, 1), hist=t(s.hist, 2), streak=t(s.streak, 1), cell=t(s.cell, 0), age=t(s.age, 0),
-                      n_active=jnp.sum(busy).astype(jnp.int32))
+    return s._replace(Y=t(s.Y, 1), hist=t(s.hist, 2), streak=t(s.streak, 1), cell=t(s.cell, 0), row=t(s.row, 0),
+                      age=t(s.age, 0), n_active=jnp.sum(busy).astype(jnp.int32))
 
 
 @functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "n", "L_min"), donate_argnums=0)
-def _run(s: PoolState, system, params, integrator, o: _Options, X, n: int, L_min: int):
+def _run(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n: int, L_min: int):
     def cond(c):
         s, r = c
         shrink = (s.next_cell >= n) & (s.n_active <= L_min) & (s.Y.shape[1] > L_min)
@@ -247,7 +282,7 @@ def _run(s: PoolState, system, params, integrator, o: _Options, X, n: int, L_min
     def body(c):
         s, r = c
         s = jax.lax.fori_loop(0, o.R, lambda _, s: _one_period(system, params, integrator, o, s), s)
-        return _decide(o, s, X, n), r + 1
+        return _decide(o, s, X, Xrow, n), r + 1
 
     s, _ = jax.lax.while_loop(cond, body, (s, jnp.asarray(0, jnp.int32)))
     return s
@@ -257,12 +292,13 @@ def _resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolSta
     """The pool with ``L`` lanes (the first ``L``: busy lanes are at the front) or ``A``
     attractor slots."""
     if L is not None:
-        s = s._replace(Y=s.Y[:, :L], hist=s.hist[:, :, :L], streak=s.streak[:, :L], cell=s.cell[:L], age=s.age[:L],
-                       n_active=jnp.minimum(s.n_active, L))
+        s = s._replace(Y=s.Y[:, :L], hist=s.hist[:, :, :L], streak=s.streak[:, :L], cell=s.cell[:L], row=s.row[:L],
+                       age=s.age[:L], n_active=jnp.minimum(s.n_active, L))
     if A is not None:
-        A0, M, dim = s.att_pts.shape
-        s = s._replace(att_pts=jnp.concatenate([s.att_pts, jnp.full((A - A0, M, dim), jnp.nan)]),
-                       att_k=jnp.concatenate([s.att_k, jnp.zeros(A - A0, jnp.int32)]), overflow=jnp.asarray(False))
+        V, A0, M, dim = s.att_pts.shape
+        s = s._replace(att_pts=jnp.concatenate([s.att_pts, jnp.full((V, A - A0, M, dim), jnp.nan)], axis=1),
+                       att_k=jnp.concatenate([s.att_k, jnp.zeros((V, A - A0), jnp.int32)], axis=1),
+                       overflow=jnp.asarray(False))
     return s
 
 
@@ -278,65 +314,107 @@ def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, m
     ``attractors``: known ``(points, k)`` cycles (``k <= max_period``) that take the first
     slots, in that order.
     """
-    X = np.asarray(X, dtype=np.float64)
-    n, dim = X.shape
+    return run_pools(system, [params], [X], integrator, chunk=chunk, R=R, max_periods=max_periods,
+                     max_period=max_period, tol=tol, capture=capture, bound=bound, merge_tol=merge_tol,
+                     progress=progress, pilot=pilot, attractors=[attractors], label=label)[0]
+
+
+def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, max_periods: int, max_period: int,
+              tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = 1024,
+              attractors=None, label: str = "direct"):
+    """:func:`run_pool` for ``V`` parameter sets at once, in one pool: the states
+    ``X_list[v] (n_v, dim)`` under the parameters ``params_list[v]`` (one pytree
+    structure), each lane integrating with its cell's parameters and deciding against
+    its value's own attractor table. ``attractors``: per value, its known cycles.
+    Returns ``[(labels, attractors, periods)]`` per value, each what :func:`run_pool`
+    returns for that value alone.
+
+    The pilots of all values run first in one pool, then all the other states in one
+    pool, value after value: the compilation, the pilot's draining and the draining tail
+    are paid once.
+    """
+    from ..integrate import stack_params
+
+    V = len(params_list)
+    Xs = [np.asarray(X, dtype=np.float64) for X in X_list]
+    dim = Xs[0].shape[1]
     M = int(max_period)
     o = _Options(M=M, R=int(R), tol=float(tol), merge_tol=float(merge_tol), max_periods=int(max_periods),
                  bound=float(bound), capture=None if capture == "auto" else float(capture), rounds_per_call=4)
-    n_p = min(int(pilot), n) if 0 < int(pilot) < n else 0
-    first = np.sort(np.random.default_rng(0).choice(n, size=n_p, replace=False))
-    order = np.concatenate([first, np.setdiff1d(np.arange(n), first)])
-    att = _seed_attractors(attractors, M, dim)
-    bar = progress_bar(n, label, progress)
-    parts = []
-    for part in (order[:n_p], order[n_p:]):
-        if len(part):
-            L = max(1, min(int(chunk), len(part)))
-            s = _drive(system, params, integrator, o, jnp.asarray(X[part]), L, att, bar)
-            att = (s.att_pts, s.att_k, int(s.n_att))
-            parts.append(jax.device_get((s.labels, s.used)))
+    params = params_list[0] if V == 1 else stack_params(params_list)
+    orders, n_ps = [], []
+    for X in Xs:
+        n = len(X)
+        n_p = min(int(pilot), n) if 0 < int(pilot) < n else 0
+        first = np.sort(np.random.default_rng(0).choice(n, size=n_p, replace=False))
+        orders.append(np.concatenate([first, np.setdiff1d(np.arange(n), first)]))
+        n_ps.append(n_p)
+    att = _seed_attractors(attractors if attractors is not None else [()] * V, M, dim)
+    bar = progress_bar(sum(len(X) for X in Xs), label, progress)
+    labels = [np.empty(len(X), dtype=np.int64) for X in Xs]
+    used = [np.empty(len(X), dtype=np.int64) for X in Xs]
+    for phase in (0, 1):
+        parts = [o_[:n_p] if phase == 0 else o_[n_p:] for o_, n_p in zip(orders, n_ps)]
+        total = sum(len(p) for p in parts)
+        if not total:
+            continue
+        Xp = np.concatenate([X[p] for X, p in zip(Xs, parts)])
+        rows = np.concatenate([np.full(len(p), v, np.int32) for v, p in enumerate(parts)])
+        L = max(1, min(int(chunk), max(len(p) for p in parts)))  # the pool of one value, refilled from the next
+        s = _drive(system, params, integrator, o, jnp.asarray(Xp), jnp.asarray(rows), L, att, bar)
+        att = (s.att_pts, s.att_k, s.n_att)
+        lab, use = (np.asarray(a) for a in jax.device_get((s.labels, s.used)))
+        start = 0
+        for v, p in enumerate(parts):
+            labels[v][p] = lab[start:start + len(p)]
+            used[v][p] = use[start:start + len(p)]
+            start += len(p)
     bar.close()
-    labels = np.empty(n, dtype=np.int64)
-    used = np.empty(n, dtype=np.int64)
-    labels[order] = np.concatenate([np.asarray(p[0]) for p in parts])
-    used[order] = np.concatenate([np.asarray(p[1]) for p in parts])
-    att_pts, att_k = jax.device_get(att[:2])
-    atts = [(np.asarray(att_pts[a, : int(att_k[a])]), int(att_k[a])) for a in range(int(att[2]))]
-    return labels, atts, used
+    att_pts, att_k, n_att = (np.asarray(a) for a in jax.device_get(att))
+    out = []
+    for v in range(V):
+        atts = [(att_pts[v, a, : int(att_k[v, a])], int(att_k[v, a])) for a in range(int(n_att[v]))]
+        out.append((labels[v], atts, used[v]))
+    return out
 
 
 def _seed_attractors(attractors, M: int, dim: int):
-    """The attractor table ``(points (A, M, dim), periods (A,), count)`` holding the known
-    cycles first (``A``: 8 slots, or the next power of two that holds them)."""
-    known = [(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in attractors]
-    if any(not 0 < k <= M for _, k in known):
+    """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,))`` of ``V``
+    values holding each value's known cycles first (``A``: 8 slots, or the next power of
+    two that holds them)."""
+    known = [[(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in att] for att in attractors]
+    if any(not 0 < k <= M for kn in known for _, k in kn):
         raise ValueError(f"known attractors must have periods 1..{M}")
-    A = max(8, 1 << max(0, len(known) - 1).bit_length())
-    pts = np.full((A, M, dim), np.nan)
-    ks = np.zeros(A, np.int32)
-    for a, (p, k) in enumerate(known):
-        pts[a, :k] = p[:k]
-        ks[a] = k
-    return jnp.asarray(pts), jnp.asarray(ks), len(known)
+    most = max(len(kn) for kn in known)
+    A = max(8, 1 << max(0, most - 1).bit_length())
+    V = len(known)
+    pts = np.full((V, A, M, dim), np.nan)
+    ks = np.zeros((V, A), np.int32)
+    for v, kn in enumerate(known):
+        for a, (p, k) in enumerate(kn):
+            pts[v, a, :k] = p[:k]
+            ks[v, a] = k
+    return jnp.asarray(pts), jnp.asarray(ks), jnp.asarray([len(kn) for kn in known], jnp.int32)
 
 
-def _drive(system, params, integrator, o: _Options, Xd, L: int, att, bar) -> PoolState:
-    """Run one pool over the states ``Xd (n, dim)`` until every one is decided."""
+def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) -> PoolState:
+    """Run one pool over the states ``Xd (n, dim)`` (of parameter rows ``Xrow (n,)``)
+    until every one is decided."""
     n, dim = Xd.shape
-    s = _init(n, L, dim, o.M, Xd, *att)
+    s = _init(n, L, dim, o.M, Xd, Xrow, *att)
     done = 0
     while True:
         L_min = _next_pool(s.Y.shape[1])
-        s = _run(s, system, params, integrator, o, Xd, n, L_min)
+        s = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min)
         n_done, overflow, n_active, next_cell, n_att, busy = (int(v) for v in jax.device_get(
-            (s.n_done, s.overflow, s.n_active, s.next_cell, s.n_att, jnp.sum(s.cell >= 0))))
+            (s.n_done, s.overflow, s.n_active, s.next_cell, jnp.sum(s.n_att), jnp.sum(s.cell >= 0))))
         bar.update(n_done - done)
         done = n_done
         bar.set_postfix_str(f"{n_active} lanes busy, {n_att} attractors", refresh=False)
         if n_done >= n:
             return s
         if overflow:
-            s = _resize(s, A=2 * s.att_k.shape[0])
+            s = _resize(s, A=2 * s.att_k.shape[1])
             continue
         if next_cell >= n and busy <= (3 * n_active) // 4:
             s = _compact(s)

@@ -22,9 +22,9 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
-from ._pool import run_pool
+from ._pool import run_pools
 
-__all__ = ["label_uncertainty", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
+__all__ = ["label_uncertainty", "label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
 
 DEFAULT_SAMPLES = 1024
 """Cells sampled for the estimate (the direct method's pilot size: the same compiled pool)."""
@@ -46,33 +46,48 @@ def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attrac
         direct: the :class:`~jaxgear.Direct` method whose pool and options are used (its
             integrator is the result's).
     """
+    return label_uncertainties(system, [params], grid, [labels], [attractors], direct, samples=samples,
+                               perturbation=perturbation, seed=seed, progress=progress)[0]
+
+
+def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attractors_list, direct, *,
+                        samples: int = DEFAULT_SAMPLES, perturbation: float = DEFAULT_PERTURBATION, seed: int = 0,
+                        progress: bool = False) -> list[dict]:
+    """:func:`label_uncertainty` of several results on one grid (one per parameter set of
+    ``params_list``), each pool run once for all of them: one dict per result, each
+    equal to :func:`label_uncertainty` of that result alone."""
     check_int(samples, "samples", 1)
     check_number(perturbation, "perturbation", 0)
-    labels = np.asarray(labels).reshape(-1)
     n = grid.n_cells
     S = min(int(samples), n)
     rng = np.random.default_rng(seed)
     cells = np.sort(rng.choice(n, size=S, replace=False))
-    ref = labels[cells]
     X = grid.centres(cells)
-    known = [(np.asarray(a.points), int(a.period)) for a in attractors if 0 < int(a.period) <= direct.max_period]
-    ids = np.array([a.id for a in attractors if 0 < int(a.period) <= direct.max_period], dtype=np.int64)
-
-    def relabel(X, integrator, name):
-        lab, _, _ = run_pool(system, params, X, integrator, chunk=direct.chunk_size, R=direct.round_periods,
-                             max_periods=direct.max_periods, max_period=direct.max_period, tol=direct.period_tol,
-                             capture=direct.capture_radius, bound=direct.escape_bound, merge_tol=direct.merge_tol,
-                             progress=progress, pilot=0, attractors=known, label=name)
-        out = lab.copy()
-        seeded = (lab >= 0) & (lab < len(ids))
-        out[seeded] = ids[lab[seeded]]
-        out[lab >= len(ids)] = np.iinfo(np.int64).max  # an attractor the result does not have
-        return out
-
-    fine = direct.integrator.refined()
-    step = relabel(X, fine, "uncertainty: step halved")
     dX = np.zeros_like(X)
     dX[:, list(grid.axes)] = rng.uniform(-1.0, 1.0, (S, len(grid.axes))) * perturbation * grid.cell_size
-    start = relabel(X + dX, direct.integrator, "uncertainty: start moved")
-    return dict(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
-                perturbation=float(perturbation), refined_integrator=fine.to_dict())
+    refs = [np.asarray(labels).reshape(-1)[cells] for labels in labels_list]
+    knowns = [[(np.asarray(a.points), int(a.period)) for a in atts if 0 < int(a.period) <= direct.max_period]
+              for atts in attractors_list]
+    idss = [np.array([a.id for a in atts if 0 < int(a.period) <= direct.max_period], dtype=np.int64)
+            for atts in attractors_list]
+
+    def relabel(X, integrator, name):
+        pooled = run_pools(system, params_list, [X] * len(params_list), integrator, chunk=direct.chunk_size,
+                           R=direct.round_periods, max_periods=direct.max_periods, max_period=direct.max_period,
+                           tol=direct.period_tol, capture=direct.capture_radius, bound=direct.escape_bound,
+                           merge_tol=direct.merge_tol, progress=progress, pilot=0, attractors=knowns, label=name)
+        outs = []
+        for (lab, _, _), ids in zip(pooled, idss):
+            out = lab.copy()
+            seeded = (lab >= 0) & (lab < len(ids))
+            out[seeded] = ids[lab[seeded]]
+            out[lab >= len(ids)] = np.iinfo(np.int64).max  # an attractor the result does not have
+            outs.append(out)
+        return outs
+
+    fine = direct.integrator.refined()
+    steps = relabel(X, fine, "uncertainty: step halved")
+    starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
+    return [dict(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
+                 perturbation=float(perturbation), refined_integrator=fine.to_dict())
+            for step, start, ref in zip(steps, starts, refs)]

@@ -15,7 +15,8 @@ from __future__ import annotations
 from typing import Any, Mapping
 
 from ._adaptive import Adaptive
-from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, AbstractIntegrator, batch_field, check_steps_per_period
+from ._base import (DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, AbstractIntegrator, batch_field, check_steps_per_period,
+                    stack_params)
 from ._kink import KinkAwareRK4
 from ._rk4 import RK4, rk4_step
 

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 from .._checks import check_int
 
 __all__ = ["AbstractIntegrator", "AbstractFixedStep", "DEFAULT_STEPS_PER_PERIOD", "batch_field",
-           "check_steps_per_period"]
+           "check_steps_per_period", "stack_params"]
 
 DEFAULT_STEPS_PER_PERIOD = 200
 """Fixed steps per forcing period of the default integrator (the one place it is set)."""
@@ -51,6 +51,12 @@ def batch_field(system, params, t, Y):
     return jax.vmap(system.vector_field, in_axes=(in_t, 1, None), out_axes=1)(t, Y, params)
 
 
+def stack_params(params_list):
+    """Several parameter pytrees of one structure as one, every numeric leaf with a
+    leading axis of ``len(params_list)`` rows (static fields must agree)."""
+    return jax.tree.map(lambda *a: jnp.stack([jnp.asarray(x) for x in a]), *params_list)
+
+
 class AbstractIntegrator(eqx.Module):
     """An integration strategy for a :class:`~jaxgear.ForcedSystem` (see the module).
 
@@ -68,6 +74,21 @@ class AbstractIntegrator(eqx.Module):
         (a traced int, optional): only lanes ``[0, n_active)`` matter, the others may be
         returned unchanged (the compiled CPU kernel skips them; others compute all).
         """
+
+    def advance_rows(self, system, params_rows, rows, Y, t0, periods: int, n_active=None):
+        """:meth:`advance` with one parameter set per lane: ``params_rows`` is the
+        parameter pytree with a leading axis of ``V`` rows on every numeric leaf
+        (:func:`stack_params`), ``rows (n,)`` int the row of each lane of ``Y (dim, n)``.
+
+        Each lane is advanced exactly as :meth:`advance` would with its own parameters
+        (here by mapping it over the lanes; the compiled CPU kernel reads the rows
+        itself). ``n_active`` as in :meth:`advance`.
+        """
+        def one(y, r):
+            p = jax.tree.map(lambda a: a[r], params_rows)
+            return self.advance(system, p, y[:, None], t0, periods)[:, 0]
+
+        return jax.vmap(one, in_axes=(1, 0), out_axes=1)(Y, rows)
 
     @abc.abstractmethod
     def trajectory(self, system, params, Y, t0, periods: int, samples_per_period: int):

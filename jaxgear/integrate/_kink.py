@@ -387,6 +387,13 @@ class KinkAwareRK4(AbstractFixedStep):
             return native_advance(self, system, params, Y, t0, int(periods), n_active)
         return super().advance(system, params, Y, t0, periods)
 
+    def advance_rows(self, system, params_rows, rows, Y, t0, periods: int, n_active=None):
+        if self.backend == "auto" and system.native is not None:
+            from ._native import native_advance
+
+            return native_advance(self, system, params_rows, Y, t0, int(periods), n_active, rows=rows)
+        return super().advance_rows(system, params_rows, rows, Y, t0, periods)
+
     def flow(self, system, params, x, t0, periods: int):
         # the pure-JAX steps: differentiable both ways (monodromy matrices, implicit gradients)
         return AbstractFixedStep.advance(self, system, params, x[:, None], t0, periods)[:, 0]

@@ -116,35 +116,46 @@ def _shape_code(params) -> int:
     return {"sine": 0, "rectangular": 1}[params.mesh_shape]
 
 
-def native_advance(integrator, system, params, Y, t0, periods: int, n_active=None):
+def native_advance(integrator, system, params, Y, t0, periods: int, n_active=None, rows=None):
     """``integrator.advance`` through the compiled kernel on CPUs (the pure-JAX steps on other
-    platforms, for derivatives, and when the kernel is unavailable)."""
-    from ._base import AbstractFixedStep
+    platforms, for derivatives, and when the kernel is unavailable). With ``rows (n,)``:
+    ``integrator.advance_rows`` (``params`` holds ``V`` stacked rows, lane j uses row
+    ``rows[j]``)."""
+    from ._base import AbstractFixedStep, AbstractIntegrator
 
-    def jax_path(Y, t0, params, active=None):
-        return AbstractFixedStep.advance(integrator, system, params, Y, t0, periods)
+    def jax_path(Y, t0, params, active=None, rows=None):
+        if rows is None:
+            return AbstractFixedStep.advance(integrator, system, params, Y, t0, periods)
+        return AbstractIntegrator.advance_rows(integrator, system, params, rows, Y, t0, periods)
 
     if not _load() or Y.ndim != 2 or Y.shape[0] != 4 or system.native != "reduced":
-        return jax_path(Y, t0, params)
+        return jax_path(Y, t0, params, None, rows)
     active = jnp.asarray(Y.shape[1] if n_active is None else n_active, jnp.int32)
     steps, max_splits, shape = int(integrator.steps_per_period), int(integrator.max_splits), _shape_code(params)
+    if rows is None:
+        rows = jnp.zeros((Y.shape[1],), jnp.int32)
+        packed = lambda params: pack_params(params)[None]  # noqa: E731
+        jax_rows = lambda Y, t0, params, active, rows: jax_path(Y, t0, params)  # noqa: E731
+    else:
+        rows = jnp.asarray(rows, jnp.int32)
+        packed = jax.vmap(pack_params)
+        jax_rows = jax_path
 
-    def cpu_path(Y, t0, params, active):
-        n = Y.shape[1]
+    def cpu_path(Y, t0, params, active, rows):
         call = jax.ffi.ffi_call(TARGET, jax.ShapeDtypeStruct(Y.shape, Y.dtype), vmap_method="broadcast_all")
-        return call(Y, pack_params(params)[None], jnp.zeros((n,), jnp.int32),
-                    jnp.reshape(jnp.asarray(t0, jnp.float64), (1,)), jnp.reshape(active, (1,)),
-                    periods=np.int64(periods), steps=np.int64(steps), max_splits=np.int64(max_splits),
-                    shape=np.int64(shape))
+        return call(Y, packed(params), rows, jnp.reshape(jnp.asarray(t0, jnp.float64), (1,)),
+                    jnp.reshape(active, (1,)), periods=np.int64(periods), steps=np.int64(steps),
+                    max_splits=np.int64(max_splits), shape=np.int64(shape))
 
     @jax.custom_jvp
-    def advance(Y, t0, params, active):
+    def advance(Y, t0, params, active, rows):
         if jax.default_backend() == "cpu":  # CPU devices only: the pure-JAX steps need not be traced
-            return cpu_path(Y, t0, params, active)
-        return jax.lax.platform_dependent(Y, t0, params, active, cpu=cpu_path, default=jax_path)
+            return cpu_path(Y, t0, params, active, rows)
+        return jax.lax.platform_dependent(Y, t0, params, active, rows, cpu=cpu_path, default=jax_rows)
 
     @advance.defjvp
     def advance_jvp(primals, tangents):  # derivatives from the pure-JAX steps (the reference)
-        return jax.jvp(lambda Y, t0, params: jax_path(Y, t0, params), primals[:3], tangents[:3])
+        rows = primals[4]
+        return jax.jvp(lambda Y, t0, params: jax_rows(Y, t0, params, None, rows), primals[:3], tangents[:3])
 
-    return advance(Y, jnp.asarray(t0, jnp.float64), params, active)
+    return advance(Y, jnp.asarray(t0, jnp.float64), params, active, rows)

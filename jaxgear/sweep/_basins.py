@@ -1,6 +1,8 @@
 """Basin shares across a parameter: the global analysis at every value, attractors matched.
 
-At each value :func:`~jaxgear.analyze_global` runs on the grid; the attractors of
+At each value the global analysis runs on the grid (for the direct method all values of
+a block in one lane pool over (value, cell) pairs,
+:func:`~jaxgear.analysis.analyze_global_values`); the attractors of
 neighbouring values are matched by the Hausdorff distance of their stroboscopic point
 sets (:func:`jaxgear._matching.match_attractors`, the idea of global continuation of
 attractors), so each keeps a global identity; shares per value and global attractor,
@@ -25,7 +27,7 @@ from .._matching import match_attractors
 from .._params import param_targets, params_to_dict, with_param
 from .._system import ForcedSystem
 from .._version import __version__
-from ..analysis import AbstractGlobalMethod, analyze_global, default_method, method_from_name
+from ..analysis import AbstractGlobalMethod, analyze_global_values, default_method, method_from_name
 from ._bifurcation import read_only
 from ._checkpoint import Checkpoint
 from ._classify import period_label
@@ -194,9 +196,15 @@ class BasinSweep:
         return save_result(self, path)
 
 
-def _analyze_value(system, params, grid, method):
-    """The global analysis at one parameter value (a hook for progress and tests)."""
-    return analyze_global(system, params, grid, method, progress=False)
+BLOCK_CELLS = 1 << 20
+"""Cells (values x grid cells) one lane pool of a basin sweep takes at most: the values
+of a block run together, and the block is what a killed sweep loses."""
+
+
+def _analyze_values(system, params_list, grid, method):
+    """The global analysis at several parameter values, in one lane pool (a hook for
+    progress and tests)."""
+    return analyze_global_values(system, params_list, grid, method, progress=False)
 
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
@@ -205,7 +213,10 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     """Basin shares across a parameter, attractors continued from value to value.
 
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
-    the method's grid; for the gear model the paper's region D). The attractors of
+    the method's grid; for the gear model the paper's region D); with the direct method
+    the values run together, as one lane pool over (value, cell) pairs of at most
+    :data:`BLOCK_CELLS` cells (:func:`~jaxgear.analysis.analyze_global_values`: the
+    same result per value). The attractors of
     neighbouring values are matched by the Hausdorff distance of their stroboscopic
     point sets (cyclic-shift invariant, the idea of global continuation of attractors):
     greedily, closest pairs first, pairs farther than ``match_tol`` not matched (default:
@@ -259,17 +270,25 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
                     match_tol=float(match_tol), version=__version__)
     ck = Checkpoint(out, "basins", settings, restart)
-    results = []
+    results: list = [None] * len(vals)
     bar = progress_bar(len(vals), f"basins {param}", progress, unit="value")
-    for i, v in enumerate(vals):
+    todo = []
+    for i in range(len(vals)):
         part = f"value_{i:05d}.nc"
-        r = ck.load_result(part, load) if ck.has(part) else None
-        if r is None:
-            r = _analyze_value(system, with_param(params, param, v), grid, method)
+        results[i] = ck.load_result(part, load) if ck.has(part) else None
+        if results[i] is None:
+            todo.append(i)
+        else:
+            bar.update(1)
+    per_block = max(1, BLOCK_CELLS // grid.n_cells)
+    for b in range(0, len(todo), per_block):
+        block = todo[b:b + per_block]
+        for i, r in zip(block, _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid,
+                                               method)):
             if ck.dir is not None:
-                r.save(ck.path(part))
-        results.append(r)
-        bar.update(1)
+                r.save(ck.path(f"value_{i:05d}.nc"))
+            results[i] = r
+        bar.update(len(block))
     bar.close()
     sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
                              float(match_tol), system, params_to_dict(params),

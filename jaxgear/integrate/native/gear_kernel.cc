@@ -539,13 +539,21 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
   alignas(64) double xa[4][kBlock], xb[4][kBlock], k1[4][kBlock];
   double (*x)[kBlock] = xa;
   double (*x1)[kBlock] = xb;
-  int row[kBlock];
+  int row[kBlock], lane[kBlock];  // lane j of the block is lane a + lane[j] of the batch
   for (int j = 0; j < L; ++j) {
-    for (int i = 0; i < 4; ++i) x[i][j] = Y[i * n + a + j];
+    lane[j] = j;
     row[j] = lane_row ? lane_row[a + j] : 0;
   }
   bool uniform = true;
   for (int j = 1; j < L; ++j) uniform &= row[j] == row[0];
+  if (!uniform)  // lanes of several parameter rows: grouped by row, each group a run of the block
+    std::stable_sort(lane, lane + L, [&](int p, int q) { return row[p] < row[q]; });
+  int row_sorted[kBlock];
+  for (int j = 0; j < L; ++j) row_sorted[j] = row[lane[j]];
+  for (int j = 0; j < L; ++j) {
+    row[j] = row_sorted[j];
+    for (int i = 0; i < 4; ++i) x[i][j] = Y[i * n + a + lane[j]];
+  }
   alignas(64) unsigned char need[kBlock];
   for (int per = 0; per < periods; ++per) {
     for (int s = 0; s < steps; ++s) {
@@ -556,31 +564,17 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
         trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, L, x, x1, k1,
                       tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
       } else {
-        // lanes with different parameter rows: one lane at a time
-        for (int j = 0; j < L; ++j) {
-          const int r = row[j];
-          const Model& m = models[r];
+        // lanes with different parameter rows: each run of one row vectorised as above
+        for (int j0 = 0; j0 < L;) {
+          int j1 = j0 + 1;
+          while (j1 < L && row[j1] == row[j0]) ++j1;
+          const int r = row[j0];
           const Table& tb = tables[r];
-          const double h = m.T / steps;
-          double y[4], y1[4], kl[4];
-          for (int i = 0; i < 4; ++i) y[i] = x[i][j];
-          double acc4[4], z[4], dz[4];
-          field(coefs[r], tb.stage[3 * s], y, kl);
-          for (int i = 0; i < 4; ++i) { acc4[i] = kl[i]; z[i] = y[i] + 0.5 * h * kl[i]; }
-          field(coefs[r], tb.stage[3 * s + 1], z, dz);
-          for (int i = 0; i < 4; ++i) { acc4[i] += 2.0 * dz[i]; z[i] = y[i] + 0.5 * h * dz[i]; }
-          field(coefs[r], tb.stage[3 * s + 1], z, dz);
-          for (int i = 0; i < 4; ++i) { acc4[i] += 2.0 * dz[i]; z[i] = y[i] + h * dz[i]; }
-          field(coefs[r], tb.stage[3 * s + 2], z, dz);
-          for (int i = 0; i < 4; ++i) { acc4[i] += dz[i]; y1[i] = y[i] + (h / 6.0) * acc4[i]; }
-          double S0[4], S1[4];
-          switching(coefs[r], tb.E0[s], y, S0);
-          switching(coefs[r], tb.E1[s], y1, S1);
-          bool nd = tb.thb[s] < 1.0;
-          for (int i = 0; i < 4; ++i)
-            if (side(S1[i]) != side(S0[i]) && std::isfinite(S1[i]) && std::isfinite(S0[i])) nd = true;
-          need[j] = nd;
-          for (int i = 0; i < 4; ++i) { x1[i][j] = y1[i]; k1[i][j] = kl[i]; }
+          const double h = models[r].T / steps;
+          auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
+          trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x),
+                        at(x1), at(k1), tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
+          j0 = j1;
         }
       }
       // lanes with an event: split them one by one
@@ -619,7 +613,7 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
     }
   }
   for (int j = 0; j < L; ++j)
-    for (int i = 0; i < 4; ++i) out[i * n + a + j] = x[i][j];
+    for (int i = 0; i < 4; ++i) out[i * n + a + lane[j]] = x[i][j];
 }
 
 ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Buffer<ffi::S32> lane_row,
