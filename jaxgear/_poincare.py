@@ -78,7 +78,7 @@ def _orbit_kernel(system, params, Y, t0, n_points, periods_between, integrator):
         Y = integrator.advance(system, params, carry, t0 + j * periods_between * T, periods_between)
         return Y, Y
 
-    _, Ys = jax.lax.scan(step, Y, jnp.arange(n_points))
+    _, Ys = jax.lax.scan(step, Y, jnp.arange(n_points, dtype=jnp.float64))
     return Ys  # (n_points, dim, n)
 
 
@@ -143,7 +143,7 @@ def section_kernel(system, params, Y, t0, periods, index, direction, max_extra_p
 
     def body(c):
         k, Y, found, Yb, kb = c
-        Yn = stepper.step(system, params, t_start + k * h, Y, h)
+        Yn = stepper.step(system, params, t_start + k.astype(jnp.float64) * h, Y, h)
         hit = _crossed(Y[index], Yn[index], direction) & ~found
         Yb = jnp.where(hit[None, :], Y, Yb)
         kb = jnp.where(hit, k, kb)
@@ -152,7 +152,7 @@ def section_kernel(system, params, Y, t0, periods, index, direction, max_extra_p
 
     init = (jnp.asarray(0), Y, jnp.zeros(n, bool), Y, jnp.zeros(n, jnp.int64))
     _, Yend, found, Yb, kb = jax.lax.while_loop(cond, body, init)
-    tb = t_start + kb * h
+    tb = t_start + kb.astype(jnp.float64) * h
 
     # Safeguarded Newton on the step length s in [0, h] so that step(Yb, s)[index] = 0.
     g0 = Yb[index]

@@ -117,7 +117,7 @@ def _crossings(system, params, X, stepper, index: int, direction: int):
     lanes = X.shape[0]
 
     def one_step(Y, i):
-        t = jnp.full((lanes,), i * h)
+        t = jnp.full((lanes,), i * h, dtype=jnp.float64)
         g0 = Y[index]
 
         def iterate(j, c):
@@ -136,7 +136,7 @@ def _crossings(system, params, X, stepper, index: int, direction: int):
         hit = up if direction > 0 else down if direction < 0 else (up | down)
         return full, (hit, Z)
 
-    _, (hits, Zs) = jax.lax.scan(one_step, X.T, jnp.arange(n_steps))
+    _, (hits, Zs) = jax.lax.scan(one_step, X.T, jnp.arange(n_steps, dtype=jnp.float64))
     return hits, Zs
 
 

@@ -89,7 +89,7 @@ class _Options(NamedTuple):
 def _init(n: int, L: int, dim: int, M: int, X, Xrow, att_pts, att_k, n_att) -> PoolState:
     H = 2 * M + 1
     take = min(L, n)
-    cell = jnp.where(jnp.arange(L) < take, jnp.arange(L), -1).astype(jnp.int32)
+    cell = jnp.where(jnp.arange(L, dtype=jnp.int32) < take, jnp.arange(L, dtype=jnp.int32), -1).astype(jnp.int32)
     Y = jnp.zeros((dim, L)).at[:, :take].set(X[:take].T)
     row = jnp.zeros(L, jnp.int32).at[:take].set(Xrow[:take])
     return PoolState(
@@ -131,7 +131,7 @@ def _one_period(system, params, integrator, o: _Options, s: PoolState) -> PoolSt
     busy = s.cell >= 0
     age = jnp.where(busy, s.age + 1, s.age)
     thr = (o.tol * (1.0 + jnp.sqrt(_sqdist(Y, 0.0)))) ** 2
-    ks = jnp.arange(1, o.M + 1)
+    ks = jnp.arange(1, o.M + 1, dtype=jnp.int32)
     prev = _back(hist, g, 1, o.M)  # (M, dim, L): x_(t-1), ..., x_(t-M)
     ok = (_sqdist(Y[None], prev) <= thr[None]) & (age[None] > ks[:, None])  # x_(t-k) is this cell's
     streak = jnp.where(ok, s.streak + 1, 0)
@@ -142,7 +142,7 @@ def _capture_radius(att_pts, att_k, capture):
     if capture is not None:
         return jnp.asarray(capture, jnp.float64)
     A, M, _ = att_pts.shape
-    valid = (jnp.arange(M)[None] < att_k[:, None])  # (A, M)
+    valid = (jnp.arange(M, dtype=jnp.int32)[None] < att_k[:, None])  # (A, M)
     pts = jnp.where(valid[..., None], att_pts, 0.0)
     scale = 1.0 + jnp.max(jnp.where(valid[..., None], jnp.abs(pts), 0.0))
     d = jnp.sqrt(jnp.sum((pts[:, None, :, None] - pts[None, :, None, :]) ** 2, axis=-1))  # (A, A, M, M)
@@ -168,12 +168,12 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     busy = s.cell >= 0
     norms = jnp.sqrt(_sqdist(Y, 0.0))
     esc = busy & (~jnp.isfinite(norms) | (norms > o.bound))
-    ks = jnp.arange(1, M + 1)
+    ks = jnp.arange(1, M + 1, dtype=jnp.int32)
     per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0).astype(jnp.int32)  # (L,)
     rec = busy & ~esc & (per <= M)
     live = busy & ~esc
     label = jnp.full(L, -1, jnp.int32)
-    i = jnp.arange(M)
+    i = jnp.arange(M, dtype=jnp.int32)
     W_now = _back(s.hist, g, 0, M)  # (M, dim, L): the point i periods back
     radius = _lanes(s.radius, s.row)  # (L,) or (1,)
 
@@ -185,7 +185,7 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
         valid = i[:, None] < k[None]  # (M, L) or (M, 1)
         dn = jnp.sqrt(_sqdist(Y[None], P))  # (M, L)
         dn = jnp.where(valid, dn, jnp.inf)
-        m = jnp.argmin(dn, axis=0)  # the newest point is near P[m] ...
+        m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
         dmin = jnp.min(dn, axis=0)
         back = jnp.mod(m[None] - i[:, None], jnp.maximum(k, 1)[None])  # ... the one i back near P[m - i]
         if V == 1:
@@ -208,7 +208,7 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
 
     # a recurring lane on no known attractor of its row registers a new one (one per row and round)
     new = rec & (label < 0)
-    vs = jnp.arange(V)
+    vs = jnp.arange(V, dtype=jnp.int32)
     new_v = new[None] & (s.row[None] == vs[:, None])  # (V, L)
     has_new = jnp.any(new_v, axis=1)
     room = s.n_att < A
@@ -242,9 +242,9 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     used = s.used.at[target].set(s.age, mode="drop")
 
     # freed lanes take the next cells of the queue (only lanes below n_active while it drains)
-    n_done = s.n_done + jnp.sum(decided).astype(jnp.int32)
-    free = (~busy | decided) & (jnp.arange(L) < jnp.where(s.next_cell < n, L, s.n_active))
-    rank = (jnp.cumsum(free) - 1).astype(jnp.int32)
+    n_done = s.n_done + jnp.sum(decided, dtype=jnp.int32)
+    free = (~busy | decided) & (jnp.arange(L, dtype=jnp.int32) < jnp.where(s.next_cell < n, L, s.n_active))
+    rank = jnp.cumsum(free, dtype=jnp.int32) - 1
     nc = s.next_cell + rank
     take = free & (nc < n)
     cell = jnp.where(take, nc, jnp.where(free, -1, s.cell)).astype(jnp.int32)
@@ -252,8 +252,8 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     Ynew = jnp.where(take[None], X[jnp.clip(nc, 0, n - 1)].T, jnp.where(free[None], 0.0, Y))
     age = jnp.where(free, 0, s.age)
     streak = jnp.where(free[None], 0, s.streak)
-    next_cell = jnp.minimum(s.next_cell + jnp.sum(take), n).astype(jnp.int32)
-    highest = jnp.max(jnp.where(cell >= 0, jnp.arange(L), -1)) + 1  # busy lanes lie below it
+    next_cell = jnp.minimum(s.next_cell + jnp.sum(take, dtype=jnp.int32), n).astype(jnp.int32)
+    highest = jnp.max(jnp.where(cell >= 0, jnp.arange(L, dtype=jnp.int32), -1)) + 1  # busy lanes lie below it
     n_active = jnp.where(s.next_cell < n, jnp.maximum(s.n_active, highest), s.n_active).astype(jnp.int32)
     s = s._replace(Y=Ynew, cell=cell, row=row, age=age, streak=streak, labels=labels, used=used,
                    next_cell=next_cell, n_done=n_done, att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius,

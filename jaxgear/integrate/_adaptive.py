@@ -74,7 +74,7 @@ class Adaptive(AbstractIntegrator):
     def trajectory(self, system, params, Y, t0, periods: int, samples_per_period: int):
         T = system.period(params)
         m = int(periods) * int(samples_per_period)
-        ts = t0 + T * jnp.arange(m + 1) / samples_per_period
+        ts = t0 + T * jnp.arange(m + 1, dtype=jnp.float64) / samples_per_period
         Ys = jax.vmap(lambda y: self.solve(system, params, y, t0, ts[-1], ts=ts), in_axes=1, out_axes=2)(Y)
         return ts, Ys
 

@@ -165,7 +165,7 @@ class AbstractFixedStep(AbstractIntegrator):
         chunk = chunk_lanes(dim)
 
         def one_pass(_, Yb):
-            return jax.lax.fori_loop(0, n_steps, lambda i, Z: self.step(system, params, t0 + i * h, Z, h), Yb)
+            return jax.lax.fori_loop(0, n_steps, lambda i, Z: self.step(system, params, t0 + _as_float(i) * h, Z, h), Yb)
 
         def loop(Yb):
             return jax.lax.fori_loop(0, int(repeats), one_pass, Yb) if repeats > 1 else one_pass(0, Yb)
@@ -189,11 +189,11 @@ class AbstractFixedStep(AbstractIntegrator):
         m = int(periods) * s
         sub = -(-int(self.steps_per_period) // s)  # whole steps between samples
         h = T / (sub * s)
-        ts = t0 + T * jnp.arange(m + 1) / s
+        ts = t0 + T * jnp.arange(m + 1, dtype=jnp.float64) / s
 
         def one_sample(Z, i):
-            t_start = t0 + i * sub * h
-            Z = jax.lax.fori_loop(0, sub, lambda j, W: self.step(system, params, t_start + j * h, W, h), Z)
+            t_start = t0 + _as_float(i) * (sub * h)
+            Z = jax.lax.fori_loop(0, sub, lambda j, W: self.step(system, params, t_start + _as_float(j) * h, W, h), Z)
             return Z, Z
 
         _, Ys = jax.lax.scan(one_sample, Y, jnp.arange(m))
@@ -206,6 +206,11 @@ class AbstractFixedStep(AbstractIntegrator):
 # step per cell unchunked, 6.0 ns with chunks of 65,536-100,000 cells, 9.8 ns with
 # 32,768 (each stage is one multithreaded XLA loop whose start-up cost then shows).
 _CHUNK_BYTES = 16 * 2**20
+
+
+def _as_float(i):
+    """A loop counter as a float64 scalar (step times are float64; no implicit promotion)."""
+    return jnp.asarray(i, jnp.float64)
 
 
 def chunk_lanes(dim: int) -> int:

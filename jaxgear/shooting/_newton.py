@@ -42,7 +42,7 @@ def orbit_jacobians(system, params, x, t0, k, integrator):
         y, J = value_and_jacobian(lambda w: integrator.flow(system, params, w, t0 + i * T, 1), z)
         return y, (z, J)
 
-    xk, (pts, Js) = jax.lax.scan(one_period, x, jnp.arange(k))
+    xk, (pts, Js) = jax.lax.scan(one_period, x, jnp.arange(k, dtype=jnp.float64))
 
     def accumulate(C, J):
         C = J @ C
