@@ -197,10 +197,10 @@ def _have_numba() -> bool:
 # =========================================================================== item 1
 def bench_kernel(X, repeat, R):
     """Item 1: one period of the paper grid, jaxgear's integrators and the numba baselines."""
+    import baselines as B
     import jax
     import jax.numpy as jnp
 
-    import baselines as B
     import jaxgear
 
     p = jaxgear.paper_params()
@@ -260,9 +260,9 @@ def bench_kernel(X, repeat, R):
 def bench_other_styles(X, repeat, R, scipy_sample, diffrax_sample):
     """Item 2: numba naive, solve_ivp loop, diffrax vmap, each against the default integrator
     and plain RK4 of item 1."""
+    import baselines as B
     import jax.numpy as jnp
 
-    import baselines as B
     import jaxgear
 
     p = jaxgear.paper_params()
@@ -572,7 +572,7 @@ def bench_bifurcation(R, quick: bool):
     X8 = random_states(n_states, seed=3)
     out = {}
     for name, values in (("b", np.linspace(0.25, 6.0, n_par)), ("Omega", np.linspace(0.6, 1.2, n_par)))[: 1 if quick else 2]:
-        fn = lambda: jaxgear.bifurcation_diagram(jaxgear.REDUCED, p, name, values, X8, transient=periods - record,  # noqa: E731
+        fn = lambda name=name, values=values: jaxgear.bifurcation_diagram(jaxgear.REDUCED, p, name, values, X8, transient=periods - record,  # noqa: E731
                                                  record=record, direction="independent", progress=False)
         m, d = measure_result(fn, 1)
         total = n_par * n_states

@@ -8,7 +8,7 @@ grid, and the results do not depend on the chunk size.
 from __future__ import annotations
 
 import warnings
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 

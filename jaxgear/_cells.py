@@ -10,7 +10,7 @@ state outside the box or non-finite goes.
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -60,7 +60,7 @@ class CellGrid:
     # ------------------------------------------------------------------ build
     @classmethod
     def box(cls, bounds: Sequence[tuple[float, float]], counts: Sequence[int], *, axes: Sequence[int] | None = None,
-            dim: int | None = None, base: Sequence[float] | None = None, names: Sequence[str] = ()) -> "CellGrid":
+            dim: int | None = None, base: Sequence[float] | None = None, names: Sequence[str] = ()) -> CellGrid:
         """A grid from ``bounds=[(lo, hi), ...]`` and ``counts`` over ``axes`` (default: the first ones)."""
         from ._checks import check_int, check_number
 
@@ -83,7 +83,7 @@ class CellGrid:
                    counts=tuple(int(c) for c in counts), base=base, names=tuple(names))
 
     @classmethod
-    def paper(cls, counts: Sequence[int] = (50, 30, 60), bounds=PAPER_REGION) -> "CellGrid":
+    def paper(cls, counts: Sequence[int] = (50, 30, 60), bounds=PAPER_REGION) -> CellGrid:
         """The paper's region D on Σ = {x4 = 0} (eq. 10): 50 × 30 × 60 cells over x1, x2, x3."""
         return cls.box(bounds, counts, axes=(0, 1, 2), base=(0.0, 0.0, 0.0, 0.0), names=("x1", "x2", "x3", "x4"))
 
@@ -147,5 +147,5 @@ class CellGrid:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, d) -> "CellGrid":
+    def from_dict(cls, d) -> CellGrid:
         return cls(**{k: tuple(v) for k, v in d.items()})

@@ -32,7 +32,8 @@ import dataclasses
 import json
 import types
 import typing
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -343,7 +344,7 @@ def _decode_items(r: _Reader, cls, path: str) -> tuple:
     if n == 0:
         return ()
     cols = {}
-    for name, hint, meta in _record_fields(cls):
+    for name, hint, _meta in _record_fields(cls):
         p = f"{path}__{name}"
         if _is_array_hint(hint):
             stacked = r.array(p)

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -276,7 +277,7 @@ class GearSet:
             mesh_shape=self.mesh_shape,
         )
 
-    def replace(self, **changes) -> "GearSet":
+    def replace(self, **changes) -> GearSet:
         """A copy with some physical fields changed (validated again)."""
         names = {f.name for f in dataclasses.fields(self)}
         unknown = set(changes) - names

@@ -16,8 +16,9 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 __all__ = ["load", "save_result", "atomic_write", "write_json", "write_text", "save_figure", "read_dataset",
            "strict_json", "TMP_PREFIX", "remove_stale_temporaries", "NotAResultFile"]

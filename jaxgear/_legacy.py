@@ -68,7 +68,7 @@ def _orbits(ds):
             trajectory=v("trajectory")[i, :n_traj] if n_traj else None))
     shots, seeds = {}, {}
     for k in json.loads(ds.attrs["shot_periods"]):
-        g = lambda f: v(f"shot_k{k}_{f}")  # noqa: E731
+        g = lambda f, k=k: v(f"shot_k{k}_{f}")  # noqa: E731
         shots[k] = ShootResult(
             point=g("point"), orbit=g("orbit"), min_period=g("min_period"), monodromy=g("monodromy"),
             multipliers=_complex(g("multipliers_real"), g("multipliers_imag")), stable=g("stable"),

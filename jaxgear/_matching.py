@@ -15,7 +15,7 @@ across values) and the comparison of two results.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -206,7 +206,7 @@ REDUCED = ForcedSystem(
 """The reduced 2-DOF model of paper §4.1; Σ = {x4 = 0} is its default section."""
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def nplanet_system(N: int) -> ForcedSystem:
     """The general model with ``N`` planets (paper eq. 5) as a :class:`ForcedSystem`.
 

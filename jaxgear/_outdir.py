@@ -28,8 +28,8 @@ import fnmatch
 import os
 import shutil
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from ._io import TMP_PREFIX, remove_stale_temporaries
 

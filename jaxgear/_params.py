@@ -13,7 +13,8 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -199,7 +200,7 @@ class GearParams(eqx.Module):
                 return False
         return True
 
-    def replace(self, **changes) -> "GearParams":
+    def replace(self, **changes) -> GearParams:
         """A copy with some canonical names (or ``mesh_shape``) changed (validated again)."""
         d = self.to_dict()
         unknown = set(changes) - set(PARAM_NAMES) - {"mesh_shape"}
@@ -218,7 +219,7 @@ class GearParams(eqx.Module):
         return out
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "GearParams":
+    def from_dict(cls, d: Mapping[str, Any]) -> GearParams:
         """Build from a mapping with the canonical names (those of :data:`OPTIONAL_DEFAULTS`
         may be missing, as in files written before they existed)."""
         known = set(PARAM_NAMES) | {"mesh_shape"}
@@ -235,7 +236,7 @@ class GearParams(eqx.Module):
     def to_json(self) -> str:
         return json.dumps(self.to_dict())
 
-    def uniform(self) -> "GearParams":
+    def uniform(self) -> GearParams:
         """The same parameters with per-planet arrays collapsed to scalars.
 
         Raises ``ValueError`` if the planets are not identical (the reduced model of

@@ -25,7 +25,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from ._checks import check_choice, check_int, check_number
 from ._status import Status
 from ._system import ForcedSystem, check_state_shape
-from .integrate import AbstractIntegrator, batch_field, default_integrator, resolve_integrator
+from .integrate import AbstractIntegrator, batch_field, resolve_integrator
 
 __all__ = ["stroboscopic_map", "stroboscopic_orbit", "section_map", "SectionHit", "sample_trajectory",
            "section_kernel", "check_periods"]

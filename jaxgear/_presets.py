@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from ._gearset import GearSet
 from ._params import PARAM_ALIASES, PARAM_NAMES, GearParams

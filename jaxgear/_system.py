@@ -7,7 +7,8 @@ models of :mod:`jaxgear._model` are two such systems.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -120,7 +121,7 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
     except Exception as e:  # a user function failing on these parameters
         raise ValueError(f"{name}: period(params) failed on these parameters: {type(e).__name__}: {e}") from e
     if T.ndim:
-        leaves_nd = [np.ndim(l) for l in jax.tree_util.tree_leaves(params)]
+        leaves_nd = [np.ndim(leaf) for leaf in jax.tree_util.tree_leaves(params)]
         if batched is None:
             batched = any(d > 0 for d in leaves_nd)
         if not batched:

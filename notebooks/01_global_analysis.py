@@ -21,6 +21,7 @@
 FULL = False
 
 import numpy as np
+from IPython.display import display
 
 import jaxgear as jg
 from jaxgear import plotting

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from IPython.display import display
 
 import jaxgear as jg
 from jaxgear import plotting

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from IPython.display import display
 
 import jaxgear as jg
 from jaxgear import plotting

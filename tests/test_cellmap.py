@@ -125,7 +125,7 @@ def test_double_well_mirror_symmetric_basins():
     np.testing.assert_allclose(sorted(a.points[0, 0] for a in r.attractors), [-1.0, 1.0], atol=1e-8)
     L = r.labels
     ids = {a.id: np.sign(a.points[0, 0]) for a in r.attractors}
-    mirror = np.vectorize(lambda l: [k for k, s in ids.items() if s == -ids[l]][0] if l >= 0 else l)(L)
+    mirror = np.vectorize(lambda lab: [k for k, s in ids.items() if s == -ids[lab]][0] if lab >= 0 else lab)(L)
     # (x, v) -> (-x, -v) maps the grid onto itself and swaps the basins
     assert np.array_equal(L[::-1, ::-1], mirror)
     shares = sorted(a.share for a in r.attractors)
@@ -160,10 +160,10 @@ def test_invariants_and_chunk_size_independence():
         assert np.max(np.abs(fine - a.points)) < 1e-2  # RK4 error at 200 steps with backlash kinks
 
 
-@pytest.mark.parametrize("l", [1, 2, 3])
-def test_period_two_reported_as_p2_whatever_l(l):
+@pytest.mark.parametrize("steps", [1, 2, 3])
+def test_period_two_reported_as_p2_whatever_l(steps):
     grid = CellGrid.box([(-1.6, 1.6), (-1.2, 1.2)], (10, 8), names=("x", "v"))
-    r = jg.analyze_global(jg.DUFFING, PERIOD_TWO, grid, method=jg.StroboscopicCellMap(mapping_steps=l, settle_periods=300), progress=False)
+    r = jg.analyze_global(jg.DUFFING, PERIOD_TWO, grid, method=jg.StroboscopicCellMap(mapping_steps=steps, settle_periods=300), progress=False)
     periodic = [a for a in r.attractors if a.share > 0.05]
     assert periodic and all(a.period == 2 for a in periodic)
     for a in periodic:

@@ -265,7 +265,7 @@ def test_warnings_are_one_line(capsys, monkeypatch):
     import jaxgear.cli.params as params_cli
 
     def run(args):
-        warnings.warn("something to know\nabout this run", UserWarning)
+        warnings.warn("something to know\nabout this run", UserWarning, stacklevel=2)
         return 0
 
     monkeypatch.setattr(params_cli, "run", run)

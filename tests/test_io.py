@@ -4,9 +4,9 @@ arrays with xarray, and every plotting function draws from a loaded result witho
 integrating anything (the integration kernels are replaced by functions that raise)."""
 
 import dataclasses
-from pathlib import Path
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest

@@ -50,8 +50,8 @@ def test_kernel_equals_pure_jax_on_random_states_and_parameters(shape):
         p = random_params(rng, shape)
         Y = jnp.asarray(random_states(rng, 700))  # not a multiple of the kernel's block
         t0 = float(rng.uniform(0, 10))
-        native = jax.jit(lambda Y, p: KinkAwareRK4(100).advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
-        ref = jax.jit(lambda Y, p: KinkAwareRK4(100, backend="jax").advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
+        native = jax.jit(lambda Y, p, t0=t0: KinkAwareRK4(100).advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
+        ref = jax.jit(lambda Y, p, t0=t0: KinkAwareRK4(100, backend="jax").advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
         assert np.all(np.isfinite(np.asarray(ref)))
         assert rel_diff(native, ref) <= TOL, (shape, rel_diff(native, ref))
         assert rel_diff(native, Y) > 1e-3  # the states moved

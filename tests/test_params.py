@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import jaxgear as jg
-from jaxgear import GearParams, GearSet, PARAM_NAMES
+from jaxgear import PARAM_NAMES, GearParams, GearSet
 
 # ----------------------------------------------------------------------------- hand calculation
 RHO, WIDTH, J_C = 7850.0, 0.025, 0.01

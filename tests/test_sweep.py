@@ -138,7 +138,7 @@ def test_hysteresis_of_the_hardening_duffing_oscillator():
     # the up sweep rides the upper branch, the down sweep the lower one (amplitude of the harmonic)
     for i in np.nonzero(inside)[0]:
         roots = duffing_hb(**DUFF, w=values[i])
-        amp = lambda x: np.hypot(x[0], x[1] / values[i])  # noqa: E731
+        amp = lambda x, w=values[i]: np.hypot(x[0], x[1] / w)  # noqa: E731
         assert abs(amp(up[i]) - roots[-1]) < 0.1 * roots[-1]
         assert abs(amp(down[i]) - roots[0]) < 0.1 * roots[-1]
 

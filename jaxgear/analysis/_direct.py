@@ -62,7 +62,7 @@ class Direct(AbstractGlobalMethod):
         return None
 
     @classmethod
-    def like(cls, method: AbstractGlobalMethod, integrator=None) -> "Direct":
+    def like(cls, method: AbstractGlobalMethod, integrator=None) -> Direct:
         """The direct method with the options every method shares (integrator, periods,
         tolerances, batch size) taken from ``method``; ``method`` itself when it is one."""
         if isinstance(method, Direct) and integrator is None:

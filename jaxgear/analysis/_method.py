@@ -106,7 +106,7 @@ class AbstractGlobalMethod(eqx.Module):
         """Crossing direction of Σ for the reported section points."""
         return 1
 
-    def replace(self, **changes) -> "AbstractGlobalMethod":
+    def replace(self, **changes) -> AbstractGlobalMethod:
         """A copy with some options changed (validated again)."""
         return dataclasses.replace(self, **changes)
 

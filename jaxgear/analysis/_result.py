@@ -78,7 +78,7 @@ def _refined_name(u: dict) -> str:
     return "16x smaller integration error"
 
 
-def _grid_dims(r: "GlobalResult") -> tuple[str, ...]:
+def _grid_dims(r: GlobalResult) -> tuple[str, ...]:
     return r.grid.axis_names
 
 

@@ -16,8 +16,16 @@ from pathlib import Path
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from .common import (add_param_options, check_counts, check_options, check_point, check_region, parse_counts,
-                     parse_point, parse_ranges)
+from .common import (
+    add_param_options,
+    check_counts,
+    check_options,
+    check_point,
+    check_region,
+    parse_counts,
+    parse_point,
+    parse_ranges,
+)
 
 KINDS = ("bifurcation", "basins", "continuation")
 

@@ -40,7 +40,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable, Mapping, NamedTuple
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -55,7 +56,7 @@ from .._params import get_field, params_from_dict, params_to_dict, params_type_n
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
 from ..shooting import Instability, PeriodicOrbit, classify_multipliers, periodic_orbit
 from ..shooting._floquet import check_period
 from ._objectives import OrbitSamples, sample_orbit

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 
 from .._checks import check_int
 from .._system import ForcedSystem
-from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
 from ..shooting._floquet import check_period
 
 __all__ = ["OrbitSamples", "sample_orbit", "MeshForces", "mesh_forces", "transmission_error", "peak_to_peak",

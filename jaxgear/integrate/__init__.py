@@ -12,16 +12,24 @@ Every analysis takes an integrator object and uses only the operations of
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from ._adaptive import Adaptive
-from ._base import (DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, AbstractIntegrator, batch_field, check_steps_per_period,
-                    stack_params)
+from ._base import (
+    DEFAULT_STEPS_PER_PERIOD,
+    AbstractFixedStep,
+    AbstractIntegrator,
+    batch_field,
+    check_steps_per_period,
+    stack_params,
+)
 from ._kink import KinkAwareRK4
 from ._rk4 import RK4, rk4_step
 
 __all__ = ["AbstractIntegrator", "AbstractFixedStep", "KinkAwareRK4", "RK4", "Adaptive", "default_integrator",
-           "integrator_from_dict", "resolve_integrator", "DEFAULT_STEPS_PER_PERIOD", "batch_field", "rk4_step", "check_steps_per_period"]
+           "integrator_from_dict", "resolve_integrator", "DEFAULT_STEPS_PER_PERIOD", "batch_field", "rk4_step",
+           "check_steps_per_period", "stack_params"]
 
 
 def default_integrator(steps_per_period: int | None = None) -> AbstractFixedStep:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -84,7 +83,7 @@ class Adaptive(AbstractIntegrator):
 
         return KinkAwareRK4(int(self.search_steps_per_period))
 
-    def refined(self) -> "Adaptive":
+    def refined(self) -> Adaptive:
         """Tolerances divided by 16 (and a refined crossing stepper)."""
         return dataclasses.replace(self, rtol=self.rtol / 16, atol=self.atol / 16)
 

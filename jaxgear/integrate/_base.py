@@ -101,14 +101,14 @@ class AbstractIntegrator(eqx.Module):
 
     @property
     @abc.abstractmethod
-    def crossing_stepper(self) -> "AbstractFixedStep":
+    def crossing_stepper(self) -> AbstractFixedStep:
         """The fixed-step integrator that brackets and locates section crossings."""
 
     def to_dict(self) -> dict[str, Any]:
         """The integrator's settings (JSON-able; :func:`integrator_from_dict` rebuilds it)."""
         return {"type": self.name}
 
-    def refined(self) -> "AbstractIntegrator":
+    def refined(self) -> AbstractIntegrator:
         """The same integrator with its error about 16 times smaller (half the step of a
         fourth-order method): what a result's label uncertainty is measured against."""
         raise NotImplementedError(f"{type(self).__name__} does not define refined()")
@@ -132,13 +132,13 @@ class AbstractFixedStep(AbstractIntegrator):
         """
 
     @property
-    def crossing_stepper(self) -> "AbstractFixedStep":
+    def crossing_stepper(self) -> AbstractFixedStep:
         return self
 
     def to_dict(self) -> dict[str, Any]:
         return {"type": self.name, "steps_per_period": int(self.steps_per_period)}
 
-    def refined(self) -> "AbstractFixedStep":
+    def refined(self) -> AbstractFixedStep:
         """Twice the steps per period (a fourth-order method's error / 16)."""
         return dataclasses.replace(self, steps_per_period=2 * int(self.steps_per_period))
 

@@ -79,7 +79,7 @@ def _compile(path: Path) -> None:
         Path(tmp).unlink(missing_ok=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _load() -> bool:
     """Build (if needed), load and register the kernel once; False (and one warning) if that fails."""
     if os.environ.get("JAXGEAR_NATIVE", "1").lower() in ("0", "off", "false", "no"):

@@ -4,21 +4,32 @@ attractor ``i`` is ``attractor_color(i)`` everywhere; the sink is light grey,
 unresolved cells black.
 """
 
-from ._style import attractor_color as attractor_color, SINK_COLOR as SINK_COLOR
+from ._basins import (
+    plot_attractors as plot_attractors,
+)
 from ._basins import (
     plot_domains as plot_domains,
+)
+from ._basins import (
     plot_domains_3d as plot_domains_3d,
-    plot_attractors as plot_attractors,
+)
+from ._basins import (
     plot_shares as plot_shares,
 )
-from ._orbit import plot_orbit as plot_orbit
 from ._branch import plot_branch as plot_branch
-
 from ._orbit import plot_multipliers as plot_multipliers
-
+from ._orbit import plot_orbit as plot_orbit
+from ._style import SINK_COLOR as SINK_COLOR
+from ._style import attractor_color as attractor_color
+from ._sweep import (
+    period_color as period_color,
+)
+from ._sweep import (
+    plot_basin_shares as plot_basin_shares,
+)
 from ._sweep import (
     plot_bifurcation as plot_bifurcation,
-    plot_basin_shares as plot_basin_shares,
+)
+from ._sweep import (
     plot_parameter_map as plot_parameter_map,
-    period_color as period_color,
 )

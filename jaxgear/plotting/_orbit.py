@@ -3,14 +3,14 @@ and Floquet multipliers against the unit circle."""
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..integrate import AbstractIntegrator
 from .._poincare import sample_trajectory
 from .._system import ForcedSystem
+from ..integrate import AbstractIntegrator
 from ._style import attractor_color
 
 

@@ -12,7 +12,6 @@ plus the sink.
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 from typing import Any
 

@@ -29,7 +29,7 @@ from .._format import format_table
 from .._params import param_targets, params_to_dict, with_param
 from .._system import ForcedSystem, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 from ._checkpoint import Checkpoint
 from ._classify import ESCAPED, classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points, sequential_points
@@ -165,7 +165,7 @@ class BifurcationDiagram:
         each attractor with its share of the starts."""
         rows = []
         S = len(self.starts)
-        for d, name in enumerate(self.directions):
+        for name in self.directions:
             runs = []
             for i in range(len(self.values)):
                 atts = self.attractors_at(i, name)

@@ -16,7 +16,7 @@ from .._format import format_table
 from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 from ._bifurcation import check_common, read_only
 from ._checkpoint import Checkpoint
 from ._classify import classify_sequences, group_starts, label_order, period_label
