@@ -37,3 +37,23 @@ def test_analyze_bad_input_exit_code(capsys):
     assert main(["analyze", "--grid", "5,3", "--quiet", "--no-figures"]) == 2
     assert main(["analyze", "--set", "Omega=-1", "--quiet", "--no-figures"]) == 2
     assert "Omega" in capsys.readouterr().err
+
+
+def test_library_cli_and_readme_share_the_default_method_and_integrator():
+    """analyze_global() without a method, `jaxgear analyze` without --method and the README
+    all use the same method and integrator."""
+    import argparse
+    from pathlib import Path
+
+    from jaxgear.cli.analyze import add_parser, build_method
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    add_parser(sub)
+    args = sub.choices["analyze"].parse_args([])
+    cli = build_method(args)
+    lib = jg.analysis.default_method()
+    assert type(cli) is type(lib) and cli.to_dict() == lib.to_dict()
+    assert lib.integrator == jg.default_integrator()
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert f"jaxgear analyze: {lib.name}, 90000 cells" in readme
+    assert f"`jaxgear.{type(lib.integrator).__name__}({lib.integrator.steps_per_period})`" in readme
