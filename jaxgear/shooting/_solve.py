@@ -42,20 +42,12 @@ from jax.custom_derivatives import SymbolicZero
 from .._status import Status
 from ..integrate import AbstractFixedStep, AbstractIntegrator
 
-__all__ = ["SOLVERS", "DEFAULT_SOLVER", "DEFAULT_SEGMENTS", "Shooting", "segment_map", "make_solver",
+__all__ = ["SOLVERS", "Shooting", "segment_map", "make_solver",
            "check_segments", "solve_orbit", "optx_status"]
 
 SOLVERS = ("newton", "dogleg", "levenberg-marquardt", "damped-newton")
 """Solver names: the three optimistix solvers, and the hand-written damped Newton of
 :mod:`._newton` (single shooting only; kept as the baseline of the benchmarks)."""
-
-DEFAULT_SOLVER = "levenberg-marquardt"
-"""Default solver of a search (chosen by measurement: ``benchmarks/shooting.py``)."""
-
-DEFAULT_SEGMENTS = 4
-"""Default number of segments ``M`` per orbit of a search (chosen by measurement:
-``benchmarks/shooting.py``)."""
-
 
 class Shooting(eqx.Module):
     """The multiple-shooting problem of a P-k orbit: system, integrator, ``k``, ``M``.
@@ -211,22 +203,38 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, *, solver: str, tol: flo
     """
     args = (params, t0)
     X0 = shoot.initial_states(params, t0, x0)
-    X0 = jnp.where(jnp.all(jnp.isfinite(X0)), X0, jnp.broadcast_to(x0, X0.shape))
+    X0 = jax.lax.stop_gradient(jnp.where(jnp.all(jnp.isfinite(X0)), X0, jnp.broadcast_to(x0, X0.shape)))
 
     def fn(Xf, a):
         X = Xf.reshape(X0.shape)
         return deflation(X[0], known, power, shift) * shoot.residual(X, a)
 
-    sol = optx.root_find(fn, make_solver(solver, tol), X0.reshape(-1), args, max_steps=int(max_iter), throw=False,
+    # the solve itself is not differentiated: derivatives come from the implicit function
+    # theorem, attached below by a zero-step solve at the root
+    sargs = jax.lax.stop_gradient(args)
+    sol = optx.root_find(fn, make_solver(solver, tol), X0.reshape(-1), sargs, max_steps=int(max_iter), throw=False,
                          adjoint=optx.ImplicitAdjoint())
-    X = sol.value.reshape(X0.shape)
-    x = X[0]
-    xs = jax.lax.stop_gradient(x)
-    xk = shoot.integrator.flow(shoot.system, params, xs, t0, shoot.k)
-    r = jnp.linalg.norm(xk - xs)
-    finite = jnp.all(jnp.isfinite(X)) & jnp.isfinite(r)
-    diverged = jnp.max(jnp.linalg.norm(jnp.where(jnp.isfinite(X), X, 0.0), axis=1)) > max_norm
+    Xs = jax.lax.stop_gradient(sol.value)
+    x = Xs.reshape(X0.shape)[0]
+    xk = shoot.integrator.flow(shoot.system, params, x, t0, shoot.k)
+    r = jax.lax.stop_gradient(jnp.linalg.norm(xk - x))
+    finite = jnp.all(jnp.isfinite(Xs)) & jnp.isfinite(r)
+    diverged = jnp.max(jnp.linalg.norm(jnp.where(jnp.isfinite(Xs), Xs, 0.0).reshape(X0.shape), axis=1)) > max_norm
     st = optx_status(sol.result, finite, r, tol, diverged)
+    # Implicit derivatives (optimistix.ImplicitAdjoint) at a converged root. A seed that did
+    # not converge gets the residual X - X_end instead (identity Jacobian, zero derivative;
+    # its point is NaN anyway): the adjoint's linear solve would otherwise raise on a
+    # singular Jacobian (e.g. past a fold), where a batch must report failure as data.
+    conv = st == Status.CONVERGED
+    X_end = jnp.where(conv, Xs, X0.reshape(-1))
+
+    def gated(Xf, a):
+        p_, t_, ok, Xe = a
+        return jnp.where(ok, fn(Xf, (p_, t_)), Xf - Xe)
+
+    sol_ad = optx.root_find(gated, make_solver(solver, tol), X_end, (params, t0, conv, X_end), max_steps=0,
+                            throw=False, adjoint=optx.ImplicitAdjoint())
+    x = sol_ad.value.reshape(X0.shape)[0]
     # a seed that already meets the tolerance counts no iteration (optimistix always takes
     # one step, a correction below the tolerance, before it tests for termination)
     x0s = jax.lax.stop_gradient(x0)
