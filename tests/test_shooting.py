@@ -421,3 +421,58 @@ def test_solver_options_rejected():
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), segments=3)  # 200 steps: 3 does not divide
     with pytest.raises(ValueError, match="damped-newton"):
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), solver="damped-newton", segments=2)
+
+
+# --------------------------------------------------------------------------- jaxgear shoot --periods
+def _cli_json(argv):
+    from jaxgear.cli import main
+
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(argv) == 0
+    return json.loads(buf.getvalue())
+
+
+def _assert_periodic_by_reintegration(out, integrator):
+    """Every reported orbit returns to its points after its minimal period (and not before)."""
+    p = jg.GearParams.from_dict(out["params"]).uniform()
+    for o in out["orbits"]:
+        pts, m = np.asarray(o["points"]), int(o["period"])
+        back = np.asarray(jg.stroboscopic_map(jg.REDUCED, p, pts, periods=m, integrator=integrator))
+        assert np.max(np.abs(back - pts)) < 1e-7 * (1 + np.max(np.abs(pts))), o
+        if m > 1:  # minimal: fewer periods do not close the orbit
+            one = np.asarray(jg.stroboscopic_map(jg.REDUCED, p, pts[:1], periods=1, integrator=integrator))
+            assert np.linalg.norm(one - pts[:1]) > 1e-3
+
+
+def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
+    # a small search over the paper's region D, from 8 random seeds at a coarse step
+    # (100 steps per period): the transient brings the seeds near the attractor, Newton on
+    # P^1 and P^2 from there reaches the unstable P-1 (flip) and P-2 born from it
+    n = 100
+    out = _cli_json(["shoot", "--periods", "1-2", "--random", "8", "--steps-per-period", str(n), "--verify", "50",
+                     "--json"])
+    assert out["settings"]["periods_tried"] == [1, 2]
+    _assert_periodic_by_reintegration(out, jg.default_integrator(n))
+    periods = sorted(o["period"] for o in out["orbits"])
+    assert 1 in periods and 2 in periods, periods
+    p1 = next(o for o in out["orbits"] if o["period"] == 1)
+    assert not p1["stable"] and p1["instability"] == "flip" and p1["multipliers"][0][0] < -1
+    c = out["convergence"]
+    assert c["1"]["runs"] == 8 and c["1"]["converged"] >= 1 and c["2"]["converged"] >= 1
+    # each orbit checked by direct integration, consistent with its multipliers
+    assert len(out["checks"]) == len(out["orbits"]) and all(v["consistent"] for v in out["checks"].values())
+
+
+@pytest.mark.slow
+def test_cli_shoot_periods_1_8_on_region_d_finds_the_four_orbits():
+    # the done-when search: 64 random seeds over region D, every period 1..8
+    out = _cli_json(["shoot", "--periods", "1-8", "--random", "64", "--json"])
+    _assert_periodic_by_reintegration(out, jg.default_integrator())
+    kinds = {(o["period"], o["stable"]) for o in out["orbits"]}
+    assert {(1, False), (2, False), (4, True), (8, True)} <= kinds, kinds
+    runs = sum(c["runs"] for c in out["convergence"].values())
+    conv = sum(c["converged"] for c in out["convergence"].values())
+    assert conv / runs >= 0.15, (conv, runs)
+    p1 = next(o for o in out["orbits"] if o["period"] == 1)
+    assert p1["instability"] == "flip" and p1["multipliers"][0][0] < -1
