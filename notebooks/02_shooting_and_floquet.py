@@ -64,8 +64,9 @@ print("files go to", SCRATCH)
 
 # %%
 x_guess = np.array([1.2736, -2.7122, 5.5372, 0.0])  # the paper's P-1 guess
+# the hand-written damped Newton: it records every iteration (the residual history below)
 box = jg.find_periodic_orbits(jg.REDUCED, p, jg.seeds_in_box(n_box, x_guess - 3.0, x_guess + 3.0, seed=1),
-                              period=(1, 2), progress=False)
+                              period=(1, 2), solver="damped-newton", progress=False)
 print("Newton:", box.status_counts)
 print(box.table())
 P1 = next(o for o in box.orbits if o.period == 1)

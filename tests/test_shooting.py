@@ -115,7 +115,8 @@ def test_autodiff_jacobian_matches_central_difference():
 
 
 def test_newton_converges_quadratically():
-    r = jg.periodic_orbit(jg.DUFFING, duffing(), jnp.array([0.7, 1.3]))
+    # the hand-written Newton records every iterate's residual
+    r = jg.periodic_orbit(jg.DUFFING, duffing(), jnp.array([0.7, 1.3]), solver="damped-newton")
     assert int(r.status) == SHOOT_CONVERGED and float(r.residual) <= 1e-10
     h = np.asarray(r.history)
     h = h[np.isfinite(h)]
@@ -360,3 +361,118 @@ def test_cli_shoot_out_writes_orbits_json_and_figures(tmp_path):
         assert main(["shoot", "--from", x, "--period", "1", "--out", str(tmp_path / "b"), "--no-figures",
                      "--quiet"]) == 0
     assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["orbits.json", "orbits.nc"]
+
+
+# --------------------------------------------------------------------------- optimistix solvers, deflation, segments
+def test_deflation_finds_the_saddle_plain_newton_misses():
+    # random seeds around the small stable orbit: plain Newton returns it from every seed;
+    # the deflated round pushes the same seeds off it, onto the saddle (and the large orbit)
+    p = duffing()
+    seeds = jg.seeds_in_box(8, [-0.6, -0.2], [-0.1, 0.3], seed=0)
+    kw = dict(integrator=jg.RK4(100), max_iter=20, progress=False, trajectory_samples=0)
+    plain = jg.find_periodic_orbits(jg.DUFFING, p, seeds, **kw)
+    assert [o.stable for o in plain.orbits] == [True] and plain.orbits[0].n_seeds == 8
+    defl = jg.find_periodic_orbits(jg.DUFFING, p, seeds, deflation_rounds=1, **kw)
+    saddles = [o for o in defl.orbits if not o.stable]
+    assert len(saddles) == 1 and saddles[0].instability == "fold" and saddles[0].residual <= 1e-10
+    np.testing.assert_allclose(saddles[0].points[0], [-0.8471, 0.6365], atol=1e-3)  # the saddle (harmonic balance 0.95)
+    c = defl.convergence["1"]
+    assert c["runs"] == 16 and c["first_round"] == 8 and c["converged"] > 8
+    # plain Newton from the same seeds with the known orbit deflated finds no stable small orbit again
+    small = plain.orbits[0].points
+    r = jg.periodic_orbit(jg.DUFFING, p, seeds, integrator=jg.RK4(100), max_iter=20, deflate=small)
+    conv = np.asarray(r.status) == SHOOT_CONVERGED
+    assert conv.any() and np.all(np.linalg.norm(np.asarray(r.point)[conv] - small[0], axis=1) > 0.1)
+
+
+def test_multiple_shooting_converges_from_more_seeds():
+    # seeds far out in the phase plane (the hardening spring makes single-period flows from
+    # them wild): five segments per period converge from more of the same seeds
+    p = duffing()
+    seeds = jg.seeds_in_box(32, [-4.0, -4.0], [4.0, 4.0], seed=2)
+    frac = {}
+    for M in (1, 5):
+        r = jg.periodic_orbit(jg.DUFFING, p, seeds, segments=M, integrator=jg.RK4(100), max_iter=20)
+        st = np.asarray(r.status)
+        frac[M] = float(np.mean(st == SHOOT_CONVERGED))
+        assert np.all(np.asarray(r.residual)[st == SHOOT_CONVERGED] <= 1e-10)
+    assert frac[1] <= 8 / 32 and frac[5] >= 10 / 32, frac
+
+
+def test_implicit_gradient_through_optimistix_solvers_and_segments():
+    x0 = jnp.array([1.0, 1.1])
+
+    def amplitude(gamma, solver, M):
+        r = jg.periodic_orbit(jg.DUFFING, duffing(gamma=gamma), x0, solver=solver, segments=M, integrator=jg.RK4(100))
+        return jnp.sum(r.point**2)
+
+    h = 1e-5
+    for solver, M in (("levenberg-marquardt", 1), ("newton", 4)):
+        g = float(jax.grad(amplitude)(0.3, solver, M))
+        fd = (float(amplitude(0.3 + h, solver, M)) - float(amplitude(0.3 - h, solver, M))) / (2 * h)
+        assert np.isfinite(g) and abs(g) > 0.1 and abs(g - fd) <= 1e-6 * abs(fd), (solver, M, g, fd)
+
+
+def test_solver_options_rejected():
+    p = duffing()
+    with pytest.raises(ValueError, match="solver"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), solver="bisection")
+    with pytest.raises(ValueError, match="segments"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), segments=3)  # 200 steps: 3 does not divide
+    with pytest.raises(ValueError, match="damped-newton"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), solver="damped-newton", segments=2)
+
+
+# --------------------------------------------------------------------------- jaxgear shoot --periods
+def _cli_json(argv):
+    from jaxgear.cli import main
+
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(argv) == 0
+    return json.loads(buf.getvalue())
+
+
+def _assert_periodic_by_reintegration(out, integrator):
+    """Every reported orbit returns to its points after its minimal period (and not before)."""
+    p = jg.GearParams.from_dict(out["params"]).uniform()
+    for o in out["orbits"]:
+        pts, m = np.asarray(o["points"]), int(o["period"])
+        back = np.asarray(jg.stroboscopic_map(jg.REDUCED, p, pts, periods=m, integrator=integrator))
+        assert np.max(np.abs(back - pts)) < 1e-7 * (1 + np.max(np.abs(pts))), o
+        if m > 1:  # minimal: fewer periods do not close the orbit
+            one = np.asarray(jg.stroboscopic_map(jg.REDUCED, p, pts[:1], periods=1, integrator=integrator))
+            assert np.linalg.norm(one - pts[:1]) > 1e-3
+
+
+def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
+    # a small search over the paper's region D, from 8 random seeds at a coarse step
+    # (100 steps per period): the transient brings the seeds near the attractor, Newton on
+    # P^1 and P^2 from there reaches the unstable P-1 (flip) and P-2 born from it
+    n = 100
+    out = _cli_json(["shoot", "--periods", "1-2", "--random", "8", "--steps-per-period", str(n), "--verify", "50",
+                     "--json"])
+    assert out["settings"]["periods_tried"] == [1, 2]
+    _assert_periodic_by_reintegration(out, jg.default_integrator(n))
+    periods = sorted(o["period"] for o in out["orbits"])
+    assert 1 in periods and 2 in periods, periods
+    p1 = next(o for o in out["orbits"] if o["period"] == 1)
+    assert not p1["stable"] and p1["instability"] == "flip" and p1["multipliers"][0][0] < -1
+    c = out["convergence"]
+    assert c["1"]["runs"] == 8 and c["1"]["converged"] >= 1 and c["2"]["converged"] >= 1
+    # each orbit checked by direct integration, consistent with its multipliers
+    assert len(out["checks"]) == len(out["orbits"]) and all(v["consistent"] for v in out["checks"].values())
+
+
+@pytest.mark.slow
+def test_cli_shoot_periods_1_8_on_region_d_finds_the_four_orbits():
+    # the done-when search: 64 random seeds over region D, every period 1..8
+    out = _cli_json(["shoot", "--periods", "1-8", "--random", "64", "--json"])
+    _assert_periodic_by_reintegration(out, jg.default_integrator())
+    kinds = {(o["period"], o["stable"]) for o in out["orbits"]}
+    assert {(1, False), (2, False), (4, True), (8, True)} <= kinds, kinds
+    runs = sum(c["runs"] for c in out["convergence"].values())
+    conv = sum(c["converged"] for c in out["convergence"].values())
+    assert conv / runs >= 0.15, (conv, runs)
+    p1 = next(o for o in out["orbits"] if o["period"] == 1)
+    assert p1["instability"] == "flip" and p1["multipliers"][0][0] < -1

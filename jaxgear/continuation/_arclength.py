@@ -119,7 +119,18 @@ def _ns_test(lam):
 @eqx.filter_jit
 def _correct(system, params, name, k, integrator, t0, z_guess, anchor, w, tref, tol, max_iter, max_norm):
     """Bordered Newton ``F(z) = 0, w . (z - anchor) = 0`` from ``z_guess``, then the
-    tangent, multipliers and test functions at the result (one compiled kernel)."""
+    tangent, multipliers and test functions at the result (one compiled kernel).
+
+    A hand-written loop, kept by measurement: ``optimistix.Newton`` (rtol 0, atol
+    ``tol``) on the same bordered system passes the same tests, but on the hardening
+    Duffing branch through its two folds (``tests/test_continuation.py``) it takes
+    0.32 s per compiled branch against 0.24 s here, with 48 points against 38. Its
+    termination test on the step size needs one Newton step more than the residual test
+    below (near a fold ``|dz|`` lags ``||F||``), which the step control reads as slow
+    convergence; and the tangent and multipliers need the Jacobian at the root, which
+    this loop has from its last iteration and optimistix does not return. This loop also
+    gives up as soon as the residual grows a hundredfold (the step is then halved).
+    """
     n = z_guess.shape[0] - 1
     eye = jnp.eye(n)
     evaluate = lambda z: _map_and_jac(system, params, name, k, t0, integrator, z)

@@ -25,8 +25,10 @@ from .._system import ForcedSystem, check_state_shape, check_system
 from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
 from ._floquet import Instability, check_period, classify_multipliers, sorted_eigvals
 from ._newton import damped_newton, orbit_jacobians
+from ._solve import SOLVERS, Shooting, check_segments, solve_orbit
 
-__all__ = ["ShootResult", "periodic_orbit", "shoot_kernel", "check_newton_options", "params_concrete"]
+__all__ = ["ShootResult", "periodic_orbit", "shoot_kernel", "check_newton_options", "check_solver_options",
+           "params_concrete"]
 
 
 class ShootResult(NamedTuple):
@@ -83,7 +85,26 @@ def _minimal_period(pts, x, k, period_tol):
     return m
 
 
-def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol):
+def _floquet_result(system, params, x, t0, k, integrator, period_tol, r, it, st, hist):
+    """The :class:`ShootResult` of a solve: Floquet data at the converged point ``x``."""
+    xs = jax.lax.stop_gradient(x)
+    conv = st == Status.CONVERGED
+    _, pts, Cs = orbit_jacobians(system, params, jnp.where(conv, xs, 0.0), t0, k, integrator)
+    nan = jnp.nan
+    m = _minimal_period(pts, xs, k, period_tol)
+    M = jnp.take(Cs, m - 1, axis=0)
+    lam = jnp.where(conv, sorted_eigvals(jnp.where(conv, M, 0.0)), nan)
+    stable, kind = classify_multipliers(lam)
+    return ShootResult(
+        point=jnp.where(conv, x, nan), orbit=jnp.where(conv, pts, nan), min_period=jnp.where(conv, m, 0),
+        monodromy=jnp.where(conv, M, nan), multipliers=lam, stable=stable & conv,
+        instability=jnp.where(conv, kind, int(Instability.UNKNOWN)), residual=r, iterations=it, status=st,
+        history=hist, last_iterate=xs,
+    )
+
+
+def _shoot_damped(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol):
+    """The hand-written damped Newton (solver ``"damped-newton"``, single shooting)."""
     flow_k = lambda x: integrator.flow(system, params, x, t0, k)
     G = lambda x: flow_k(x) - x
     evaluate = lambda x: orbit_jacobians(system, params, x, t0, k, integrator)
@@ -108,14 +129,30 @@ def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, p
     return ShootResult(
         point=jnp.where(conv, x, nan), orbit=jnp.where(conv, pts, nan), min_period=jnp.where(conv, m, 0),
         monodromy=jnp.where(conv, M, nan), multipliers=lam, stable=stable & conv,
-            instability=jnp.where(conv, kind, int(Instability.UNKNOWN)), residual=r, iterations=it, status=st,
+        instability=jnp.where(conv, kind, int(Instability.UNKNOWN)), residual=r, iterations=it, status=st,
         history=hist, last_iterate=jax.lax.stop_gradient(x),
     )
 
 
+def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="newton",
+               segments=1, known=None, power=2.0, shift=1.0):
+    if solver == "damped-newton":
+        return _shoot_damped(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol)
+    shoot = Shooting(system, integrator, k, segments)
+    x, st, it, r = solve_orbit(shoot, params, t0, x0, known, solver=solver, tol=tol, max_iter=max_iter,
+                               max_norm=max_norm, power=power, shift=shift)
+    st = st.astype(jnp.int32)
+    it = jnp.asarray(it, jnp.int32)
+    # optimistix does not expose its iterates: the history holds the final residual only
+    hist = jnp.full(max_iter + 1, jnp.nan).at[jnp.clip(it, 0, max_iter)].set(r)
+    return _floquet_result(system, params, x, t0, k, integrator, period_tol, r, it, st, hist)
+
+
 @eqx.filter_jit
-def shoot_kernel(system, params, X, t0, k, integrator, tol, max_iter, max_norm, period_tol):
-    one = lambda x0: _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol)
+def shoot_kernel(system, params, X, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="newton",
+                 segments=1, known=None, power=2.0, shift=1.0):
+    one = lambda x0: _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol,
+                                solver, segments, known, power, shift)
     return jax.vmap(one)(X)
 
 
@@ -132,19 +169,37 @@ def check_newton_options(tol, max_iter, period_tol, max_norm=1e6) -> None:
     check_number(max_norm, "max_norm", 0, strict_min=True)
 
 
+def check_solver_options(solver, segments, integrator, k, deflating=False, power=2.0, shift=1.0) -> int:
+    """Raise ``ValueError`` for an unknown solver, bad segments or deflation settings; return ``M``."""
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}.")
+    M = check_segments(integrator, k, segments)
+    if solver == "damped-newton" and (M != 1 or deflating):
+        raise ValueError("the damped-newton solver does single shooting without deflation: "
+                         "use segments=1 and no deflation, or an optimistix solver.")
+    check_number(power, "deflation_power", 1, strict_min=True)
+    check_number(shift, "deflation_shift", 0)
+    return M
+
+
 def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
                    integrator: AbstractIntegrator | None = None, tol: float = 1e-10, max_iter: int = 40,
-                   max_norm: float = 1e6, period_tol: float = 1e-6) -> ShootResult:
-    """Shooting: a P-k orbit as a fixed point of ``P^k`` by damped Newton (paper §4.1, [15]).
+                   max_norm: float = 1e6, period_tol: float = 1e-6, solver: str = "newton", segments: int = 1,
+                   deflate=None, deflation_power: float = 2.0, deflation_shift: float = 1.0) -> ShootResult:
+    """Shooting: a P-k orbit as a fixed point of ``P^k`` by Newton-type solvers (paper §4.1, [15]).
 
-    Solves ``G(x) = P^k(x) - x = 0`` in the full state from each seed in ``x0``, with the
-    Jacobian ``DP^k - I`` from ``jax.jacfwd`` through the integrator and Armijo
-    backtracking. One ``jit``; seeds are ``vmap``-ed (a batch of hundreds is one call).
-    Then the Floquet analysis at each converged point (see :class:`ShootResult`).
+    Solves ``G(x) = P^k(x) - x = 0`` in the full state from each seed in ``x0`` (single
+    shooting, ``segments=1``) or its multiple-shooting form with ``segments`` segments
+    (continuity of the segment flows, :mod:`jaxgear.shooting._solve`), with Jacobians
+    from ``jax.jacfwd`` through the integrator, by an optimistix solver under ``vmap``
+    (``throw=False``: each seed ends with its own status). One ``jit``; a batch of
+    hundreds of seeds is one call. Then the Floquet analysis at each converged point
+    (see :class:`ShootResult`).
 
     The converged ``point`` is differentiable with respect to ``params``
     (``jax.grad``, ``jax.jacfwd``) by the implicit function theorem
-    (``lax.custom_root``, Newton is not unrolled): ``dx*/dp = -(DP^k - I)^{-1} dP^k/dp``.
+    (``optimistix.ImplicitAdjoint``; the iterations are not unrolled):
+    ``dx*/dp = -(DP^k - I)^{-1} dP^k/dp``.
 
     Args:
         system: any :class:`~jaxgear.ForcedSystem`.
@@ -159,6 +214,15 @@ def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
         max_norm: an iterate with ``||x|| > max_norm`` is reported as diverged.
         period_tol: ``P^j(x*) = x*`` for a divisor ``j`` of ``k`` when
             ``||P^j(x*) - x*|| <= period_tol * (1 + ||x*||)``.
+        solver: ``"newton"`` (default), ``"dogleg"``, ``"levenberg-marquardt"``
+            (optimistix), or ``"damped-newton"`` (the hand-written Newton with Armijo
+            backtracking, single shooting; it alone records every iteration in
+            ``history``).
+        segments: ``M``, segments of the multiple shooting (1: single shooting).
+        deflate: optional ``(R, dim)`` known orbit points (phase ``t0``) that the solver
+            is deflated away from (Farrell-Birkisson-Funke operator
+            ``prod (1/||x - r_i||^p + shift)``; non-finite rows are ignored).
+        deflation_power, deflation_shift: ``p`` and ``shift`` of that operator.
     Returns:
         :class:`ShootResult` with the leading shape of ``x0``.
     Raises:
@@ -168,12 +232,15 @@ def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
     check_state_shape(system, x0)
     check_newton_options(tol, max_iter, period_tol, max_norm)
     integrator = resolve_integrator(integrator)
+    known = None if deflate is None else jnp.asarray(deflate, jnp.float64).reshape(-1, system.dim)
+    M = check_solver_options(solver, segments, integrator, k, known is not None, deflation_power, deflation_shift)
     if params_concrete(params):
         check_system(system, params, np.asarray(x0, dtype=float).reshape(-1, system.dim)[0], batched=False)
     x0 = jnp.asarray(x0, dtype=jnp.float64)
     lead = x0.shape[:-1]
     X = x0.reshape(-1, system.dim)
     res = shoot_kernel(system, params, X, jnp.asarray(t0, jnp.float64), k, integrator, float(tol),
-                        int(max_iter), float(max_norm), float(period_tol))
+                        int(max_iter), float(max_norm), float(period_tol), solver, M, known, float(deflation_power),
+                        float(deflation_shift))
     return jax.tree_util.tree_map(lambda a: a.reshape(*lead, *a.shape[1:]), res)
 

@@ -15,13 +15,14 @@ from .._codec import array_field, items_field, result_type
 from .._format import format_table
 from .._matching import group_attractors, same_attractor
 from .._params import params_to_dict
-from .._poincare import sample_trajectory
+from .._poincare import sample_trajectory, stroboscopic_map
 from .._status import Status, count_statuses
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
 from ._floquet import Instability, check_period
-from ._orbit import ShootResult, check_newton_options, shoot_kernel
+from ._orbit import ShootResult, check_newton_options, check_solver_options, shoot_kernel
+from ._solve import check_segments
 
 __all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
 
@@ -101,6 +102,15 @@ class OrbitSearch:
         params: the full parameter set as a dict (canonical names for the gear models).
         settings: the options of the search (tolerances, integrator, ``t0``, ...), JSON-able.
         version: jaxgear version; runtime_s: wall time of the search (s).
+        convergence: per ``k`` (keys ``"1"``, ``"2"``, ...): ``runs`` (seed runs, all
+            deflation rounds), ``seeds``, ``converged`` (runs that converged to an orbit of
+            the result), ``seeds_converged`` (seeds with at least one such run),
+            ``first_round`` (converged runs of the undeflated round) and ``orbits``
+            ``{orbit index: runs}``: to what the seeds converged.
+        checks: per orbit index (``"0"``, ...): the check by direct integration
+            (:func:`verify_orbit`): ``periods``, ``kept``, ``left_at`` (first period at
+            which a perturbed start left the orbit, -1 if never) and ``consistent`` (kept
+            exactly when the multipliers say stable). Empty unless ``verify`` was given.
     """
 
     orbits: tuple[PeriodicOrbit, ...] = items_field("orbit")
@@ -114,6 +124,8 @@ class OrbitSearch:
     settings: dict = dataclasses.field(default_factory=dict)
     version: str = ""
     runtime_s: float = float("nan")
+    convergence: dict = dataclasses.field(default_factory=dict)
+    checks: dict = dataclasses.field(default_factory=dict)
 
     @property
     def n_seeds(self) -> int:
@@ -130,6 +142,16 @@ class OrbitSearch:
                 "residual", "seeds")
         return format_table(rows, head)
 
+    def convergence_table(self) -> str:
+        """Printable table: per ``k``, seed runs, converged runs and to which orbits."""
+        rows = []
+        for k, c in sorted(self.convergence.items(), key=lambda kv: int(kv[0])):
+            to = ", ".join(f"#{int(i) + 1} P-{self.orbits[int(i)].period} x{n}" for i, n in
+                           sorted(c["orbits"].items(), key=lambda kv: int(kv[0]))) or "-"
+            rows.append((f"P^{k}", c["runs"], c["converged"], f"{c['converged'] / max(c['runs'], 1):.0%}",
+                         f"{c['seeds_converged']}/{c['seeds']}", to))
+        return format_table(rows, ("map", "runs", "converged", "fraction", "seeds converged", "to orbits"))
+
     def _dim(self) -> int:
         for o in self.orbits:
             return int(np.shape(o.points)[-1])
@@ -143,6 +165,7 @@ class OrbitSearch:
             jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
             params=self.params, settings=self.settings, n_seeds=self.n_seeds,
             status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
+            convergence=dict(self.convergence), checks=dict(self.checks),
             runtime_s=self.runtime_s, version=self.version,
         )
 
@@ -196,7 +219,7 @@ def _orbits_from_shots(res: ShootResult, dedup_tol: float, t0: float = 0.0) -> l
     return out
 
 
-def _merge_orbits(orbits: Sequence[PeriodicOrbit], dedup_tol: float) -> list[PeriodicOrbit]:
+def _merge_orbits(orbits: Sequence[PeriodicOrbit], dedup_tol: float, keep_order: bool = False) -> list[PeriodicOrbit]:
     merged: list[PeriodicOrbit] = []
     for o in orbits:
         for i, q in enumerate(merged):
@@ -206,7 +229,8 @@ def _merge_orbits(orbits: Sequence[PeriodicOrbit], dedup_tol: float) -> list[Per
                 break
         else:
             merged.append(o)
-    merged.sort(key=lambda o: (o.period, float(o.points[0, 0])))
+    if not keep_order:
+        merged.sort(key=lambda o: (o.period, float(o.points[0, 0])))
     return merged
 
 
@@ -229,21 +253,97 @@ def _with_trajectories(system, params, orbits: list[PeriodicOrbit], samples: int
     return out
 
 
+def _run_kernel(system, params, X, t0_arr, k, integrator, opts, known, chunk_size, bar):
+    """``shoot_kernel`` over ``X (n, dim)`` in chunks of ``chunk_size``: a numpy :class:`ShootResult`."""
+    size = min(int(chunk_size), len(X))
+    parts = []
+    for a, b in chunks(len(X), size):
+        res = shoot_kernel(system, params, jnp.asarray(pad_rows(X[a:b], size)), t0_arr, k, integrator,
+                           opts["tol"], opts["max_iter"], opts["max_norm"], opts["period_tol"], opts["solver"],
+                           opts["segments"], known, opts["power"], opts["shift"])
+        parts.append([np.asarray(f)[: b - a] for f in res])
+        if bar is not None:
+            bar.update(b - a)
+    return ShootResult(*[np.concatenate(f, axis=0) for f in zip(*parts)])
+
+
+def _known_points(orbits: Sequence[PeriodicOrbit], k: int, rows: int, dim: int):
+    """The points of the orbits whose period divides ``k``, padded with NaN to ``rows`` rows (fixed shape)."""
+    pts = [o.points for o in orbits if k % int(o.period) == 0]
+    P = np.concatenate(pts, axis=0) if pts else np.zeros((0, dim))
+    rows = max(rows, -(-len(P) // rows) * rows)
+    out = np.full((rows, dim), np.nan)
+    out[: len(P)] = P
+    return jnp.asarray(out)
+
+
+def _concat(results: Sequence[ShootResult]) -> ShootResult:
+    return ShootResult(*[np.concatenate(f, axis=0) for f in zip(*results)])
+
+
+def _polish(system, params, orbits, t0_arr, integrator, opts, dedup_tol, t0):
+    """Re-converge each orbit (found with the search integrator) with ``integrator``: Newton on
+    its minimal period ``m`` with one segment per period. Returns ``(orbits, index)``,
+    ``index[i]`` the polished orbit of input ``i`` or -1 when its Newton failed."""
+    out: list[PeriodicOrbit] = []
+    index = np.full(len(orbits), -1)
+    by_m: dict[int, list[int]] = {}
+    for i, o in enumerate(orbits):
+        by_m.setdefault(int(o.period), []).append(i)
+    for m, idx in sorted(by_m.items()):
+        X = np.stack([orbits[i].points[0] for i in idx])
+        try:
+            M = check_segments(integrator, m, m)
+        except ValueError:
+            M = 1
+        pol = dict(opts, solver="newton", segments=M, max_iter=min(int(opts["max_iter"]), 20))
+        res = _run_kernel(system, params, X, t0_arr, m, integrator, pol, None, 8, None)
+        found = _orbits_from_shots(res, dedup_tol, t0)
+        for j, i in enumerate(idx):
+            if int(res.status[j]) != Status.CONVERGED:
+                continue
+            pts = res.orbit[j, : int(res.min_period[j])]
+            for f, o in enumerate(found):
+                if same_attractor(pts, int(res.min_period[j]), o.points, o.period, dedup_tol):
+                    index[i] = len(out) + f
+                    break
+        out.extend(dataclasses.replace(o, n_seeds=0) for o in found)
+    return out, index
+
+
 def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | Sequence[int] = 1, t0=0.0,
                          integrator: AbstractIntegrator | None = None, tol: float = 1e-10, max_iter: int = 40,
                          max_norm: float = 1e6, period_tol: float = 1e-6, dedup_tol: float = 1e-6,
                          chunk_size: int = 256, progress: bool = True,
-                         trajectory_samples: int = 200) -> OrbitSearch:
+                         trajectory_samples: int = 200, solver: str = "newton", segments: int = 1,
+                         deflation_rounds: int = 0, deflation_power: float = 2.0, deflation_shift: float = 1.0,
+                         transient: int = 0, search_integrator: AbstractIntegrator | None = None,
+                         verify: int = 0) -> OrbitSearch:
     """Shoot from many seeds and return the distinct periodic orbits (paper §4.1, ref. [15]).
 
-    For every ``k`` and every seed, damped Newton on ``G(x) = P^k(x) - x = 0`` (the
-    k-fold stroboscopic map of paper eq. 6, full state) with the Jacobian from
-    ``jax.jacfwd`` (see :func:`periodic_orbit`); then the Floquet multipliers of each
-    converged orbit (its minimal period ``m``), and the converged seeds deduplicated
-    into distinct orbits. Seeds are processed in chunks of ``chunk_size`` (one compiled
-    shape per ``k``, ``vmap`` over the chunk): memory is bounded by the chunk, and the
-    result does not depend on ``chunk_size``. The system and parameters are checked
-    once on entry (:func:`~jaxgear.check_system`).
+    For every ``k`` and every seed, a Newton-type solve of ``G(x) = P^k(x) - x = 0`` (the
+    k-fold stroboscopic map of paper eq. 6, full state; single or multiple shooting, see
+    :func:`periodic_orbit`); then the Floquet multipliers of each converged orbit (its
+    minimal period ``m``), and the converged seeds deduplicated into distinct orbits.
+    Seeds are processed in chunks of ``chunk_size`` (one compiled shape per ``k``,
+    ``vmap`` over the chunk): memory is bounded by the chunk, and the result does not
+    depend on ``chunk_size``. The system and parameters are checked once on entry
+    (:func:`~jaxgear.check_system`).
+
+    A search for every orbit of a region (``jaxgear shoot --periods 1-8 --random N``)
+    adds three things:
+
+    - ``transient``: the seeds are first mapped ``transient`` forcing periods forward
+      (direct integration), which brings seeds from anywhere in a region near the
+      attractors and the unstable orbits they are born from;
+    - ``deflation_rounds``: after the plain round, the same seeds are shot again with the
+      orbits known so far (of periods dividing ``k``) deflated away, so that they go to
+      other orbits (see :mod:`jaxgear.shooting._solve`); rounds stop when one finds
+      nothing new;
+    - ``search_integrator``: the rounds use this (cheaper) integrator; each distinct
+      orbit is then re-converged with ``integrator`` (Newton on its minimal period, one
+      segment per period) and only orbits that re-converge are reported. Their
+      multipliers are those of ``integrator``'s map.
 
     Args:
         system: a :class:`~jaxgear.ForcedSystem` of state dimension ``dim``.
@@ -258,7 +358,7 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
         integrator: any integrator object; default :func:`~jaxgear.default_integrator`
             (kink-aware RK4, 200 steps per period).
         tol: convergence on ``||P^k(x) - x||`` (Euclidean, state units).
-        max_iter, max_norm, period_tol: as in :func:`periodic_orbit`.
+        max_iter, max_norm, period_tol, solver, segments: as in :func:`periodic_orbit`.
         dedup_tol: two converged seeds give the same orbit when a point of one lies
             within ``dedup_tol * (1 + ||x||)`` of a point of the other (any cyclic
             shift); an orbit found with several multiples of its period is reported
@@ -268,14 +368,24 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
         trajectory_samples: samples per forcing period of each orbit's stored
             trajectory (:attr:`PeriodicOrbit.trajectory`, used by
             :func:`jaxgear.plotting.plot_orbit` without integrating); 0 stores none.
+        deflation_rounds: deflated rounds after the plain one (0: none).
+        deflation_power, deflation_shift: ``p`` and ``shift`` of the deflation operator.
+        transient: forcing periods each seed is mapped forward before shooting (0: none).
+        search_integrator: integrator of the rounds (default: ``integrator``).
+        verify: when > 0, check each orbit by direct integration over ``verify`` periods
+            (:func:`verify_orbit`), stored in :attr:`OrbitSearch.checks`.
     Returns:
         :class:`OrbitSearch`: ``orbits`` (distinct, sorted by period), ``shots``
-        ``{k: ShootResult}`` with leading shape ``(n_k,)``, ``status_counts``, the
-        seeds, the parameter set and the settings.
+        ``{k: ShootResult}`` with leading shape ``(n_k (rounds + 1),)`` (round after
+        round; with a search integrator the fields are that integrator's),
+        ``status_counts``, the seeds, the per-``k`` convergence, the parameter set and
+        the settings.
     Raises:
         ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
             options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
     """
+    from ._verify import verify_orbit
+
     start = time.perf_counter()
     if isinstance(seeds, Mapping):
         groups = {check_period(k): np.asarray(v, dtype=float) for k, v in seeds.items()}
@@ -294,40 +404,112 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
     check_newton_options(tol, max_iter, period_tol, max_norm)
     check_int(chunk_size, "chunk_size", 1)
     check_int(trajectory_samples, "trajectory_samples", 0)
+    check_int(deflation_rounds, "deflation_rounds", 0)
+    check_int(transient, "transient", 0)
+    check_int(verify, "verify", 0)
     check_number(dedup_tol, "dedup_tol", 0, strict_min=True)
     integrator = resolve_integrator(integrator)
+    search_int = integrator if search_integrator is None else resolve_integrator(search_integrator)
+    polish = search_int != integrator
+    for k in groups:
+        check_solver_options(solver, segments, search_int, k, deflation_rounds > 0, deflation_power,
+                             deflation_shift)
     first = next(iter(groups.values()))[0]
     check_system(system, params, first)
 
+    if transient:
+        for k, X in groups.items():
+            Y = np.asarray(stroboscopic_map(system, params, X, periods=int(transient), t0=t0, integrator=integrator))
+            groups[k] = np.where(np.all(np.isfinite(Y), axis=1, keepdims=True), Y, X)
+
+    opts = dict(tol=float(tol), max_iter=int(max_iter), max_norm=float(max_norm), period_tol=float(period_tol),
+                solver=solver, segments=int(segments), power=float(deflation_power), shift=float(deflation_shift))
     t0_arr = jnp.asarray(t0, jnp.float64)
     shots: dict[int, ShootResult] = {}
-    found: list[PeriodicOrbit] = []
-    bar = progress_bar(sum(len(X) for X in groups.values()), "shooting", progress, unit="seed")
+    found: list[PeriodicOrbit] = []  # distinct orbits of the search integrator's map
+    lanes: dict[int, np.ndarray] = {}  # per k and run: index into `found`, -1 if not converged
+    first_round: dict[int, int] = {}
+    bar = progress_bar(sum(len(X) for X in groups.values()) * (1 + int(deflation_rounds)), "shooting", progress,
+                       unit="seed")
     try:
         for k, X in sorted(groups.items()):  # one jit per distinct k (and chunk shape)
-            size = min(int(chunk_size), len(X))
-            parts = []
-            for a, b in chunks(len(X), size):
-                res = shoot_kernel(system, params, jnp.asarray(pad_rows(X[a:b], size)), t0_arr, k, integrator,
-                                    float(tol), int(max_iter), float(max_norm), float(period_tol))
-                parts.append([np.asarray(f)[: b - a] for f in res])
-                bar.update(b - a)
-            res = ShootResult(*[np.concatenate(f, axis=0) for f in zip(*parts)])
-            shots[k] = res
-            found.extend(_orbits_from_shots(res, dedup_tol, float(t0)))
+            rounds = []
+            for r in range(1 + int(deflation_rounds)):
+                known = _known_points(found, k, 16, system.dim) if r > 0 else None
+                if r > 0 and not np.any(np.isfinite(np.asarray(known))):
+                    break
+                res = _run_kernel(system, params, X, t0_arr, k, search_int, opts, known, chunk_size, bar)
+                rounds.append(res)
+                new = _orbits_from_shots(res, dedup_tol, float(t0))
+                n_before = len(found)
+                found = _merge_orbits(list(found) + new, dedup_tol, keep_order=True)
+                if r == 0:
+                    first_round[k] = int(np.sum(np.asarray(res.status) == Status.CONVERGED))
+                if r > 0 and len(found) == n_before:
+                    break
+            shots[k] = _concat(rounds)
     finally:
         bar.close()
-    orbits = _with_trajectories(system, params, _merge_orbits(found, dedup_tol), int(trajectory_samples), integrator)
-    counts = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
-                            NEWTON_STATUSES)
+    # every converged run: which distinct orbit it reached
+    for k, res in shots.items():
+        st = np.asarray(res.status)
+        lab = np.full(len(st), -1)
+        for i in np.flatnonzero(st == Status.CONVERGED):
+            m = int(res.min_period[i])
+            for j, o in enumerate(found):
+                if same_attractor(res.orbit[i, :m], m, o.points, o.period, dedup_tol):
+                    lab[i] = j
+                    break
+        lanes[k] = lab
+    if polish and found:
+        final, index = _polish(system, params, found, t0_arr, integrator, opts, dedup_tol, float(t0))
+    else:
+        final, index = list(found), np.arange(len(found))
+    # merge orbits that coincide after polishing, sort, and count the seeds of each
+    order = _merge_orbits(final, dedup_tol, keep_order=True)
+    remap = np.full(len(final), -1)
+    for i, o in enumerate(final):
+        remap[i] = next(j for j, q in enumerate(order) if same_attractor(o.points, o.period, q.points, q.period,
+                                                                         dedup_tol))
+    sorted_idx = sorted(range(len(order)), key=lambda j: (order[j].period, float(order[j].points[0, 0])))
+    rank = np.empty(len(order), dtype=int)
+    rank[sorted_idx] = np.arange(len(order))
+    final_of_found = np.array([rank[remap[index[j]]] if index[j] >= 0 else -1 for j in range(len(found))], dtype=int)
+    lane_to_final = {k: np.where(lab >= 0, final_of_found[np.maximum(lab, 0)], -1) if len(found) else lab
+                     for k, lab in lanes.items()}
+    counts = np.zeros(len(order), dtype=int)
+    for lab in lane_to_final.values():
+        counts += np.bincount(lab[lab >= 0], minlength=len(order))
+    orbits = [dataclasses.replace(order[j], n_seeds=int(counts[rank[j]])) for j in sorted_idx]
+    orbits = _with_trajectories(system, params, orbits, int(trajectory_samples), integrator)
+    convergence = {}
+    for k, lab in lane_to_final.items():
+        n = len(groups[k])
+        ok = lab >= 0
+        per_seed = ok.reshape(-1, n).any(axis=0) if len(lab) else np.zeros(n, bool)
+        convergence[str(k)] = dict(runs=int(len(lab)), seeds=int(n), converged=int(ok.sum()),
+                                   seeds_converged=int(per_seed.sum()), first_round=int(np.sum(ok[:n])),
+                                   orbits={str(int(j)): int(c) for j, c in
+                                           zip(*np.unique(lab[ok], return_counts=True))})
+    checks = {}
+    if verify:
+        for i, o in enumerate(orbits):
+            c = verify_orbit(system, params, o, periods=int(verify), t0=t0, integrator=integrator)
+            left = c.left_at[c.left_at > 0]
+            checks[str(i)] = dict(periods=int(verify), kept=bool(c.kept), left_at=int(left.min()) if left.size else -1,
+                                  consistent=bool(c.kept) == bool(o.stable))
+    counts_st = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
+                               NEWTON_STATUSES)
     settings: dict[str, Any] = dict(
         periods=sorted(groups), t0=float(t0), integrator=integrator.to_dict(), tol=float(tol), max_iter=int(max_iter), max_norm=float(max_norm),
         period_tol=float(period_tol), dedup_tol=float(dedup_tol), chunk_size=int(chunk_size),
-        trajectory_samples=int(trajectory_samples),
+        trajectory_samples=int(trajectory_samples), solver=solver, segments=int(segments),
+        deflation_rounds=int(deflation_rounds), deflation_power=float(deflation_power),
+        deflation_shift=float(deflation_shift), transient=int(transient),
+        search_integrator=search_int.to_dict(), verify=int(verify),
     )
     params_dict = params_to_dict(params)
-    return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
+    return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts_st, seeds=groups, system=system.name,
                        state_names=tuple(system.state_names), section_index=system.section_index,
                        params=params_dict, settings=settings, version=__version__,
-                       runtime_s=time.perf_counter() - start)
-
+                       runtime_s=time.perf_counter() - start, convergence=convergence, checks=checks)

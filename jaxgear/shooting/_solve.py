@@ -1,0 +1,243 @@
+"""Multiple shooting with deflation, solved by optimistix (paper §4.1, extended).
+
+A P-k orbit is split into ``M`` segments of ``k T / M`` each. The unknowns are the
+states ``X = (X_0, ..., X_{M-1})`` at the segment starts ``t0 + s k T / M``; the
+residuals are the continuity defects
+
+    R_s(X) = phi_s(X_s) - X_{s+1 mod M},    s = 0 .. M-1,
+
+where ``phi_s`` is the integrator's flow over segment ``s``. ``M = 1`` is single
+shooting, ``R = P^k(x) - x``. Each segment is integrated independently (in parallel
+under ``vmap``), so an unstable orbit is never integrated over its whole period from
+a poor guess: Newton's reach widens (Stoer & Bulirsch §7.3.5).
+
+The Jacobian of ``R`` is block-cyclic: ``dR_s/dX_s = D phi_s`` and ``dR_s/dX_{s+1} = -I``.
+:func:`segment_map` has a custom JVP that computes the ``M`` blocks ``D phi_s`` by
+``jax.jacfwd`` (``dim`` tangents per segment, all segments at once) and applies them,
+instead of pushing ``M dim`` tangents through every segment.
+
+**Deflation** (Farrell, Birkisson & Funke, SIAM J. Sci. Comput. 37 (2015) A2026): with
+known orbit points ``r_i``, the solver works on
+
+    D(X) R(X),    D(X) = prod_i (1 / ||X_0 - r_i||^p + shift),
+
+which has the same roots except the known ones (near ``r_i`` it stays away from zero
+for ``p >= 2``), so a seed that went to a known orbit goes elsewhere.
+
+The solvers are optimistix's (``Newton``, ``Dogleg``, ``LevenbergMarquardt``) under
+``vmap`` with ``throw=False``: every seed ends with its own :class:`~jaxgear.Status`.
+Derivatives of the root with respect to the parameters are implicit
+(``optimistix.ImplicitAdjoint``: the solver's iterations are not differentiated).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.custom_derivatives import SymbolicZero
+
+from .._status import Status
+from ..integrate import AbstractFixedStep, AbstractIntegrator
+
+__all__ = ["SOLVERS", "Shooting", "segment_map", "make_solver",
+           "check_segments", "solve_orbit", "optx_status"]
+
+SOLVERS = ("newton", "dogleg", "levenberg-marquardt", "damped-newton")
+"""Solver names: the three optimistix solvers, and the hand-written damped Newton of
+:mod:`._newton` (single shooting only; kept as the baseline of the benchmarks)."""
+
+class Shooting(eqx.Module):
+    """The multiple-shooting problem of a P-k orbit: system, integrator, ``k``, ``M``.
+
+    Segment ``s`` runs from ``t0 + s k T / M`` for ``k T / M``. For a fixed-step
+    integrator with ``n`` steps per period the segments have ``k n / M`` steps each (so
+    ``M`` must divide ``k n``) on the same step grid as ``P^k`` (the composed segments
+    are the integrator's ``P^k``); any other integrator needs ``M`` dividing ``k``.
+    """
+
+    system: object = eqx.field(static=True)
+    integrator: AbstractIntegrator = eqx.field(static=True)
+    k: int = eqx.field(static=True)
+    segments: int = eqx.field(static=True)
+
+    def phi(self, params, t0, x, s):
+        """Flow of segment ``s`` (traced int) from ``x (dim,)``: ``(dim,)``."""
+        T = self.system.period(params)
+        integ = self.integrator
+        if isinstance(integ, AbstractFixedStep):
+            n = int(integ.steps_per_period) * self.k // self.segments
+            h = T / integ.steps_per_period
+            # the pure-JAX steps: differentiable both ways
+            return AbstractFixedStep.advance_steps(integ, self.system, params, x[:, None], t0 + s * n * h, n, h)[:, 0]
+        per = self.k // self.segments
+        return integ.flow(self.system, params, x, t0 + s * per * T, per)
+
+    def all_segments(self, X, args):
+        params, t0 = args
+        return jax.vmap(lambda x, s: self.phi(params, t0, x, s))(X, jnp.arange(self.segments))
+
+    def initial_states(self, params, t0, x0):
+        """Segment starts ``(M, dim)`` obtained by integrating from ``x0`` (the seed)."""
+        def one(x, s):
+            y = self.phi(params, t0, x, s)
+            return y, x
+
+        _, X = jax.lax.scan(one, x0, jnp.arange(self.segments))
+        return X
+
+    def residual(self, X, args):
+        """Continuity defects ``(M * dim,)`` of segment starts ``X (M, dim)``."""
+        Phi = segment_map(self, X, args)
+        return (Phi - jnp.roll(X, -1, axis=0)).reshape(-1)
+
+
+def check_segments(integrator, k: int, segments: int) -> int:
+    """``segments`` as an int that splits a P-k orbit for ``integrator`` (else ``ValueError``)."""
+    if isinstance(segments, bool) or int(segments) != segments or int(segments) < 1:
+        raise ValueError(f"segments={segments!r} must be an integer >= 1.")
+    M = int(segments)
+    if isinstance(integrator, AbstractFixedStep):
+        n = int(integrator.steps_per_period) * int(k)
+        if n % M:
+            raise ValueError(f"segments={M} must divide the {n} steps of a P-{k} orbit "
+                             f"({integrator.steps_per_period} steps per period).")
+    elif int(k) % M:
+        raise ValueError(f"segments={M} must divide the period k={k} for the {integrator.name} integrator.")
+    return M
+
+
+def _instantiate(t, primal):
+    if not isinstance(t, SymbolicZero):
+        return t
+    dtype = jax.dtypes.float0 if not jnp.issubdtype(jnp.result_type(primal), jnp.inexact) else t.aval.dtype
+    return np.zeros(np.shape(primal), dtype) if dtype == jax.dtypes.float0 else jnp.zeros(np.shape(primal), dtype)
+
+
+@jax.custom_jvp
+def _segment_map(shoot, X, args):
+    return shoot.all_segments(X, args)
+
+
+def segment_map(shoot: Shooting, X, args):
+    """``phi_s(X_s)`` for all segments, ``(M, dim)``; ``args = (params, t0)``.
+
+    Its JVP applies the per-segment Jacobians (computed once per linearisation, all
+    segments in parallel), so a dense Jacobian of the multiple-shooting residual costs
+    ``dim`` tangents per segment, not ``M dim`` through every segment.
+    """
+    return _segment_map(shoot, X, args)
+
+
+def _segment_map_jvp(primals, tangents):
+    shoot, X, args = primals
+    _, dX, dargs = tangents
+
+    def one(x, s):
+        def f(z):
+            y = shoot.phi(args[0], args[1], z, s)
+            return y, y
+
+        J, y = jax.jacfwd(f, has_aux=True)(x)
+        return y, J
+
+    Phi, J = jax.vmap(one)(X, jnp.arange(shoot.segments))
+    out = jnp.zeros_like(Phi)
+    if not isinstance(dX, SymbolicZero):
+        out = out + jnp.einsum("sij,sj->si", J, dX)
+    # parameter (and phase) tangents: one JVP through all segments, skipped when they are zero
+    is_zero = lambda t: isinstance(t, SymbolicZero)
+    if not all(is_zero(t) for t in jax.tree_util.tree_leaves(dargs, is_leaf=is_zero)):
+        dargs = jax.tree_util.tree_map(_instantiate, dargs, args, is_leaf=is_zero)
+        out = out + jax.jvp(lambda a: shoot.all_segments(X, a), (args,), (dargs,))[1]
+    return Phi, out
+
+
+_segment_map.defjvp(_segment_map_jvp, symbolic_zeros=True)
+
+
+def make_solver(name: str, tol: float):
+    """The optimistix solver called ``name`` (one of :data:`SOLVERS` but ``damped-newton``).
+
+    Tolerances: steps below ``1e-12 + 1e-10 |x|`` (max norm) end the iteration; whether a
+    seed converged is then decided on the residual (``||P^k(x) - x|| <= tol``).
+    """
+    rtol, atol = 1e-10, 1e-12
+    if name == "newton":  # its atol also bounds the residual (max norm) at termination
+        return optx.Newton(rtol=rtol, atol=1e-2 * tol)
+    if name == "dogleg":
+        return optx.Dogleg(rtol=rtol, atol=atol)
+    if name == "levenberg-marquardt":
+        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    raise ValueError(f"unknown solver {name!r}; choose one of {', '.join(SOLVERS)}.")
+
+
+def optx_status(result, finite, residual, tol, diverged):
+    """A :class:`~jaxgear.Status` code from an optimistix ``RESULTS`` and the residual check."""
+    R = optx.RESULTS
+    singular = (result == R.singular) | (result == R.breakdown)
+    return jnp.where(residual <= tol, Status.CONVERGED,
+                     jnp.where(singular, Status.SINGULAR,
+                               jnp.where(~finite | diverged, Status.DIVERGED, Status.NOT_CONVERGED)))
+
+
+def deflation(x, known, power: float, shift: float):
+    """``prod_i (1 / ||x - r_i||^p + shift)`` over the rows of ``known (R, dim)`` that are finite."""
+    if known is None or known.shape[0] == 0:
+        return jnp.asarray(1.0)
+    ok = jnp.all(jnp.isfinite(known), axis=1)
+    d2 = jnp.sum((x[None] - jnp.where(ok[:, None], known, 0.0)) ** 2, axis=1)
+    fac = 1.0 / d2 ** (0.5 * power) + shift
+    return jnp.prod(jnp.where(ok, fac, 1.0))
+
+
+def solve_orbit(shoot: Shooting, params, t0, x0, known, *, solver: str, tol: float, max_iter: int,
+                max_norm: float, power: float = 2.0, shift: float = 1.0):
+    """Solve the (deflated) multiple-shooting problem from one seed ``x0 (dim,)``.
+
+    Returns ``x (dim,)`` (the first segment start, differentiable w.r.t. ``params`` by
+    the implicit function theorem), the status code, the iterations and the residual
+    ``||P^k(x) - x||`` of the composed segments.
+    """
+    args = (params, t0)
+    X0 = shoot.initial_states(params, t0, x0)
+    X0 = jax.lax.stop_gradient(jnp.where(jnp.all(jnp.isfinite(X0)), X0, jnp.broadcast_to(x0, X0.shape)))
+
+    def fn(Xf, a):
+        X = Xf.reshape(X0.shape)
+        return deflation(X[0], known, power, shift) * shoot.residual(X, a)
+
+    # the solve itself is not differentiated: derivatives come from the implicit function
+    # theorem, attached below by a zero-step solve at the root
+    sargs = jax.lax.stop_gradient(args)
+    sol = optx.root_find(fn, make_solver(solver, tol), X0.reshape(-1), sargs, max_steps=int(max_iter), throw=False,
+                         adjoint=optx.ImplicitAdjoint())
+    Xs = jax.lax.stop_gradient(sol.value)
+    x = Xs.reshape(X0.shape)[0]
+    xk = shoot.integrator.flow(shoot.system, params, x, t0, shoot.k)
+    r = jax.lax.stop_gradient(jnp.linalg.norm(xk - x))
+    finite = jnp.all(jnp.isfinite(Xs)) & jnp.isfinite(r)
+    diverged = jnp.max(jnp.linalg.norm(jnp.where(jnp.isfinite(Xs), Xs, 0.0).reshape(X0.shape), axis=1)) > max_norm
+    st = optx_status(sol.result, finite, r, tol, diverged)
+    # Implicit derivatives (optimistix.ImplicitAdjoint) at a converged root. A seed that did
+    # not converge gets the residual X - X_end instead (identity Jacobian, zero derivative;
+    # its point is NaN anyway): the adjoint's linear solve would otherwise raise on a
+    # singular Jacobian (e.g. past a fold), where a batch must report failure as data.
+    conv = st == Status.CONVERGED
+    X_end = jnp.where(conv, Xs, X0.reshape(-1))
+
+    def gated(Xf, a):
+        p_, t_, ok, Xe = a
+        return jnp.where(ok, fn(Xf, (p_, t_)), Xf - Xe)
+
+    sol_ad = optx.root_find(gated, make_solver(solver, tol), X_end, (params, t0, conv, X_end), max_steps=0,
+                            throw=False, adjoint=optx.ImplicitAdjoint())
+    x = sol_ad.value.reshape(X0.shape)[0]
+    # a seed that already meets the tolerance counts no iteration (optimistix always takes
+    # one step, a correction below the tolerance, before it tests for termination)
+    x0s = jax.lax.stop_gradient(x0)
+    r0 = jnp.linalg.norm(shoot.integrator.flow(shoot.system, params, x0s, t0, shoot.k) - x0s)
+    steps = jnp.where(r0 <= tol, 0, sol.stats["num_steps"])
+    return x, st, steps, jnp.where(finite, r, jnp.inf)
