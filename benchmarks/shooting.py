@@ -43,8 +43,8 @@ def main():
     seeds = jg.seeds_in_box(64, region[:, 0], region[:, 1], seed=0)
     search_int = jg.RK4(200)
     lines = []
-    head = (f"| configuration | runs | converged | fraction | first round | orbits (P-m: unstable u / stable s) "
-            f"| wall s |")
+    head = ("| configuration | runs | converged | fraction | first round | orbits (P-m: unstable u / stable s) "
+            "| wall s |")
     lines += [head, "|" + "---|" * 7]
 
     def row(label, periods, **kw):
@@ -74,7 +74,7 @@ def main():
         c = s.checks[str(i)]
         lam = " ".join(f"{z.real:+.6f}{z.imag:+.6f}j" for z in o.multipliers[:2])
         print(f"orbit {i + 1}: P-{o.period} {'stable' if o.stable else o.instability}, leading multipliers {lam}; "
-              f"direct integration: {'kept' if c['kept'] else 'left after %d periods' % c['left_at']}")
+              f"direct integration: {'kept' if c['kept'] else 'left after {} periods'.format(c['left_at'])}")
 
 
 if __name__ == "__main__":

@@ -17,11 +17,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import count_compilations
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import jaxgear as jg
-from conftest import count_compilations
 from jaxgear import continue_orbit, switch_branch
 from jaxgear import load as load_branch
 

@@ -55,36 +55,18 @@ def _execute(path: Path, tmp: Path) -> dict:
     return {"error": error, "new": new, "scratch": sorted(tmp.glob("jaxgear-*/*"))}
 
 
-@pytest.fixture(scope="session")
-def executed(tmp_path_factory):
-    """Each notebook is run once per session; its run serves both tests below."""
-    runs = {}
-
-    def run(path: Path) -> dict:
-        if path not in runs:
-            runs[path] = _execute(path, tmp_path_factory.mktemp(path.stem))
-        return runs[path]
-
-    return run
-
-
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
-def test_notebook_runs(path, executed):
+def test_notebook_runs_and_leaves_the_repository_clean(path, tmp_path):
+    """Each notebook runs top to bottom (its asserts hold) and, run from notebooks/ without
+    ``JAXGEAR_SCRATCH``, writes nothing there (one test, so that a notebook runs once even
+    when the tests are spread over several processes)."""
     nb = nbformat.read(path, as_version=4)
     assert not any(c.get("outputs") for c in nb.cells if c.cell_type == "code"), "store notebooks without outputs"
     assert any("FULL = False" in c.source for c in nb.cells), "a FULL switch at the top selects the full size"
-    error = executed(path)["error"]
-    if error is not None:
-        raise error
-
-
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
-def test_notebook_leaves_the_repository_clean(path, executed):
-    """Run from notebooks/ without ``JAXGEAR_SCRATCH``, a notebook writes nothing there."""
-    run = executed(path)
+    run = _execute(path, tmp_path)
     assert not run["new"], f"{path.name} wrote into notebooks/: {[str(p) for p in run['new']]}"
     if run["error"] is not None:
-        pytest.skip("the notebook stopped early (see test_notebook_runs)")
+        raise run["error"]
     if _writes(_code(path)):
         assert run["scratch"], f"{path.name} writes files but none arrived in its temporary SCRATCH folder"
 

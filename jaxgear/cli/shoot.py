@@ -13,10 +13,9 @@ integration; ``--json`` prints one JSON object (with the full parameter set);
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
-
-from pathlib import Path
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
@@ -141,13 +140,12 @@ def _canonical_overrides(overrides) -> dict:
 
 
 def run(args) -> int:
+    from .._checks import check_int
     from .._model import REDUCED
     from .._params import GearParams
     from .._presets import resolve_params
     from ..integrate import default_integrator
     from ..shooting import find_periodic_orbits, seeds_in_box, verify_orbit
-
-    from .._checks import check_int
 
     # every option is checked before any integration and before --out is touched
     check_options(args, OPTIONS)

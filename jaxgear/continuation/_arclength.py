@@ -55,12 +55,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
-from .._checks import check_int, check_number
 from .._params import get_param, params_to_dict, with_param
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 from ..shooting import periodic_orbit, sorted_eigvals
 from ..shooting._floquet import check_period
 from ._branch import BifurcationPoint, Branch

@@ -27,6 +27,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+# lineax defines the (zero) transpose of stop_gradient, which reverse-mode derivatives
+# through the landing's stop-gradient step lengths need (jax.grad of an orbit scalar
+# through implicit differentiation); import it with the steps, not by accident elsewhere
+import lineax  # noqa: F401
+
 from .._checks import check_choice, check_int
 from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, batch_field, check_steps_per_period
 from ._rk4 import rk4_step

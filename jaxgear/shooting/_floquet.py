@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from .._checks import check_int
 from .._system import ForcedSystem, check_state_shape
-from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 
 __all__ = ["Instability", "classify_multipliers", "sorted_eigvals", "monodromy", "floquet_multipliers",
            "check_period"]

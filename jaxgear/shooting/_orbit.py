@@ -22,7 +22,7 @@ import numpy as np
 from .._checks import check_int, check_number
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
-from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 from ._floquet import Instability, check_period, classify_multipliers, sorted_eigvals
 from ._newton import damped_newton, orbit_jacobians
 from ._solve import SOLVERS, Shooting, check_segments, solve_orbit

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -19,7 +20,7 @@ from .._poincare import sample_trajectory, stroboscopic_map
 from .._status import Status, count_statuses
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, default_integrator, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 from ._floquet import Instability, check_period
 from ._orbit import ShootResult, check_newton_options, check_solver_options, shoot_kernel
 from ._solve import check_segments
