@@ -369,7 +369,7 @@ def test_deflation_finds_the_saddle_plain_newton_misses():
     # the deflated round pushes the same seeds off it, onto the saddle (and the large orbit)
     p = duffing()
     seeds = jg.seeds_in_box(8, [-0.6, -0.2], [-0.1, 0.3], seed=0)
-    kw = dict(integrator=jg.RK4(100), max_iter=20, progress=False, trajectory_samples=0)
+    kw = dict(integrator=jg.RK4(100), max_iter=20, progress=False, trajectory_samples=0, solver="newton")
     plain = jg.find_periodic_orbits(jg.DUFFING, p, seeds, **kw)
     assert [o.stable for o in plain.orbits] == [True] and plain.orbits[0].n_seeds == 8
     defl = jg.find_periodic_orbits(jg.DUFFING, p, seeds, deflation_rounds=1, **kw)
@@ -380,7 +380,7 @@ def test_deflation_finds_the_saddle_plain_newton_misses():
     assert c["runs"] == 16 and c["first_round"] == 8 and c["converged"] > 8
     # plain Newton from the same seeds with the known orbit deflated finds no stable small orbit again
     small = plain.orbits[0].points
-    r = jg.periodic_orbit(jg.DUFFING, p, seeds, integrator=jg.RK4(100), max_iter=20, deflate=small)
+    r = jg.periodic_orbit(jg.DUFFING, p, seeds, integrator=jg.RK4(100), max_iter=20, deflate=small, solver="newton")
     conv = np.asarray(r.status) == SHOOT_CONVERGED
     assert conv.any() and np.all(np.linalg.norm(np.asarray(r.point)[conv] - small[0], axis=1) > 0.1)
 
@@ -392,7 +392,7 @@ def test_multiple_shooting_converges_from_more_seeds():
     seeds = jg.seeds_in_box(32, [-4.0, -4.0], [4.0, 4.0], seed=2)
     frac = {}
     for M in (1, 5):
-        r = jg.periodic_orbit(jg.DUFFING, p, seeds, segments=M, integrator=jg.RK4(100), max_iter=20)
+        r = jg.periodic_orbit(jg.DUFFING, p, seeds, segments=M, integrator=jg.RK4(100), max_iter=20, solver="newton")
         st = np.asarray(r.status)
         frac[M] = float(np.mean(st == SHOOT_CONVERGED))
         assert np.all(np.asarray(r.residual)[st == SHOOT_CONVERGED] <= 1e-10)

@@ -65,7 +65,7 @@ def add_parser(sub) -> None:
                    "deflation, multiple shooting, polishing with the integrator and verification of each orbit "
                    "by direct integration; seeds from --random, plus the attractors of --seeds-from")
     p.add_argument("--solver", default=None, choices=("newton", "dogleg", "levenberg-marquardt", "damped-newton"),
-                   help="nonlinear solver (default newton; with --periods damped-newton, the hand-written "
+                   help="nonlinear solver (default damped-newton, the hand-written "
                    "single-shooting Newton with backtracking)")
     p.add_argument("--segments", type=int, default=None, metavar="M",
                    help="multiple shooting with M segments per orbit (default 1; needs an optimistix --solver)")
@@ -196,7 +196,7 @@ def run(args) -> int:
     opt = {name: getattr(args, name) for name in SEARCH_DEFAULTS}
     for name, value in opt.items():
         if value is None:
-            opt[name] = SEARCH_DEFAULTS[name] if search_mode else {"solver": "newton", "segments": 1,
+            opt[name] = SEARCH_DEFAULTS[name] if search_mode else {"solver": "damped-newton", "segments": 1,
                                                                     "deflation_rounds": 0, "transient": 0}[name]
     extra = {}
     if search_mode:

@@ -27,7 +27,7 @@ from ._floquet import Instability, check_period, classify_multipliers, sorted_ei
 from ._newton import damped_newton, orbit_jacobians
 from ._solve import SOLVERS, Shooting, check_segments, solve_orbit
 
-__all__ = ["ShootResult", "periodic_orbit", "shoot_kernel", "check_newton_options", "check_solver_options",
+__all__ = ["ShootResult", "periodic_orbit", "default_solver", "shoot_kernel", "check_newton_options", "check_solver_options",
            "params_concrete"]
 
 
@@ -134,7 +134,7 @@ def _shoot_damped(system, params, x0, t0, k, integrator, tol, max_iter, max_norm
     )
 
 
-def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="newton",
+def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="damped-newton",
                segments=1, known=None, power=2.0, shift=1.0):
     if solver == "damped-newton":
         return _shoot_damped(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol)
@@ -149,7 +149,7 @@ def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, p
 
 
 @eqx.filter_jit
-def shoot_kernel(system, params, X, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="newton",
+def shoot_kernel(system, params, X, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="damped-newton",
                  segments=1, known=None, power=2.0, shift=1.0):
     one = lambda x0: _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol,
                                 solver, segments, known, power, shift)
@@ -169,6 +169,13 @@ def check_newton_options(tol, max_iter, period_tol, max_norm=1e6) -> None:
     check_number(max_norm, "max_norm", 0, strict_min=True)
 
 
+def default_solver(segments: int = 1, deflating: bool = False) -> str:
+    """The solver used when none is given: the damped Newton for single shooting without
+    deflation (as often converged as the best optimistix solver and the fastest in
+    ``benchmarks/shooting.py``), the optimistix Newton otherwise."""
+    return "newton" if int(segments) > 1 or deflating else "damped-newton"
+
+
 def check_solver_options(solver, segments, integrator, k, deflating=False, power=2.0, shift=1.0) -> int:
     """Raise ``ValueError`` for an unknown solver, bad segments or deflation settings; return ``M``."""
     if solver not in SOLVERS:
@@ -184,7 +191,7 @@ def check_solver_options(solver, segments, integrator, k, deflating=False, power
 
 def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
                    integrator: AbstractIntegrator | None = None, tol: float = 1e-10, max_iter: int = 40,
-                   max_norm: float = 1e6, period_tol: float = 1e-6, solver: str = "newton", segments: int = 1,
+                   max_norm: float = 1e6, period_tol: float = 1e-6, solver: str | None = None, segments: int = 1,
                    deflate=None, deflation_power: float = 2.0, deflation_shift: float = 1.0) -> ShootResult:
     """Shooting: a P-k orbit as a fixed point of ``P^k`` by Newton-type solvers (paper §4.1, [15]).
 
@@ -214,10 +221,12 @@ def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
         max_norm: an iterate with ``||x|| > max_norm`` is reported as diverged.
         period_tol: ``P^j(x*) = x*`` for a divisor ``j`` of ``k`` when
             ``||P^j(x*) - x*|| <= period_tol * (1 + ||x*||)``.
-        solver: ``"newton"`` (default), ``"dogleg"``, ``"levenberg-marquardt"``
-            (optimistix), or ``"damped-newton"`` (the hand-written Newton with Armijo
-            backtracking, single shooting; it alone records every iteration in
-            ``history``).
+        solver: ``None`` (default: :func:`default_solver`), ``"damped-newton"`` (the
+            hand-written Newton with Armijo backtracking, single shooting; as often converged as the best optimistix
+            solver and the fastest in ``benchmarks/shooting.py``, and it alone records
+            every iteration in ``history``), or ``"newton"``, ``"dogleg"``,
+            ``"levenberg-marquardt"`` (optimistix; needed for ``segments > 1`` and
+            ``deflate``).
         segments: ``M``, segments of the multiple shooting (1: single shooting).
         deflate: optional ``(R, dim)`` known orbit points (phase ``t0``) that the solver
             is deflated away from (Farrell-Birkisson-Funke operator
@@ -233,6 +242,7 @@ def periodic_orbit(system: ForcedSystem, params, x0, *, period: int = 1, t0=0.0,
     check_newton_options(tol, max_iter, period_tol, max_norm)
     integrator = resolve_integrator(integrator)
     known = None if deflate is None else jnp.asarray(deflate, jnp.float64).reshape(-1, system.dim)
+    solver = default_solver(segments, known is not None) if solver is None else solver
     M = check_solver_options(solver, segments, integrator, k, known is not None, deflation_power, deflation_shift)
     if params_concrete(params):
         check_system(system, params, np.asarray(x0, dtype=float).reshape(-1, system.dim)[0], batched=False)

@@ -22,7 +22,7 @@ from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
 from ._floquet import Instability, check_period
-from ._orbit import ShootResult, check_newton_options, check_solver_options, shoot_kernel
+from ._orbit import ShootResult, check_newton_options, check_solver_options, default_solver, shoot_kernel
 from ._solve import check_segments
 
 __all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
@@ -316,7 +316,7 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
                          integrator: AbstractIntegrator | None = None, tol: float = 1e-10, max_iter: int = 40,
                          max_norm: float = 1e6, period_tol: float = 1e-6, dedup_tol: float = 1e-6,
                          chunk_size: int = 256, progress: bool = True,
-                         trajectory_samples: int = 200, solver: str = "newton", segments: int = 1,
+                         trajectory_samples: int = 200, solver: str | None = None, segments: int = 1,
                          deflation_rounds: int = 0, deflation_power: float = 2.0, deflation_shift: float = 1.0,
                          transient: int = 0, search_integrator: AbstractIntegrator | None = None,
                          verify: int = 0) -> OrbitSearch:
@@ -407,6 +407,8 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
     check_int(trajectory_samples, "trajectory_samples", 0)
     check_int(deflation_rounds, "deflation_rounds", 0)
     check_int(transient, "transient", 0)
+    check_int(segments, "segments", 1)
+    solver = default_solver(segments, deflation_rounds > 0) if solver is None else solver
     check_int(verify, "verify", 0)
     check_number(dedup_tol, "dedup_tol", 0, strict_min=True)
     integrator = resolve_integrator(integrator)

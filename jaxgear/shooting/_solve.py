@@ -67,6 +67,7 @@ class Shooting(eqx.Module):
         """Flow of segment ``s`` (traced int) from ``x (dim,)``: ``(dim,)``."""
         T = self.system.period(params)
         integ = self.integrator
+        s = jnp.asarray(s, jnp.float64)  # segment index as a time factor
         if isinstance(integ, AbstractFixedStep):
             n = int(integ.steps_per_period) * self.k // self.segments
             h = T / integ.steps_per_period
