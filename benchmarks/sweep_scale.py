@@ -7,10 +7,10 @@ Measures, in one run on one machine, the basin sweep of the reduced gear model (
 preset, default method :class:`jaxgear.Direct` with its label uncertainty) over
 ``--values`` backlash values ``b`` in [4, 6]:
 
-1. *batched*: :func:`jaxgear.basin_sweep`, which runs all values in one lane pool over
+1. *batched*: :func:`jaxgear.basin_sweep` with ``batched=True``, all values in one lane pool over
    (value, cell) pairs;
-2. *separate*: :func:`jaxgear.analyze_global` at each value, one after the other (the
-   sweep before the batched pool);
+2. *separate*: :func:`jaxgear.analyze_global` at each value, one after the other (what
+   ``basin_sweep`` does by default);
 
 each as ``min`` over ``--repeat`` calls after one warm-up call (compilation apart), and
 checks that both give the same shares and labels at every value. The LAST line is the
@@ -50,7 +50,7 @@ def main():
     values = np.linspace(4.0, 6.0, a.values)
 
     def batched():
-        return jg.basin_sweep(jg.REDUCED, params, "b", values, grid, progress=False)
+        return jg.basin_sweep(jg.REDUCED, params, "b", values, grid, progress=False, batched=True)
 
     def separate():
         return [jg.analyze_global(jg.REDUCED, jg.with_param(params, "b", v), grid, progress=False) for v in values]

@@ -337,7 +337,7 @@ def test_basin_sweep_in_one_pool_is_each_value_alone():
     p = jg.paper_params()
     grid = jg.CellGrid.paper((10, 6, 12))
     values = [4.5, 5.5]
-    s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False)
+    s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False, batched=True)
     assert not np.allclose(s.shares[0], s.shares[-1])  # the values differ
     _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct())
 
@@ -349,7 +349,7 @@ def test_basin_sweep_in_one_pool_pure_jax():
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
     values = [1.0, 1.3, 1.4]
     method = jg.Direct(integrator=jg.RK4(64), max_period=4)
-    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=method, progress=False)
+    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=method, progress=False, batched=True)
     assert s.present.sum(axis=1).tolist() != [s.present.shape[1]] * 3
     _assert_sweep_is_separate_analyses(s, jg.DUFFING, p, "omega", values, grid, method)
 

@@ -1,8 +1,8 @@
 """Basin shares across a parameter: the global analysis at every value, attractors matched.
 
-At each value the global analysis runs on the grid (for the direct method all values of
-a block in one lane pool over (value, cell) pairs,
-:func:`~jaxgear.analysis.analyze_global_values`); the attractors of
+At each value the global analysis runs on the grid (one after another, or with
+``batched=True`` and the direct method all values of a block in one lane pool over
+(value, cell) pairs, :func:`~jaxgear.analysis.analyze_global_values`); the attractors of
 neighbouring values are matched by the Hausdorff distance of their stroboscopic point
 sets (:func:`jaxgear._matching.match_attractors`, the idea of global continuation of
 attractors), so each keeps a global identity; shares per value and global attractor,
@@ -26,7 +26,7 @@ from .._matching import match_attractors
 from .._params import param_targets, params_to_dict, with_param
 from .._system import ForcedSystem
 from .._version import __version__
-from ..analysis import AbstractGlobalMethod, analyze_global_values, default_method, method_from_name
+from ..analysis import AbstractGlobalMethod, analyze_global, analyze_global_values, default_method, method_from_name
 from ._bifurcation import read_only
 from ._checkpoint import Checkpoint
 from ._classify import period_label
@@ -200,22 +200,24 @@ BLOCK_CELLS = 1 << 20
 of a block run together, and the block is what a killed sweep loses."""
 
 
-def _analyze_values(system, params_list, grid, method):
-    """The global analysis at several parameter values, in one lane pool (a hook for
-    progress and tests)."""
-    return analyze_global_values(system, params_list, grid, method, progress=False)
+def _analyze_values(system, params_list, grid, method, batched: bool = False):
+    """The global analysis at several parameter values: in one lane pool (``batched``) or
+    one analysis after another (a hook for progress and tests)."""
+    if batched:
+        return analyze_global_values(system, params_list, grid, method, progress=False)
+    return [analyze_global(system, p, grid, method, progress=False) for p in params_list]
 
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
                 method: AbstractGlobalMethod | str | None = None, match_tol: float | None = None,
-                progress: bool = True, out=None, restart: bool = False, save: bool = True) -> BasinSweep:
+                progress: bool = True, out=None, restart: bool = False, save: bool = True,
+                batched: bool = False) -> BasinSweep:
     """Basin shares across a parameter, attractors continued from value to value.
 
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
-    the method's grid; for the gear model the paper's region D); with the direct method
-    the values run together, as one lane pool over (value, cell) pairs of at most
-    :data:`BLOCK_CELLS` cells (:func:`~jaxgear.analysis.analyze_global_values`: the
-    same result per value). The attractors of
+    the method's grid; for the gear model the paper's region D), values in blocks of at
+    most :data:`BLOCK_CELLS` cells (``batched``: each block in one lane pool,
+    :func:`~jaxgear.analysis.analyze_global_values`, the same result per value). The attractors of
     neighbouring values are matched by the Hausdorff distance of their stroboscopic
     point sets (cyclic-shift invariant, the idea of global continuation of attractors):
     greedily, closest pairs first, pairs farther than ``match_tol`` not matched (default:
@@ -231,6 +233,12 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``
             (``save=False``: only the parts; the command line writes the result with its
             summary and figures as one set); restart: discard a folder of other settings.
+        batched: run the values of a block in one lane pool over (value, cell) pairs
+            (:func:`~jaxgear.analysis.analyze_global_values`, identical results) instead
+            of one analysis after another. Off by default: on the 2-core CPU of the
+            benchmarks it is 0.77x as fast (``benchmarks/sweep_scale.py``; integration
+            dominates there and the per-value bookkeeping costs more); it saves the
+            draining tail of each analysis, which matters more on a GPU.
     Returns:
         :class:`BasinSweep`.
     """
@@ -283,7 +291,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     for b in range(0, len(todo), per_block):
         block = todo[b:b + per_block]
         for i, r in zip(block, _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid,
-                                               method)):
+                                               method, batched)):
             if ck.dir is not None:
                 r.save(ck.path(f"value_{i:05d}.nc"))
             results[i] = r
