@@ -90,6 +90,14 @@ def _floquet_result(system, params, x, t0, k, integrator, period_tol, r, it, st,
     xs = jax.lax.stop_gradient(x)
     conv = st == Status.CONVERGED
     _, pts, Cs = orbit_jacobians(system, params, jnp.where(conv, xs, 0.0), t0, k, integrator)
+    return _result_at(x, pts, Cs, k, period_tol, r, it, st, hist)
+
+
+def _result_at(x, pts, Cs, k, period_tol, r, it, st, hist):
+    """The :class:`ShootResult` at ``x`` from its orbit points ``pts`` and the Jacobians
+    ``Cs`` of ``P^1 .. P^k`` there (NaN where the solve did not converge)."""
+    xs = jax.lax.stop_gradient(x)
+    conv = st == Status.CONVERGED
     nan = jnp.nan
     m = _minimal_period(pts, xs, k, period_tol)
     M = jnp.take(Cs, m - 1, axis=0)
@@ -118,20 +126,7 @@ def _shoot_damped(system, params, x0, t0, k, integrator, tol, max_iter, max_norm
         return jnp.linalg.solve(jax.jacfwd(g)(y), y)
 
     x, (r, it, st, hist, pts, Cs) = jax.lax.custom_root(G, x0, solve, tangent_solve, has_aux=True)
-    it = it.astype(jnp.int32)
-    st = st.astype(jnp.int32)
-    conv = st == Status.CONVERGED
-    nan = jnp.nan
-    m = _minimal_period(pts, x, k, period_tol)
-    M = jnp.take(Cs, m - 1, axis=0)
-    lam = jnp.where(conv, sorted_eigvals(jnp.where(conv, M, 0.0)), nan)
-    stable, kind = classify_multipliers(lam)
-    return ShootResult(
-        point=jnp.where(conv, x, nan), orbit=jnp.where(conv, pts, nan), min_period=jnp.where(conv, m, 0),
-        monodromy=jnp.where(conv, M, nan), multipliers=lam, stable=stable & conv,
-        instability=jnp.where(conv, kind, int(Instability.UNKNOWN)), residual=r, iterations=it, status=st,
-        history=hist, last_iterate=jax.lax.stop_gradient(x),
-    )
+    return _result_at(x, pts, Cs, k, period_tol, r, it.astype(jnp.int32), st.astype(jnp.int32), hist)
 
 
 def _shoot_one(system, params, x0, t0, k, integrator, tol, max_iter, max_norm, period_tol, solver="damped-newton",
