@@ -10,7 +10,7 @@ import numpy as np
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
-__all__ = ["detect_period", "follow", "refine_orbit", "refine_orbits", "section_points", "section_points_of",
+__all__ = ["detect_period", "follow", "refine_orbits", "section_points", "section_points_of",
            "advance_states"]
 
 
@@ -96,11 +96,6 @@ def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_perio
         start = int(np.argmin(pts[:, 0]))
         out.append((np.roll(pts, -start, axis=0), res))
     return out
-
-
-def refine_orbit(system, params, x: np.ndarray, k: int, integrator, settle: int = 0) -> tuple[np.ndarray, float]:
-    """:func:`refine_orbits` of one cycle: ``(points (k, dim), residual)``."""
-    return refine_orbits(system, params, [(x, k)], integrator, settle)[0]
 
 
 @eqx.filter_jit
