@@ -48,7 +48,7 @@ def _advance_rows(system, params, X, periods, integrator):
 
 def advance_states(system, params, X, periods: int, integrator) -> np.ndarray:
     """States ``X (n, dim)`` at phase 0 advanced by ``periods`` forcing periods: ``(n, dim)``."""
-    return np.asarray(_advance_rows(system, params, jnp.asarray(X), int(periods), integrator))
+    return np.asarray(_advance_rows(system, params, jax.device_put(np.asarray(X, np.float64)), int(periods), integrator))
 
 
 def follow(system, params, X: np.ndarray, integrator, settle: int, max_period: int, tol: float):
@@ -88,7 +88,7 @@ def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_perio
     Xp = _pad_rows(X)
     if settle > 0:
         Xp = advance_states(system, params, Xp, int(settle), integrator)
-    orb = np.asarray(stroboscopic_orbit(system, params, jnp.asarray(Xp), n_points=2 * K, integrator=integrator))
+    orb = np.asarray(stroboscopic_orbit(system, params, jax.device_put(Xp), n_points=2 * K, integrator=integrator))
     out = []
     for i, k in enumerate(ks):
         pts = orb[i, k - 1: 2 * k - 1]
@@ -151,7 +151,7 @@ def section_points_of(system, params, cycles, integrator, index, direction) -> l
     if not rows:
         return [empty for _ in cycles]
     X = np.concatenate(rows)
-    hits, Zs = _crossings(system, params, jnp.asarray(_pad_rows(X)), integrator.crossing_stepper, int(index),
+    hits, Zs = _crossings(system, params, jax.device_put(_pad_rows(X)), integrator.crossing_stepper, int(index),
                           int(np.sign(direction)))
     hits, Zs = np.asarray(hits)[:, : len(X)], np.asarray(Zs)[:, :, : len(X)]
     lane, step = np.nonzero(hits.T)  # by state (cycle order), then time

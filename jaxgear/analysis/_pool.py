@@ -16,9 +16,11 @@ decides happens on the device inside one ``lax.while_loop`` over rounds of
   (capture), when it recurs (a known attractor if its newest point lies on one, else a
   new attractor is registered, one per round), or when it reached ``max_periods``
   (unresolved);
-- decided lanes write their cell's label and take the next cells of the queue; when the
-  queue is empty the busy lanes are gathered at the front and only those are integrated
-  (``n_active``), and the host moves them to a smaller pool when few remain.
+- decided lanes write their cell's label and take the next cells of the queue; once the
+  queue is empty, the busy lanes beyond the first ``c`` (the busy count) move into the
+  free lanes below it after a round that left the active range 1/8 free, so only
+  ``n_active = c`` lanes are integrated (a compaction moves only the lanes out of place),
+  and the host moves the last ones to a smaller pool when few remain.
 
 The host only reads a few scalars per call (progress, a full attractor table, a pool
 to shrink).
@@ -261,15 +263,47 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     return s
 
 
-@functools.partial(jax.jit, donate_argnums=0)
+COMPACT_BELOW = 7 / 8
+"""A round ends with a compaction once the busy lanes fill at most this share of the
+active range (a compaction costs about a tenth of a period of the lanes' integration:
+more often loses more to its cost than it saves)."""
+
+MOVE_CHUNK = 1024
+"""Lanes moved per step of a compaction (:func:`_compact`)."""
+
+
 def _compact(s: PoolState) -> PoolState:
-    """Gather the busy lanes at the front and integrate only those (called by the host once
-    the queue is empty and they fill at most three quarters of the active range)."""
+    """Move the busy lanes that lie beyond the first ``c`` lanes (``c``: the busy count)
+    into the free lanes below ``c``, so lanes ``[0, c)`` hold every busy lane and only
+    those are integrated (``n_active = c``). Only the lanes out of place move, in steps of
+    :data:`MOVE_CHUNK`, so a compaction costs what it moves (the ring of a lane is most of
+    the pool's memory)."""
+    L = s.cell.shape[0]
+    pos = jnp.arange(L, dtype=jnp.int32)
     busy = s.cell >= 0
-    order = jnp.argsort(~busy, stable=True)
-    t = lambda a, ax: jnp.take(a, order, axis=ax)  # noqa: E731
-    return s._replace(Y=t(s.Y, 1), hist=t(s.hist, 2), streak=t(s.streak, 1), cell=t(s.cell, 0), row=t(s.row, 0),
-                      age=t(s.age, 0), n_active=jnp.sum(busy).astype(jnp.int32))
+    c = jnp.sum(busy, dtype=jnp.int32)
+    out_of_place = busy & (pos >= c)
+    m = jnp.sum(out_of_place, dtype=jnp.int32)
+    src_all = jnp.nonzero(out_of_place, size=L, fill_value=L)[0].astype(jnp.int32)
+    dst_all = jnp.nonzero(~busy & (pos < c), size=L, fill_value=L)[0].astype(jnp.int32)
+    K = min(MOVE_CHUNK, L)
+    pad = jnp.full(K, L, jnp.int32)  # so the last chunk's slice stays inside the arrays
+    src_all, dst_all = jnp.concatenate([src_all, pad]), jnp.concatenate([dst_all, pad])
+
+    def move(j, s):
+        src = jax.lax.dynamic_slice_in_dim(src_all, j * K, K)
+        dst = jax.lax.dynamic_slice_in_dim(dst_all, j * K, K)
+        src_c = jnp.minimum(src, L - 1)
+
+        def mv(a):  # lanes on the last axis
+            return a.at[..., dst].set(jnp.take(a, src_c, axis=-1), mode="drop")
+
+        return s._replace(Y=mv(s.Y), hist=mv(s.hist), streak=mv(s.streak), cell=mv(s.cell), row=mv(s.row),
+                          age=mv(s.age))
+
+    s = jax.lax.fori_loop(0, (m + K - 1) // K, move, s)
+    cell = jnp.where(pos >= c, -1, s.cell).astype(jnp.int32)  # the lanes moved from
+    return s._replace(cell=cell, n_active=jnp.minimum(s.n_active, c).astype(jnp.int32))
 
 
 @functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "n", "L_min"), donate_argnums=0)
@@ -282,12 +316,18 @@ def _run(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n: int,
     def body(c):
         s, r = c
         s = jax.lax.fori_loop(0, o.R, lambda _, s: _one_period(system, params, integrator, o, s), s)
-        return _decide(o, s, X, Xrow, n), r + 1
+        s = _decide(o, s, X, Xrow, n)
+        # once the queue is empty, the busy lanes are gathered at the front as lanes free up
+        busy = jnp.sum(s.cell >= 0, dtype=jnp.int32)
+        worth = (s.next_cell >= n) & (busy.astype(jnp.float64) <= COMPACT_BELOW * s.n_active.astype(jnp.float64))
+        return jax.lax.cond(worth, _compact, lambda s: s, s), r + 1
 
     s, _ = jax.lax.while_loop(cond, body, (s, jnp.asarray(0, jnp.int32)))
-    return s
+    info = jnp.stack([s.n_done, s.overflow.astype(jnp.int32), s.n_active, s.next_cell, jnp.sum(s.n_att, dtype=jnp.int32)])
+    return s, info
 
 
+@functools.partial(jax.jit, static_argnames=("L", "A"))
 def _resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolState:
     """The pool with ``L`` lanes (the first ``L``: busy lanes are at the front) or ``A``
     attractor slots."""
@@ -361,7 +401,7 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
         Xp = np.concatenate([X[p] for X, p in zip(Xs, parts)])
         rows = np.concatenate([np.full(len(p), v, np.int32) for v, p in enumerate(parts)])
         L = max(1, min(int(chunk), max(len(p) for p in parts)))  # the pool of one value, refilled from the next
-        s = _drive(system, params, integrator, o, jnp.asarray(Xp), jnp.asarray(rows), L, att, bar)
+        s = _drive(system, params, integrator, o, jax.device_put(Xp), jax.device_put(rows), L, att, bar)
         att = (s.att_pts, s.att_k, s.n_att)
         lab, use = (np.asarray(a) for a in jax.device_get((s.labels, s.used)))
         start = 0
@@ -394,7 +434,7 @@ def _seed_attractors(attractors, M: int, dim: int):
         for a, (p, k) in enumerate(kn):
             pts[v, a, :k] = p[:k]
             ks[v, a] = k
-    return jnp.asarray(pts), jnp.asarray(ks), jnp.asarray([len(kn) for kn in known], jnp.int32)
+    return jax.device_put((pts, ks, np.array([len(kn) for kn in known], np.int32)))
 
 
 def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) -> PoolState:
@@ -405,9 +445,8 @@ def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) 
     done = 0
     while True:
         L_min = _next_pool(s.Y.shape[1])
-        s = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min)
-        n_done, overflow, n_active, next_cell, n_att, busy = (int(v) for v in jax.device_get(
-            (s.n_done, s.overflow, s.n_active, s.next_cell, jnp.sum(s.n_att), jnp.sum(s.cell >= 0))))
+        s, info = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min)
+        n_done, overflow, n_active, next_cell, n_att = (int(v) for v in np.asarray(info))
         bar.update(n_done - done)
         done = n_done
         bar.set_postfix_str(f"{n_active} lanes busy, {n_att} attractors", refresh=False)
@@ -415,11 +454,7 @@ def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) 
             return s
         if overflow:
             s = _resize(s, A=2 * s.att_k.shape[1])
-            continue
-        if next_cell >= n and busy <= (3 * n_active) // 4:
-            s = _compact(s)
-            n_active = busy
-        if next_cell >= n and n_active <= L_min < s.Y.shape[1]:
+        elif next_cell >= n and n_active <= L_min < s.Y.shape[1]:
             s = _resize(s, L=L_min)
 
 
