@@ -16,7 +16,14 @@
 from ._cellmap import PoincareCellMap, StroboscopicCellMap, cell_images
 from ._compare import compare_with_direct
 from ._direct import Direct
-from ._global import DEFAULT_METHOD, analyze_global, analyze_global_values, default_method, with_label_uncertainty
+from ._global import (
+                      DEFAULT_METHOD,
+                      analyze_global,
+                      analyze_global_values,
+                      default_method,
+                      prepare_label_uncertainty,
+                      with_label_uncertainty,
+)
 from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
 from ._orbits import detect_period
@@ -28,4 +35,4 @@ __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCel
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
            "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty",
-           "with_label_uncertainty"]
+           "with_label_uncertainty", "prepare_label_uncertainty"]

@@ -25,7 +25,7 @@ from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
 from ._orbits import section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
-from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
+from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty, prepare_label_uncertainties
 
 __all__ = ["analyze_global", "analyze_global_values", "default_method", "DEFAULT_METHOD", "with_label_uncertainty"]
 
@@ -93,6 +93,8 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
     method.check(system, grid)
     check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+    if uncertainty:
+        prepare_label_uncertainty(system, params, grid, method, uncertainty)
 
     labels, raw, cycles, mean_periods = method.classify(system, params, grid, progress)
     labels, raw, cycles = _merge_same(labels, raw, cycles, method)
@@ -116,6 +118,14 @@ def with_label_uncertainty(result: GlobalResult, system, params, method: Abstrac
     return dataclasses.replace(result, uncertainty=u)
 
 
+def prepare_label_uncertainty(system, params, grid: CellGrid, method: AbstractGlobalMethod,
+                              samples: int = DEFAULT_SAMPLES) -> None:
+    """Start compiling, on a side thread, what :func:`with_label_uncertainty` with these
+    arguments will run, and return at once: called before the analysis, the compilation
+    overlaps with it."""
+    prepare_label_uncertainties(system, [params], grid, Direct.like(method), samples)
+
+
 def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, method: AbstractGlobalMethod, *,
                           progress: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> list[GlobalResult]:
     """:func:`analyze_global` at several parameter sets of one system on one grid (the
@@ -133,6 +143,8 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
     t_start = time.perf_counter()
     for params in params_list:
         check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+    if uncertainty:
+        prepare_label_uncertainties(system, params_list, grid, Direct.like(method), uncertainty)
     results = []
     for params, (labels, raw, cycles, mean_periods) in zip(params_list,
                                                            method.classify_values(system, params_list, grid,

@@ -36,16 +36,17 @@ full from one value to the next.
 from __future__ import annotations
 
 import functools
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
 
-__all__ = ["PoolState", "run_pool", "run_pools", "NOT_DONE"]
+__all__ = ["PoolState", "run_pool", "run_pools", "prepare_pools", "NOT_DONE"]
 
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
@@ -87,7 +88,7 @@ class _Options(NamedTuple):
     rounds_per_call: int
 
 
-@eqx.filter_jit
+@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
 def _init(n: int, L: int, dim: int, M: int, X, Xrow, att_pts, att_k, n_att) -> PoolState:
     H = 2 * M + 1
     take = min(L, n)
@@ -373,15 +374,12 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     pool, value after value: the compilation, the pilot's draining and the draining tail
     are paid once.
     """
-    from ..integrate import stack_params
-
     V = len(params_list)
     Xs = [np.asarray(X, dtype=np.float64) for X in X_list]
     dim = Xs[0].shape[1]
     M = int(max_period)
-    o = _Options(M=M, R=int(R), tol=float(tol), merge_tol=float(merge_tol), max_periods=int(max_periods),
-                 bound=float(bound), capture=None if capture == "auto" else float(capture), rounds_per_call=4)
-    params = params_list[0] if V == 1 else stack_params(params_list)
+    o = _options(R, max_periods, max_period, tol, capture, bound, merge_tol)
+    params = params_list[0] if V == 1 else _stack(params_list)
     orders, n_ps = [], []
     for X in Xs:
         n = len(X)
@@ -393,6 +391,11 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     bar = progress_bar(sum(len(X) for X in Xs), label, progress)
     labels = [np.empty(len(X), dtype=np.int64) for X in Xs]
     used = [np.empty(len(X), dtype=np.int64) for X in Xs]
+    n_main = sum(len(X) - n_p for X, n_p in zip(Xs, n_ps))
+    if any(n_ps) and n_main:  # the main pool's computations compile while the pilot runs
+        _prepare(system, params, integrator, o, n_main, max(1, min(int(chunk), max(len(X) - n_p for X, n_p in
+                                                                                     zip(Xs, n_ps)))), dim, V,
+                 att[1].shape[1])
     for phase in (0, 1):
         parts = [o_[:n_p] if phase == 0 else o_[n_p:] for o_, n_p in zip(orders, n_ps)]
         total = sum(len(p) for p in parts)
@@ -418,6 +421,18 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     return out
 
 
+def _options(R, max_periods, max_period, tol, capture, bound, merge_tol) -> _Options:
+    return _Options(M=int(max_period), R=int(R), tol=float(tol), merge_tol=float(merge_tol),
+                    max_periods=int(max_periods), bound=float(bound),
+                    capture=None if capture == "auto" else float(capture), rounds_per_call=4)
+
+
+def _stack(params_list):
+    from ..integrate import stack_params
+
+    return stack_params(params_list)
+
+
 def _seed_attractors(attractors, M: int, dim: int):
     """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,))`` of ``V``
     values holding each value's known cycles first (``A``: 8 slots, or the next power of
@@ -441,10 +456,12 @@ def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) 
     """Run one pool over the states ``Xd (n, dim)`` (of parameter rows ``Xrow (n,)``)
     until every one is decided."""
     n, dim = Xd.shape
+    _ready(system, integrator, o, n, L, att[1].shape)
     s = _init(n, L, dim, o.M, Xd, Xrow, *att)
     done = 0
     while True:
         L_min = _next_pool(s.Y.shape[1])
+        _ready(system, integrator, o, n, s.Y.shape[1], att[1].shape)
         s, info = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min)
         n_done, overflow, n_active, next_cell, n_att = (int(v) for v in np.asarray(info))
         bar.update(n_done - done)
@@ -466,3 +483,63 @@ of a draining pool stop costing the bookkeeping of the full one."""
 def _next_pool(L: int) -> int:
     """The pool size the lanes move to once they fit (:data:`TAIL_LANES`)."""
     return TAIL_LANES if L > 2 * TAIL_LANES else L
+
+
+# ----------------------------------------------------------------------------- compiling ahead
+# A pool's computations (``_init`` and ``_run`` of each of its sizes) compile on a side
+# thread while the device works on something else (the pilot, an earlier pool), so the
+# tracing and compiling do not add to the run's wall time. The pool waits for its own
+# warm-up before its first call, so nothing compiles twice.
+
+_COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxgear-compile")
+_PENDING: dict = {}
+_PENDING_LOCK = threading.Lock()
+
+
+def _key(system, integrator, o: _Options, n: int, L: int, att_shape) -> tuple:
+    return (system, integrator, o, int(n), int(L), tuple(att_shape))
+
+
+def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int, max_periods: int,
+                  max_period: int, tol: float, capture, bound: float, merge_tol: float, attractors=None) -> None:
+    """Compile, on a side thread, the pool that :func:`run_pools` with these arguments and
+    ``pilot=0`` will run over ``n`` states per value (a later call then starts at once).
+    Returns immediately; a failure here is left for the real call to report."""
+    V = len(params_list)
+    o = _options(R, max_periods, max_period, tol, capture, bound, merge_tol)
+    params = params_list[0] if V == 1 else _stack(params_list)
+    A = _seed_attractors(attractors if attractors is not None else [()] * V, o.M, system.dim)[1].shape[1]
+    _prepare(system, params, integrator, o, V * int(n), max(1, min(int(chunk), int(n))), system.dim, V, A)
+
+
+def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
+    sizes = [L] + ([_next_pool(L)] if _next_pool(L) < L else [])
+    for size in sizes:
+        key = _key(system, integrator, o, n, size, (V, A))
+        with _PENDING_LOCK:
+            if key in _PENDING:
+                continue
+            _PENDING[key] = _COMPILER.submit(_compile_pool, system, params, integrator, o, n, size, L, dim, V, A)
+
+
+def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L: int, dim: int, V: int, A: int):
+    f64, i32 = jnp.float64, jnp.int32
+    X = jax.ShapeDtypeStruct((n, dim), f64)
+    Xrow = jax.ShapeDtypeStruct((n,), i32)
+    att = (jax.ShapeDtypeStruct((V, A, o.M, dim), f64), jax.ShapeDtypeStruct((V, A), i32),
+           jax.ShapeDtypeStruct((V,), i32))
+    if size == L:
+        _init.lower(n, L, dim, o.M, X, Xrow, *att).compile()
+    s = jax.eval_shape(functools.partial(_init, n, size, dim, o.M), X, Xrow, *att)
+    _run.lower(s, system, params, integrator, o, X, Xrow, n, _next_pool(size)).compile()
+
+
+def _ready(system, integrator, o: _Options, n: int, L: int, att_shape) -> None:
+    """Wait for the side thread's compilation of this pool, if one was started."""
+    with _PENDING_LOCK:
+        fut = _PENDING.pop(_key(system, integrator, o, n, L, att_shape), None)
+    if fut is not None:
+        try:
+            fut.result()
+        except Exception:  # the call itself will raise what is wrong
+            pass

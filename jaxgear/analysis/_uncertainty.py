@@ -22,9 +22,9 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
-from ._pool import run_pools
+from ._pool import prepare_pools, run_pools
 
-__all__ = ["label_uncertainty", "label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
+__all__ = ["label_uncertainty", "label_uncertainties", "prepare_label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
 
 DEFAULT_SAMPLES = 1024
 """Cells sampled for the estimate (the direct method's pilot size: the same compiled pool)."""
@@ -48,6 +48,19 @@ def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attrac
     """
     return label_uncertainties(system, [params], grid, [labels], [attractors], direct, samples=samples,
                                perturbation=perturbation, seed=seed, progress=progress)[0]
+
+
+def prepare_label_uncertainties(system, params_list, grid: CellGrid, direct, samples: int = DEFAULT_SAMPLES) -> None:
+    """Start compiling the pools of :func:`label_uncertainties` on a side thread (it returns
+    at once), so that a later call does not wait for compilation: called before the
+    analysis whose result will be measured, the compilation overlaps with it."""
+    S = min(int(samples), grid.n_cells)
+    if S < 1:
+        return
+    for integrator in (direct.integrator.refined(), direct.integrator):
+        prepare_pools(system, list(params_list), integrator, S, chunk=direct.chunk_size, R=direct.round_periods,
+                      max_periods=direct.max_periods, max_period=direct.max_period, tol=direct.period_tol,
+                      capture=direct.capture_radius, bound=direct.escape_bound, merge_tol=direct.merge_tol)
 
 
 def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attractors_list, direct, *,

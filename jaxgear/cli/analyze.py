@@ -128,9 +128,11 @@ def _analyze(args, params, grid, method, out: Path) -> list[str]:
     import numpy as np
 
     from .._model import REDUCED
-    from ..analysis import analyze_global, compare_with_direct, with_label_uncertainty
+    from ..analysis import analyze_global, compare_with_direct, prepare_label_uncertainty, with_label_uncertainty
 
     t0 = time.perf_counter()
+    if args.uncertainty_samples:  # its pools compile while the analysis runs
+        prepare_label_uncertainty(REDUCED, params, grid, method, args.uncertainty_samples)
     # A second thread imports the output libraries while the analysis runs, then draws the
     # figures while the label uncertainty is measured (compiled code releases the GIL).
     with ThreadPoolExecutor(1) as side:
