@@ -23,7 +23,7 @@ from .._version import __version__
 from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import section_points_of
+from ._orbits import prepare_section_points, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty, prepare_label_uncertainties
 
@@ -93,6 +93,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
     method.check(system, grid)
     check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+    _prepare_assembly(system, params, method)
     if uncertainty:
         prepare_label_uncertainty(system, params, grid, method, uncertainty)
 
@@ -143,6 +144,7 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
     t_start = time.perf_counter()
     for params in params_list:
         check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
+    _prepare_assembly(system, params_list[0], method)
     if uncertainty:
         prepare_label_uncertainties(system, params_list, grid, Direct.like(method), uncertainty)
     results = []
@@ -182,6 +184,15 @@ def _merge_same(labels, raw, cycles, method):
     return out, [reduced[i] for i in first], merged_cycles
 
 
+def _section_index(system, method):
+    return method.section_index if method.section_index is not None else system.section_index
+
+
+def _prepare_assembly(system, params, method) -> None:
+    """Compile what :func:`_assemble` runs on a side thread while the analysis runs."""
+    prepare_section_points(system, params, method.integrator, _section_index(system, method), method.direction)
+
+
 def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime) -> GlobalResult:
     """Attractors sorted by decreasing share (ids renumbered 0..A-1) and the result object."""
     n = grid.n_cells
@@ -190,7 +201,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     out_labels = labels.copy()
     for new, old in enumerate(order):
         out_labels[labels == old] = new
-    sec_idx = method.section_index if method.section_index is not None else system.section_index
+    sec_idx = _section_index(system, method)
     attractors = []
     secs = section_points_of(system, params, [raw[old][0] if raw[old][1] > 0 else np.zeros((0, system.dim))
                                               for old in order], method.integrator, sec_idx, method.direction)

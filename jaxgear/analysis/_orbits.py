@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._ahead import compile_ahead, wait_for
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
@@ -98,7 +101,7 @@ def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_perio
     return out
 
 
-@eqx.filter_jit
+@functools.partial(jax.jit, static_argnames=("system", "stepper", "index", "direction"))
 def _crossings(system, params, X, stepper, index: int, direction: int):
     """One forcing period from each state ``X (n, dim)`` at phase 0 with the fixed-step
     ``stepper``, and at every step the crossing of ``x_index = 0`` inside it: whether the
@@ -135,6 +138,27 @@ def _crossings(system, params, X, stepper, index: int, direction: int):
     return hits, Zs
 
 
+SECTION_ROWS = 32
+"""States integrated together by :func:`section_points_of` (at least; more in powers of
+two): one compiled shape for every result with up to 32 cycle points."""
+
+
+def _section_key(system, stepper, rows: int, index, direction: int) -> tuple:
+    return ("section points", system, stepper, int(rows), int(index), int(direction))
+
+
+def prepare_section_points(system, params, integrator, index, direction) -> None:
+    """Compile, on a side thread, what :func:`section_points_of` with these arguments runs
+    for up to :data:`SECTION_ROWS` cycle points (returns at once)."""
+    if index is None:
+        return
+    stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
+    X = jax.ShapeDtypeStruct((SECTION_ROWS, system.dim), jnp.float64)
+    compile_ahead(_section_key(system, stepper, SECTION_ROWS, index, direction),
+                  lambda: _crossings.lower(system, params, X, stepper=stepper, index=int(index),
+                                           direction=direction).compile())
+
+
 def section_points_of(system, params, cycles, integrator, index, direction) -> list[np.ndarray]:
     """Crossings of Σ = {x_index = 0} over the k periods of each periodic orbit (``cycles``:
     a list of stroboscopic point arrays ``(k, dim)`` in cycle order), in time order:
@@ -151,8 +175,10 @@ def section_points_of(system, params, cycles, integrator, index, direction) -> l
     if not rows:
         return [empty for _ in cycles]
     X = np.concatenate(rows)
-    hits, Zs = _crossings(system, params, jax.device_put(_pad_rows(X)), integrator.crossing_stepper, int(index),
-                          int(np.sign(direction)))
+    Xp = _pad_rows(X, SECTION_ROWS)
+    stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
+    wait_for(_section_key(system, stepper, len(Xp), index, direction))
+    hits, Zs = _crossings(system, params, jax.device_put(Xp), stepper=stepper, index=int(index), direction=direction)
     hits, Zs = np.asarray(hits)[:, : len(X)], np.asarray(Zs)[:, :, : len(X)]
     lane, step = np.nonzero(hits.T)  # by state (cycle order), then time
     found = Zs[step, :, lane]

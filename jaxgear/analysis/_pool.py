@@ -36,14 +36,13 @@ full from one value to the next.
 from __future__ import annotations
 
 import functools
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._ahead import compile_ahead, wait_for
 from .._batching import progress_bar
 
 __all__ = ["PoolState", "run_pool", "run_pools", "prepare_pools", "NOT_DONE"]
@@ -487,13 +486,8 @@ def _next_pool(L: int) -> int:
 
 # ----------------------------------------------------------------------------- compiling ahead
 # A pool's computations (``_init`` and ``_run`` of each of its sizes) compile on a side
-# thread while the device works on something else (the pilot, an earlier pool), so the
-# tracing and compiling do not add to the run's wall time. The pool waits for its own
-# warm-up before its first call, so nothing compiles twice.
-
-_COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxgear-compile")
-_PENDING: dict = {}
-_PENDING_LOCK = threading.Lock()
+# thread (:mod:`jaxgear._ahead`) while the device works on something else (the pilot, an
+# earlier pool); the pool waits for its own warm-up before its first call.
 
 
 def _key(system, integrator, o: _Options, n: int, L: int, att_shape) -> tuple:
@@ -515,11 +509,8 @@ def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int
 def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
     sizes = [L] + ([_next_pool(L)] if _next_pool(L) < L else [])
     for size in sizes:
-        key = _key(system, integrator, o, n, size, (V, A))
-        with _PENDING_LOCK:
-            if key in _PENDING:
-                continue
-            _PENDING[key] = _COMPILER.submit(_compile_pool, system, params, integrator, o, n, size, L, dim, V, A)
+        compile_ahead(_key(system, integrator, o, n, size, (V, A)),
+                      functools.partial(_compile_pool, system, params, integrator, o, n, size, L, dim, V, A))
 
 
 def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L: int, dim: int, V: int, A: int):
@@ -536,10 +527,4 @@ def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L:
 
 def _ready(system, integrator, o: _Options, n: int, L: int, att_shape) -> None:
     """Wait for the side thread's compilation of this pool, if one was started."""
-    with _PENDING_LOCK:
-        fut = _PENDING.pop(_key(system, integrator, o, n, L, att_shape), None)
-    if fut is not None:
-        try:
-            fut.result()
-        except Exception:  # the call itself will raise what is wrong
-            pass
+    wait_for(_key(system, integrator, o, n, L, att_shape))

@@ -56,9 +56,7 @@ from typing import Any, NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-import optimistix as optx
 
 from .._batching import progress_bar
 from .._params import get_param, params_to_dict, with_param
@@ -142,6 +140,9 @@ def _bordered_newton(evaluate, z_guess, anchor, w, tol, max_iter, max_norm):
     is returned. Returns ``(z, status, iterations, ||F||, J, pts)``, ``iterations`` the
     Newton steps taken before ``z``.
     """
+    import lineax as lx  # with optimistix, imported on first use (they add to every `import jaxgear`)
+    import optimistix as optx
+
     scale = 1.0 + jnp.linalg.norm(anchor)
 
     @jax.custom_jvp
