@@ -6,23 +6,23 @@ import pytest
 
 import jaxgear  # noqa: F401  (enables float64 before any test builds arrays)
 
-# Modules whose tests run with strict dtype promotion: an implicit promotion between array
-# dtypes (int32 with int64, float64 with an integer array, a float with a complex) raises
-# instead of silently widening, so the engine's arithmetic stays float64 / int32 by
-# construction (Python scalars are still weakly typed).
-STRICT_PROMOTION = {"test_model", "test_poincare", "test_integrate", "test_native", "test_kink", "test_cellmap",
-                    "test_result", "test_feedback", "test_any_system", "test_io", "test_cli_analyze",
-                    "test_cli_params", "test_cli_validation", "test_outputs", "test_sweep", "test_smoke_package",
-                    "test_params"}
 
-
-@pytest.fixture(autouse=True)
-def _strict_dtype_promotion(request):
-    if request.module.__name__.rsplit(".", 1)[-1] in STRICT_PROMOTION:
-        with jax.numpy_dtype_promotion("strict"):
+@pytest.fixture(autouse=True, scope="session")
+def _strict_dtype_promotion():
+    """Every test runs with strict dtype promotion: an implicit promotion between array dtypes
+    (int32 with int64, float64 with an integer array, a float with a complex) raises instead
+    of silently widening, so the engine's arithmetic stays float64 / int32 by construction
+    (Python scalars are still weakly typed). Set for the whole session, so module fixtures
+    and threads the code starts are covered too, and through ``JAX_NUMPY_DTYPE_PROMOTION``
+    for the processes the tests start (the command line, the notebooks' kernels)."""
+    old = jax.config.jax_numpy_dtype_promotion
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("JAX_NUMPY_DTYPE_PROMOTION", "strict")
+        jax.config.update("jax_numpy_dtype_promotion", "strict")
+        try:
             yield
-    else:
-        yield
+        finally:
+            jax.config.update("jax_numpy_dtype_promotion", old)
 
 
 @contextlib.contextmanager

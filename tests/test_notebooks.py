@@ -28,7 +28,8 @@ def _listing(folder: Path) -> set[Path]:
 
 def _execute(path: Path, tmp: Path) -> dict:
     """Run the notebook as a user who opens it would: the kernel works in notebooks/,
-    ``JAXGEAR_SCRATCH`` is unset and jaxgear is imported from this source tree. Temporary
+    ``JAXGEAR_SCRATCH`` is unset and jaxgear is imported from this source tree, with strict
+    dtype promotion (``JAX_NUMPY_DTYPE_PROMOTION=strict``) as in every test. Temporary
     folders (the default SCRATCH) go under ``tmp``. Anything new under notebooks/ is
     recorded and removed again."""
     nb = nbformat.read(path, as_version=4)
@@ -37,6 +38,7 @@ def _execute(path: Path, tmp: Path) -> dict:
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
         mp.delenv("JAXGEAR_SCRATCH", raising=False)
+        mp.setenv("JAX_NUMPY_DTYPE_PROMOTION", "strict")  # as every test (tests/conftest.py)
         mp.setenv("TMPDIR", str(tmp))
         client = NotebookClient(nb, timeout=600, kernel_name="python3",
                                 resources={"metadata": {"path": str(NOTEBOOK_DIR)}})

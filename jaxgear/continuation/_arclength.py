@@ -108,7 +108,7 @@ def _map_and_jac(system, params, name, k, t0, integrator, z):
         def one(y, j):
             return integrator.flow(system, prm, y, t0 + j * T, 1), y
 
-        xk, pts = jax.lax.scan(one, x, jnp.arange(k))
+        xk, pts = jax.lax.scan(one, x, jnp.arange(k, dtype=jnp.float64))  # period index as a time factor
         r = xk - x
         return r, (r, pts)
 

@@ -371,7 +371,10 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
         if pg <= tol:
             status, message = "converged", f"projected gradient {pg:.2e} <= tol={tol:g}."
             break
-        updates, new_state = optimizer.update(ev.grad, opt_state, u)
+        # optax's own arithmetic mixes Python floats with its int32 step count (Adam's bias
+        # correction 1 - b1**count), which only standard promotion allows
+        with jax.numpy_dtype_promotion("standard"):
+            updates, new_state = optimizer.update(ev.grad, opt_state, u)
         target = jnp.clip(u + updates, 0.0, 1.0)
         scale, accepted, why = 1.0, False, ""
         for _s in range(int(max_shrink) + 1):

@@ -9,6 +9,9 @@ call these operations.
 - :meth:`AbstractIntegrator.trajectory` — the same, sampled for figures;
 - :meth:`AbstractIntegrator.flow` — one state ``(dim,)``, differentiable with
   ``jax.jacfwd`` (monodromy matrices) and ``jax.grad`` (design);
+- :meth:`AbstractIntegrator.segment_flow` — one of the equal segments of a P-k orbit
+  (multiple shooting), with :meth:`AbstractIntegrator.check_segments` saying which
+  numbers of segments the integrator can cut ``k`` periods into;
 - :attr:`AbstractIntegrator.crossing_stepper` — the fixed-step integrator that brackets
   and locates crossings of a Poincaré section.
 
@@ -99,6 +102,24 @@ class AbstractIntegrator(eqx.Module):
         """``P^periods`` of one state ``x (dim,)``: ``(dim,)``, differentiable both ways."""
         return self.advance(system, params, x[:, None], t0, periods)[:, 0]
 
+    def check_segments(self, periods: int, segments: int) -> None:
+        """Raise ``ValueError`` unless ``periods`` forcing periods split into ``segments``
+        equal pieces this integrator can run: here whole periods, ``segments`` must
+        divide ``periods``."""
+        if int(periods) % int(segments):
+            raise ValueError(f"segments={segments} must divide the period k={periods} for the {self.name} integrator.")
+
+    def segment_flow(self, system, params, x, t0, periods: int, segments: int, s):
+        """Segment ``s`` of ``periods`` forcing periods cut into ``segments`` equal pieces
+        (multiple shooting, :mod:`jaxgear.shooting._solve`): the flow of one state
+        ``x (dim,)`` from ``t0 + s periods T / segments`` over ``periods T / segments``,
+        ``(dim,)``, differentiable both ways. ``s`` is a scalar, possibly traced; the
+        split is one :meth:`check_segments` accepts. Here :meth:`flow` over
+        ``periods / segments`` whole periods."""
+        per = int(periods) // int(segments)
+        s = jnp.asarray(s, jnp.float64)  # segment index as a time factor
+        return self.flow(system, params, x, t0 + s * per * system.period(params), per)
+
     @property
     @abc.abstractmethod
     def crossing_stepper(self) -> AbstractFixedStep:
@@ -134,6 +155,24 @@ class AbstractFixedStep(AbstractIntegrator):
     @property
     def crossing_stepper(self) -> AbstractFixedStep:
         return self
+
+    def check_segments(self, periods: int, segments: int) -> None:
+        """``segments`` must divide the ``periods * steps_per_period`` steps (segments of
+        whole steps on the step grid of ``P^periods``)."""
+        n = int(self.steps_per_period) * int(periods)
+        if n % int(segments):
+            raise ValueError(f"segments={segments} must divide the {n} steps of a P-{periods} orbit "
+                             f"({self.steps_per_period} steps per period).")
+
+    def segment_flow(self, system, params, x, t0, periods: int, segments: int, s):
+        """``periods * steps_per_period / segments`` steps from ``t0 + s n h`` (``n`` steps
+        per segment, ``h = T / steps_per_period``): the composed segments are the steps of
+        ``P^periods``. The pure-JAX steps, differentiable both ways."""
+        T = system.period(params)
+        n = int(self.steps_per_period) * int(periods) // int(segments)
+        h = T / self.steps_per_period
+        s = jnp.asarray(s, jnp.float64)  # segment index as a time factor
+        return AbstractFixedStep.advance_steps(self, system, params, x[:, None], t0 + s * n * h, n, h)[:, 0]
 
     def to_dict(self) -> dict[str, Any]:
         return {"type": self.name, "steps_per_period": int(self.steps_per_period)}

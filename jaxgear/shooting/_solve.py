@@ -40,7 +40,7 @@ import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 
 from .._status import Status
-from ..integrate import AbstractFixedStep, AbstractIntegrator
+from ..integrate import AbstractIntegrator
 
 __all__ = ["SOLVERS", "Shooting", "segment_map", "make_solver",
            "check_segments", "solve_orbit", "optx_status"]
@@ -52,10 +52,10 @@ SOLVERS = ("newton", "dogleg", "levenberg-marquardt", "damped-newton")
 class Shooting(eqx.Module):
     """The multiple-shooting problem of a P-k orbit: system, integrator, ``k``, ``M``.
 
-    Segment ``s`` runs from ``t0 + s k T / M`` for ``k T / M``. For a fixed-step
-    integrator with ``n`` steps per period the segments have ``k n / M`` steps each (so
-    ``M`` must divide ``k n``) on the same step grid as ``P^k`` (the composed segments
-    are the integrator's ``P^k``); any other integrator needs ``M`` dividing ``k``.
+    Segment ``s`` runs from ``t0 + s k T / M`` for ``k T / M``, as the integrator's
+    ``segment_flow`` runs it (a fixed-step integrator with ``n`` steps per period: ``k n / M``
+    steps on the step grid of ``P^k``, so ``M`` must divide ``k n``; any other integrator
+    needs ``M`` dividing ``k``: ``check_segments``).
     """
 
     system: object = eqx.field(static=True)
@@ -65,16 +65,7 @@ class Shooting(eqx.Module):
 
     def phi(self, params, t0, x, s):
         """Flow of segment ``s`` (traced int) from ``x (dim,)``: ``(dim,)``."""
-        T = self.system.period(params)
-        integ = self.integrator
-        s = jnp.asarray(s, jnp.float64)  # segment index as a time factor
-        if isinstance(integ, AbstractFixedStep):
-            n = int(integ.steps_per_period) * self.k // self.segments
-            h = T / integ.steps_per_period
-            # the pure-JAX steps: differentiable both ways
-            return AbstractFixedStep.advance_steps(integ, self.system, params, x[:, None], t0 + s * n * h, n, h)[:, 0]
-        per = self.k // self.segments
-        return integ.flow(self.system, params, x, t0 + s * per * T, per)
+        return self.integrator.segment_flow(self.system, params, x, t0, self.k, self.segments, s)
 
     def all_segments(self, X, args):
         params, t0 = args
@@ -100,13 +91,7 @@ def check_segments(integrator, k: int, segments: int) -> int:
     if isinstance(segments, bool) or int(segments) != segments or int(segments) < 1:
         raise ValueError(f"segments={segments!r} must be an integer >= 1.")
     M = int(segments)
-    if isinstance(integrator, AbstractFixedStep):
-        n = int(integrator.steps_per_period) * int(k)
-        if n % M:
-            raise ValueError(f"segments={M} must divide the {n} steps of a P-{k} orbit "
-                             f"({integrator.steps_per_period} steps per period).")
-    elif int(k) % M:
-        raise ValueError(f"segments={M} must divide the period k={k} for the {integrator.name} integrator.")
+    integrator.check_segments(int(k), M)
     return M
 
 
