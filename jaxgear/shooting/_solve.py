@@ -36,7 +36,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
 
 from .._status import Status
@@ -144,12 +143,20 @@ def _segment_map_jvp(primals, tangents):
 _segment_map.defjvp(_segment_map_jvp, symbolic_zeros=True)
 
 
+def _optx():
+    """optimistix, imported on first use (it adds a tenth of a second to every ``import jaxgear``)."""
+    import optimistix
+
+    return optimistix
+
+
 def make_solver(name: str, tol: float):
     """The optimistix solver called ``name`` (one of :data:`SOLVERS` but ``damped-newton``).
 
     Tolerances: steps below ``1e-12 + 1e-10 |x|`` (max norm) end the iteration; whether a
     seed converged is then decided on the residual (``||P^k(x) - x|| <= tol``).
     """
+    optx = _optx()
     rtol, atol = 1e-10, 1e-12
     if name == "newton":  # its atol also bounds the residual (max norm) at termination
         return optx.Newton(rtol=rtol, atol=1e-2 * tol)
@@ -162,6 +169,7 @@ def make_solver(name: str, tol: float):
 
 def optx_status(result, finite, residual, tol, diverged):
     """A :class:`~jaxgear.Status` code from an optimistix ``RESULTS`` and the residual check."""
+    optx = _optx()
     R = optx.RESULTS
     singular = (result == R.singular) | (result == R.breakdown)
     return jnp.where(residual <= tol, Status.CONVERGED,
@@ -187,6 +195,7 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, *, solver: str, tol: flo
     the implicit function theorem), the status code, the iterations and the residual
     ``||P^k(x) - x||`` of the composed segments.
     """
+    optx = _optx()
     args = (params, t0)
     X0 = shoot.initial_states(params, t0, x0)
     X0 = jax.lax.stop_gradient(jnp.where(jnp.all(jnp.isfinite(X0)), X0, jnp.broadcast_to(x0, X0.shape)))
