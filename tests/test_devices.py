@@ -1,0 +1,105 @@
+"""Past one device (issue 16): the batch axes split over several devices give the results
+of one device.
+
+References that do not come from the code under test: the same analyses run with one
+device (``XLA_FLAGS=--xla_force_host_platform_device_count=1``), in a fresh process each;
+a spy on :func:`jaxgear._devices.on_devices` shows that the work really was split.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+SCRIPT = r'''
+import sys
+import numpy as np
+import jax
+import jaxgear as jg
+from jaxgear import _devices
+
+jobs = []
+real = _devices.on_devices
+
+
+def spy(fn, items, devices=None):
+    jobs.append(len(items))
+    return real(fn, items, devices)
+
+
+_devices.on_devices = spy
+what = sys.argv[2].split(",")
+out = {}
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
+method = jg.Direct(integrator=jg.RK4(64), max_period=4)
+if "direct" in what:
+    r = jg.analyze_global(jg.DUFFING, p, grid, method, progress=False)
+    out["direct_labels"] = np.asarray(r.labels)
+    out["direct_shares"] = np.array([a.share for a in r.attractors])
+    out["direct_points"] = np.concatenate([a.points for a in r.attractors])
+    out["direct_jobs"] = np.array(jobs[-1])
+if "sweep" in what:
+    s = jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.4], grid, method=method, progress=False)
+    out["sweep_labels"], out["sweep_shares"], out["sweep_points"] = s.labels, s.shares, s.points
+    out["sweep_jobs"] = np.array(jobs[-1])
+if "shoot" in what:
+    seeds = jg.seeds_in_box(12, [-3, -3], [3, 3], seed=1)
+    f = jg.find_periodic_orbits(jg.DUFFING, p, seeds, period=1, integrator=jg.RK4(64), progress=False)
+    out["shoot_points"] = np.concatenate([o.points for o in f.orbits])
+    out["shoot_iterations"] = np.asarray(f.shots[1].iterations)
+    out["shoot_status"] = np.asarray(f.shots[1].status)
+    out["shoot_jobs"] = np.array(jobs[-1])
+if "gear" in what:
+    g = jg.analyze_global(jg.REDUCED, jg.paper_params(), jg.CellGrid.paper((6, 4, 8)), progress=False, uncertainty=0)
+    out["gear_labels"] = np.asarray(g.labels)
+    out["gear_shares"] = np.array([a.share for a in g.attractors])
+    out["gear_points"] = np.concatenate([a.points for a in g.attractors])
+    out["gear_jobs"] = np.array(jobs[-1])
+assert jax.local_device_count() == int(sys.argv[3])
+np.savez(sys.argv[1], **out)
+'''
+
+
+def run_on_devices(tmp_path, devices: int, what: str) -> dict:
+    """The script's arrays, run in a fresh process with ``devices`` forced host devices."""
+    out = tmp_path / f"{what}_{devices}.npz"
+    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}",
+               PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(out), what, str(devices)], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    with np.load(out) as z:
+        return {k: z[k] for k in z.files}
+
+
+def assert_same(one: dict, two: dict, what: str):
+    for key in one:
+        if key.endswith("_jobs"):
+            assert int(one[key]) == 1 and int(two[key]) == 2, key  # two devices really took a block each
+        elif key.endswith("_labels") or key.endswith("_shares") or key.endswith(("_iterations", "_status")):
+            np.testing.assert_array_equal(two[key], one[key], err_msg=key)
+        else:  # orbits: to round-off
+            np.testing.assert_allclose(two[key], one[key], rtol=0, atol=1e-10, err_msg=key)
+    assert {k.split("_")[0] for k in one} == set(what.split(","))
+
+
+def test_two_devices_give_the_one_device_results(tmp_path):
+    """The direct analysis (cells), a basin sweep (values x cells) and shooting (seeds) on
+    two forced host devices: the labels, shares and orbits of one device."""
+    what = "direct,sweep,shoot"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+
+
+@pytest.mark.slow
+def test_two_devices_with_the_compiled_kernel(tmp_path):
+    """The gear model through the compiled CPU kernel (an XLA FFI custom call) on two
+    devices: the labels and orbits of one device."""
+    assert_same(run_on_devices(tmp_path, 1, "gear"), run_on_devices(tmp_path, 2, "gear"), "gear")
