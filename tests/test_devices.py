@@ -103,3 +103,90 @@ def test_two_devices_with_the_compiled_kernel(tmp_path):
     """The gear model through the compiled CPU kernel (an XLA FFI custom call) on two
     devices: the labels and orbits of one device."""
     assert_same(run_on_devices(tmp_path, 1, "gear"), run_on_devices(tmp_path, 2, "gear"), "gear")
+
+
+# ----------------------------------------------------------------- several processes
+PROCESS_SCRIPT = r'''
+import sys
+import jaxgear as jg
+from jaxgear import _devices
+from jaxgear.sweep import _basins
+
+out, n, pid, port = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+if n > 1:
+    _devices.initialize(f"localhost:{port}", n, pid)
+assert _devices.process_count() == n and _devices.process_index() == pid
+grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
+_basins.BLOCK_CELLS = grid.n_cells  # one value per block: a kill loses one value
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.2, 1.3, 1.4], grid, method=jg.Direct(integrator=jg.RK4(64), max_period=4),
+               progress=False, out=out)
+'''
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _start(out, n: int) -> list[subprocess.Popen]:
+    """``n`` processes of one JAX program (``jax.distributed.initialize`` on CPU) running
+    the basin sweep into ``out``."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    port = str(_free_port())
+    return [subprocess.Popen([sys.executable, "-c", PROCESS_SCRIPT, str(out), str(n), str(i), port], cwd=ROOT, env=env,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for i in range(n)]
+
+
+def _finish(procs, timeout=600):
+    for p in procs:
+        _, err = p.communicate(timeout=timeout)
+        assert p.returncode == 0, err.decode()[-3000:]
+
+
+def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
+    """A basin sweep as two JAX processes (each takes every other value; process 0 writes
+    the file): one of them killed (SIGKILL) after its first value, the job stopped, the
+    same command rerun: the finished values are kept and the file equals that of one
+    process."""
+    import signal
+    import time
+
+    from test_sweep import _assert_same_file
+
+    _finish(_start(tmp_path / "one", 1))
+    run = tmp_path / "two"
+    procs = _start(run, 2)
+    t0 = time.time()
+    while time.time() - t0 < 300 and procs[1].poll() is None and not (run / "parts" / "value_00001.nc").exists():
+        time.sleep(0.005)
+    procs[1].send_signal(signal.SIGKILL)
+    procs[1].wait()
+    assert procs[1].returncode == -signal.SIGKILL
+    assert not (run / "parts" / "value_00003.nc").exists()  # process 1's second value: lost
+    deadline = time.time() + 120  # process 0 finishes its own values, then waits for process 1's: stop the job
+    while time.time() < deadline and not all((run / "parts" / f"value_0000{i}.nc").exists() for i in (0, 2)):
+        time.sleep(0.05)
+    procs[0].send_signal(signal.SIGKILL)
+    procs[0].wait()
+    assert not (run / "basins.nc").exists()
+    kept = sorted(p.name for p in (run / "parts").glob("value_*.nc"))
+    assert kept == ["value_00000.nc", "value_00001.nc", "value_00002.nc"], kept
+    stamps = {n: (run / "parts" / n).stat().st_mtime_ns for n in kept}
+    _finish(_start(run, 2))
+    assert all((run / "parts" / n).stat().st_mtime_ns == t for n, t in stamps.items())  # not recomputed
+    _assert_same_file(tmp_path / "one" / "basins.nc", run / "basins.nc")
+
+
+@pytest.mark.slow
+def test_two_processes_write_the_one_process_file(tmp_path):
+    """An uninterrupted basin sweep as two JAX processes writes the file of one process."""
+    from test_sweep import _assert_same_file
+
+    _finish(_start(tmp_path / "one", 1))
+    _finish(_start(tmp_path / "two", 2))
+    _assert_same_file(tmp_path / "one" / "basins.nc", tmp_path / "two" / "basins.nc")
