@@ -240,6 +240,14 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             benchmarks it is 0.77x as fast (``benchmarks/sweep_scale.py``; integration
             dominates there and the per-value bookkeeping costs more); it saves the
             draining tail of each analysis, which matters more on a GPU.
+
+    Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
+    as several JAX processes (:func:`jaxgear._devices.initialize`, e.g. one per host
+    under Slurm), process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``
+    into ``out`` (required then, a folder every process sees), every process assembles
+    the sweep from the parts, and only process 0 writes ``basins.nc``: the file of one
+    process. A killed process loses the value it was computing; the same command rerun
+    resumes from the parts.
     Returns:
         :class:`BasinSweep`.
     """
