@@ -63,6 +63,21 @@ if "gear" in what:
     out["gear_shares"] = np.array([a.share for a in g.attractors])
     out["gear_points"] = np.concatenate([a.points for a in g.attractors])
     out["gear_jobs"] = np.array(jobs[-1])
+if "cellmap" in what:
+    c = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (16, 12), names=("x", "v")),
+                          jg.StroboscopicCellMap(integrator=jg.RK4(64), max_period=4), progress=False, uncertainty=0)
+    out["cellmap_labels"] = np.asarray(c.labels)
+    out["cellmap_shares"] = np.array([a.share for a in c.attractors])
+    out["cellmap_points"] = np.concatenate([a.points for a in c.attractors])
+    out["cellmap_jobs"] = np.array(jobs[0])
+if "bifurcation" in what:
+    b = jg.bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 6),
+                               np.array([[0.0, 0.0], [2.0, 0.0]]),
+                               transient=30, record=17, direction="independent", integrator=jg.RK4(32), max_period=8,
+                               progress=False)
+    out["bifurcation_points"] = np.asarray(b.points)
+    out["bifurcation_labels"] = np.asarray(b.period)
+    out["bifurcation_jobs"] = np.array(jobs[-1])
 assert jax.local_device_count() == int(sys.argv[3])
 np.savez(sys.argv[1], **out)
 '''
@@ -190,3 +205,11 @@ def test_two_processes_write_the_one_process_file(tmp_path):
     _finish(_start(tmp_path / "one", 1))
     _finish(_start(tmp_path / "two", 2))
     _assert_same_file(tmp_path / "one" / "basins.nc", tmp_path / "two" / "basins.nc")
+
+
+@pytest.mark.slow
+def test_two_devices_cell_map_and_bifurcation(tmp_path):
+    """The stroboscopic cell map's images (cells) and an independent bifurcation diagram
+    (values x starts) on two devices: the results of one."""
+    what = "cellmap,bifurcation"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
