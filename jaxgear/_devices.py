@@ -13,15 +13,19 @@ integrator's compiled CPU kernel (an XLA FFI custom call) has no sharding rule: 
 lane computes exactly what it computes on one device, so results do not depend on the
 device count.
 
-Several processes (one per host or GPU, :func:`initialize`) split the values of a sweep:
-process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``, saves each to the
-sweep's checkpoint folder (shared by the processes), and process 0 assembles the parts
-and writes the result file (:func:`wait_for_parts`).
+Several processes (one per host or GPU, :func:`initialize`): an analysis splits its
+cells over the devices of every process (the direct method's blocks are exchanged with
+:func:`allgather`, every process returns the whole result); a basin sweep splits its
+values instead: process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``,
+saves each to the sweep's checkpoint folder (shared by the processes), and process 0
+assembles the parts and writes the result file (:func:`wait_for_parts`).
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
+import contextvars
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -31,7 +35,7 @@ import jax
 import numpy as np
 
 __all__ = ["local_devices", "on_devices", "put", "split_rows", "map_rows", "initialize", "process_index",
-           "process_count", "wait_for_parts"]
+           "process_count", "wait_for_parts", "cell_processes", "values_over_processes", "allgather"]
 
 
 def local_devices() -> list:
@@ -86,6 +90,36 @@ def map_rows(fn: Callable, X: np.ndarray, devices: Sequence | None = None, min_r
 
 
 # ------------------------------------------------------------------ several processes
+_VALUES_SPLIT = contextvars.ContextVar("jaxgear_values_over_processes", default=False)
+
+
+@contextlib.contextmanager
+def values_over_processes():
+    """Inside this block each process computes its own values (a sweep split over the
+    processes): an analysis then splits its cells over this process's devices only."""
+    token = _VALUES_SPLIT.set(True)
+    try:
+        yield
+    finally:
+        _VALUES_SPLIT.reset(token)
+
+
+def cell_processes() -> tuple[int, int]:
+    """``(index, count)`` of the processes an analysis splits its cells over: all the
+    processes of the JAX program, or this one alone inside :func:`values_over_processes`."""
+    if _VALUES_SPLIT.get():
+        return 0, 1
+    return process_index(), process_count()
+
+
+def allgather(x: np.ndarray) -> np.ndarray:
+    """``x`` of every process, stacked in process order: ``(processes, *x.shape)`` (each
+    process passes an array of the same shape and dtype)."""
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.process_allgather(np.asarray(x)))
+
+
 def initialize(coordinator_address: str | None = None, num_processes: int | None = None,
                process_id: int | None = None) -> None:
     """Start JAX's multi-process runtime (``jax.distributed.initialize``): without
@@ -97,6 +131,7 @@ def initialize(coordinator_address: str | None = None, num_processes: int | None
         num_processes = int(env["JAX_NUM_PROCESSES"])
     if process_id is None and "JAX_PROCESS_ID" in env:
         process_id = int(env["JAX_PROCESS_ID"])
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")  # CPU processes exchange results
     jax.distributed.initialize(coordinator_address=coordinator_address, num_processes=num_processes,
                                process_id=process_id)
 

@@ -213,3 +213,41 @@ def test_two_devices_cell_map_and_bifurcation(tmp_path):
     (values x starts) on two devices: the results of one."""
     what = "cellmap,bifurcation"
     assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+
+
+ANALYSIS_SCRIPT = r'''
+import sys
+import jaxgear as jg
+from jaxgear import _devices
+
+out, n, pid, port = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+if n > 1:
+    _devices.initialize(f"localhost:{port}", n, pid)
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+r = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v")),
+                      jg.Direct(integrator=jg.RK4(64), max_period=4), progress=False)
+r.save(f"{out}_{pid}.nc")  # every process holds the whole result
+'''
+
+
+@pytest.mark.slow
+def test_two_processes_analyze_the_cells_of_one(tmp_path):
+    """The direct analysis as two JAX processes (the cells split over both, the blocks
+    exchanged): each process returns the result of one process."""
+    import jaxgear as jg
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    for n in (1, 2):
+        port = str(_free_port())
+        procs = [subprocess.Popen([sys.executable, "-c", ANALYSIS_SCRIPT, str(tmp_path / f"r{n}"), str(n), str(i), port],
+                                  cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                 for i in range(n)]
+        _finish(procs)
+    one = jg.load(tmp_path / "r1_0.nc")
+    for i in (0, 1):
+        two = jg.load(tmp_path / f"r2_{i}.nc")
+        np.testing.assert_array_equal(two.labels, one.labels)
+        assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
+        for a, b in zip(two.attractors, one.attractors):
+            np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-10)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from .._devices import local_devices, map_rows, put
+from .._devices import allgather, cell_processes, local_devices, on_devices, put, split_rows
 from .._matching import same_attractor
 
 __all__ = ["drive_blocks", "MIN_BLOCK_CELLS"]
@@ -38,24 +38,57 @@ def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray,
     """Label the queue ``X (n, dim)`` (parameter rows ``rows (n,)``) in one pool per device,
     each with at most ``L`` lanes, starting from the attractor tables ``att = (points
     (V, A, M, dim), periods (V, A), counts (V,))``. Returns ``(labels (n,), periods used
-    (n,), merged tables)`` as numpy arrays."""
+    (n,), merged tables)`` as numpy arrays.
+
+    With several processes (:func:`jaxgear._devices.cell_processes`) the queue is cut into
+    blocks for every device of every process (process ``p`` takes the blocks ``i`` with
+    ``i % P == p``), and the blocks' results are exchanged, so every process returns the
+    whole queue's."""
     from ._pool import _drive
 
     devices = local_devices() if devices is None else list(devices)
     att = tuple(np.asarray(a) for a in jax.device_get(att))
+    me, P = cell_processes()
+    D = len(devices)
+    blocks = split_rows(len(X), max(1, min(P * D, len(X) // MIN_BLOCK_CELLS)))
+    mine = [i for i in range(len(blocks)) if i % P == me]
 
-    def block(ab, dev):
-        a, b = ab
+    def run(i, dev):
+        a, b = blocks[i]
         s = _drive(system, put(params, dev), integrator, o, jax.device_put(X[a:b], dev),
                    jax.device_put(rows[a:b], dev), max(1, min(int(L), b - a)), put(att, dev), bar)
         return tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att)))
 
-    idx = np.arange(len(X))
-    parts = map_rows(lambda ib, dev: (ib, block((int(ib[0]), int(ib[-1]) + 1), dev)), idx, devices,
-                     min_rows=MIN_BLOCK_CELLS)
-    labels, tables = _merge(att[2], [(rows[ib], r) for ib, r in parts], o.merge_tol)
-    used = np.concatenate([r[1] for _, r in parts])
+    local = on_devices(run, mine, devices[:len(mine)]) if mine else []
+    results = dict(zip(mine, local)) if P == 1 else _exchange(blocks, dict(zip(mine, local)), me, P, D)
+    labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], o.merge_tol)
+    used = np.concatenate([results[i][1] for i in range(len(blocks))])
     return labels, used, tables
+
+
+def _exchange(blocks, local: dict, me: int, P: int, D: int) -> dict:
+    """Every block's ``(labels, used, points, periods, counts)`` in every process, from
+    each process's own blocks (``local``; block ``i`` is process ``i % P``'s slot ``i // P``)."""
+    longest = max(b - a for a, b in blocks)
+    some = next(iter(local.values()), None)
+    A = int(allgather(np.array([some[2].shape[1] if some is not None else 0])).max())
+    shapes = allgather(np.array(some[2].shape if some is not None else (0, 0, 0, 0)))
+    V, _, M, dim = (int(x) for x in shapes.max(axis=0))
+    lab = np.full((D, longest), -9, np.int64)
+    use = np.zeros((D, longest), np.int64)
+    pts = np.full((D, V, A, M, dim), np.nan)
+    ks = np.zeros((D, V, A), np.int32)
+    ns = np.zeros((D, V), np.int32)
+    for i, r in local.items():
+        j = i // P
+        lab[j, : len(r[0])], use[j, : len(r[1])] = r[0], r[1]
+        pts[j, :, : r[2].shape[1]], ks[j, :, : r[3].shape[1]], ns[j] = r[2], r[3], r[4]
+    lab, use, pts, ks, ns = (allgather(x) for x in (lab, use, pts, ks, ns))
+    out = {}
+    for i, (a, b) in enumerate(blocks):
+        p, j = i % P, i // P
+        out[i] = (lab[p, j, : b - a], use[p, j, : b - a], pts[p, j], ks[p, j], ns[p, j])
+    return out
 
 
 def _merge(n0, blocks, merge_tol: float):

@@ -21,7 +21,7 @@ from .._batching import progress_bar
 from .._cells import CellGrid
 from .._checks import check_bool, check_number
 from .._codec import array_field, result_type
-from .._devices import process_count, process_index, wait_for_parts
+from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
 from .._matching import match_attractors
 from .._params import param_targets, params_to_dict, with_param
@@ -304,8 +304,9 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     per_block = max(1, BLOCK_CELLS // grid.n_cells)
     for b in range(0, len(todo), per_block):
         block = todo[b:b + per_block]
-        for i, r in zip(block, _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid,
-                                               method, batched)):
+        with values_over_processes():  # this process's values: each analysis on this process's devices
+            done = _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid, method, batched)
+        for i, r in zip(block, done):
             if ck.dir is not None:
                 r.save(ck.path(f"value_{i:05d}.nc"))
             results[i] = r
