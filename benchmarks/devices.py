@@ -14,7 +14,9 @@ method :class:`jaxgear.Direct`):
    process pinned to core 0 (``taskset -c 0``) and as two JAX processes
    (``jax.distributed.initialize``) pinned to cores 0 and 1, wall time of the whole
    command (start, compilation and the written file included in both), and whether
-   both write the same file.
+   both write the same file; as a reference for what the machine itself allows, two
+   independent one-process sweeps of half the values each, pinned the same way, started
+   together (on a machine shared with other jobs this is far from 2x).
 
 Each section's last line is its ratio (one / two: above 1 is faster on two).
 """
@@ -61,8 +63,10 @@ counts, n_values, out, n, pid, port = json.loads(sys.argv[1]), int(sys.argv[2]),
 if n > 1:
     import jax
     jax.distributed.initialize(f"localhost:{port}", n, pid)
-jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", np.linspace(4.0, 6.0, n_values), jg.CellGrid.paper(tuple(counts)),
-               progress=False, out=out)
+values = np.linspace(4.0, 6.0, n_values)
+if len(sys.argv) > 7:  # one half of the values (the reference run)
+    values = values[int(sys.argv[7])::2]
+jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, jg.CellGrid.paper(tuple(counts)), progress=False, out=out)
 '''
 
 
@@ -113,9 +117,21 @@ def processes(counts, n_values: int, tmp: Path) -> None:
                 raise SystemExit(err.decode()[-2000:])
         walls[n] = time.perf_counter() - t
         print(f"   {n} process(es): {walls[n]:.2f} s")
+    # the machine's own capacity: two independent one-process sweeps of half the values each
+    t = time.perf_counter()
+    procs = [subprocess.Popen(["taskset", "-c", str(i), sys.executable, "-c", SWEEP, json.dumps(counts),
+                               str(n_values), str(tmp / f"half{i}"), "1", "0", "0", str(i)], env=env(),
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for i in range(2)]
+    for p in procs:
+        _, err = p.communicate()
+        if p.returncode:
+            raise SystemExit(err.decode()[-2000:])
+    walls["free"] = time.perf_counter() - t
+    print(f"   reference, 2 independent processes of half the values each (no JAX runtime): {walls['free']:.2f} s")
     with xr.open_dataset(tmp / "sweep1" / "basins.nc", engine="h5netcdf") as a, \
             xr.open_dataset(tmp / "sweep2" / "basins.nc", engine="h5netcdf") as b:
         print(f"   identical files: {a.identical(b)}")
+    print(f"   machine's parallel capacity (1 process / 2 independent halves): {walls[1] / walls['free']:.2f}x")
     print(f"   processes ratio (1 process / 2 processes): {walls[1] / walls[2]:.2f}x")
 
 
