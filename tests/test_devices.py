@@ -251,3 +251,32 @@ def test_two_processes_analyze_the_cells_of_one(tmp_path):
         assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
         for a, b in zip(two.attractors, one.attractors):
             np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-10)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", [["analyze", "--grid", "6,4,8"],
+                                     ["sweep", "--kind", "basins", "--param", "b", "--values", "4:5:2", "--grid", "3,2,3"]])
+def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
+    """`jaxgear analyze|sweep --distributed` as two processes (coordinator from the JAX_*
+    variables): process 0 writes the result file of one process."""
+    import jaxgear as jg
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    base = [sys.executable, "-m", "jaxgear", *command, "--quiet", "--no-figures"]
+    r = subprocess.run(base + ["--out", str(tmp_path / "one")], cwd=ROOT, env=env, capture_output=True, timeout=600)
+    assert r.returncode == 0, r.stderr.decode()[-3000:]
+    env.update(JAX_COORDINATOR_ADDRESS=f"localhost:{_free_port()}", JAX_NUM_PROCESSES="2")
+    _finish([subprocess.Popen(base + ["--out", str(tmp_path / "two"), "--distributed"], cwd=ROOT,
+                              env=dict(env, JAX_PROCESS_ID=str(i)), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+             for i in range(2)])
+    name = "result.nc" if command[0] == "analyze" else "basins.nc"
+    one, two = jg.load(tmp_path / "one" / name), jg.load(tmp_path / "two" / name)
+    np.testing.assert_array_equal(two.labels, one.labels)
+    if command[0] == "sweep":
+        from test_sweep import _assert_same_file
+
+        _assert_same_file(tmp_path / "one" / name, tmp_path / "two" / name)
+    else:
+        assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
+        assert two.uncertainty == one.uncertainty
