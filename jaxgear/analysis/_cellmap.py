@@ -17,12 +17,14 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._batching import chunks, equal_chunk_size, pad_rows, progress_bar
 from .._cells import PAPER_REGION, CellGrid
 from .._checks import check_choice, check_int
+from .._devices import local_devices, map_rows, put
 from .._matching import group_attractors
 from .._poincare import check_section, section_kernel
 from .._status import Status
@@ -45,13 +47,19 @@ class _AbstractCellMap(AbstractGlobalMethod):
     def images(self, system, params, grid: CellGrid, progress: bool) -> np.ndarray:
         """Image cell of every cell: ``(n_cells,)`` ints, the sink is ``n_cells``."""
         n = grid.n_cells
-        size = equal_chunk_size(n, self.chunk_size)
+        devices = local_devices()
+        size = equal_chunk_size(n, min(self.chunk_size, -(-n // len(devices))))  # a chunk per device at least
         images = np.empty(n, dtype=np.int64)
         bar = progress_bar(n, f"{self.name} map", progress)
-        for a, b in chunks(n, size):
-            X = pad_rows(grid.centres(np.arange(a, b)), size)
-            images[a:b] = grid.locate(self._map(system, params, X)[: b - a])
-            bar.update(b - a)
+
+        def block(ranges, dev):  # the chunks of one device (each cell's image alone: no dependence on devices)
+            p = put(params, dev)
+            for a, b in ranges:
+                X = jax.device_put(pad_rows(grid.centres(np.arange(a, b)), size), dev)
+                images[a:b] = grid.locate(np.asarray(self._map(system, p, X))[: b - a])
+                bar.update(b - a)
+
+        map_rows(block, np.array(list(chunks(n, size))), devices)
         bar.close()
         return images
 

@@ -371,8 +371,11 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
 
     The pilots of all values run first in one pool, then all the other states in one
     pool, value after value: the compilation, the pilot's draining and the draining tail
-    are paid once.
+    are paid once. With several local devices the other states run in one pool per
+    device, a block of the queue each (:mod:`jaxgear.analysis._sharded`).
     """
+    from ._sharded import drive_blocks
+
     V = len(params_list)
     Xs = [np.asarray(X, dtype=np.float64) for X in X_list]
     dim = Xs[0].shape[1]
@@ -403,9 +406,12 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
         Xp = np.concatenate([X[p] for X, p in zip(Xs, parts)])
         rows = np.concatenate([np.full(len(p), v, np.int32) for v, p in enumerate(parts)])
         L = max(1, min(int(chunk), max(len(p) for p in parts)))  # the pool of one value, refilled from the next
-        s = _drive(system, params, integrator, o, jax.device_put(Xp), jax.device_put(rows), L, att, bar)
-        att = (s.att_pts, s.att_k, s.n_att)
-        lab, use = (np.asarray(a) for a in jax.device_get((s.labels, s.used)))
+        if phase == 0:  # the pilot, on the first device
+            s = _drive(system, params, integrator, o, jax.device_put(Xp), jax.device_put(rows), L, att, bar)
+            att = (s.att_pts, s.att_k, s.n_att)
+            lab, use = (np.asarray(a) for a in jax.device_get((s.labels, s.used)))
+        else:  # one pool per device over a block of the queue, the attractors merged
+            lab, use, att = drive_blocks(system, params, integrator, o, Xp, rows, L, att, bar)
         start = 0
         for v, p in enumerate(parts):
             labels[v][p] = lab[start:start + len(p)]

@@ -67,6 +67,10 @@ def add_parser(sub) -> None:
                    help="output folder (default jaxgear-out), replaced as a whole at the end of the run")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--distributed", action="store_true",
+                   help="run as one process of a multi-process JAX program (jax.distributed.initialize: detects "
+                   "Slurm and Open MPI, or reads JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID); "
+                   "the cells split over every process's devices, process 0 writes --out")
     p.set_defaults(func=run)
 
 
@@ -97,6 +101,10 @@ def run(args) -> int:
     from .._model import REDUCED
     from .._presets import resolve_params
 
+    if args.distributed:  # before any JAX computation
+        from .._devices import initialize
+
+        initialize()
     # every option is checked before any integration and before --out is touched
     check_options(args, OPTIONS)
     check_output_folder(args.out)
@@ -116,6 +124,18 @@ def run(args) -> int:
     grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
     method.check(REDUCED, grid)
 
+    if args.distributed:
+        from .._devices import process_index
+
+        if process_index() != 0:  # the same computations (they exchange blocks), nothing written or printed
+            import contextlib
+            import io
+            import tempfile
+
+            args.no_figures, args.quiet = True, True
+            with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+                _analyze(args, params, grid, method, Path(tmp))
+            return 0
     print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, preset {args.preset}, Omega={float(params.Omega):.4g}")
     with OutputFolder(args.out, OWNED) as out:
         written = _analyze(args, params, grid, method, out)

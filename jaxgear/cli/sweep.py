@@ -113,6 +113,10 @@ def add_parser(sub) -> None:
     p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--distributed", action="store_true",
+                   help="basins: run as one process of a multi-process JAX program (jax.distributed.initialize: "
+                   "detects Slurm and Open MPI, or reads JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, "
+                   "JAX_PROCESS_ID); every process takes a share of the values, process 0 writes --out")
     p.set_defaults(func=run)
 
 
@@ -128,6 +132,12 @@ def run(args) -> int:
     from ..integrate import default_integrator
     from ..sweep import check_values
 
+    if args.distributed:  # before any JAX computation
+        from .._devices import initialize
+
+        if args.kind != "basins":
+            raise ValueError("--distributed runs --kind basins (the other kinds run in one process).")
+        initialize()
     # every option is checked before any integration and before --out is touched
     start, stop, count, values = _values(args.values)
     check_options(args, OPTIONS)
@@ -169,6 +179,15 @@ def run(args) -> int:
         check_values(REDUCED, params, (args.param,), values[:, None])
     head = (f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values), "
             f"preset {args.preset}, {REDUCED.name} model")
+    if args.distributed:
+        from .._devices import process_index
+
+        if process_index() != 0:  # a share of the values into --out/parts; process 0 writes the files
+            from ..sweep import basin_sweep
+
+            basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=False, out=Path(args.out),
+                        restart=args.restart, save=False)
+            return 0
 
     with OutputFolder(args.out, OWNED, create=True) as work:
         t0 = time.perf_counter()

@@ -21,6 +21,7 @@ from .._batching import progress_bar
 from .._cells import CellGrid
 from .._checks import check_bool, check_number
 from .._codec import array_field, result_type
+from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
 from .._matching import match_attractors
 from .._params import param_targets, params_to_dict, with_param
@@ -28,7 +29,7 @@ from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod, analyze_global, analyze_global_values, default_method, method_from_name
 from ._bifurcation import read_only
-from ._checkpoint import Checkpoint
+from ._checkpoint import open_shared_checkpoint
 from ._classify import period_label
 from ._values import check_values, coord_name, sorted_values
 
@@ -239,6 +240,14 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             benchmarks it is 0.77x as fast (``benchmarks/sweep_scale.py``; integration
             dominates there and the per-value bookkeeping costs more); it saves the
             draining tail of each analysis, which matters more on a GPU.
+
+    Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
+    as several JAX processes (:func:`jaxgear._devices.initialize`, e.g. one per host
+    under Slurm), process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``
+    into ``out`` (required then, a folder every process sees), every process assembles
+    the sweep from the parts, and only process 0 writes ``basins.nc``: the file of one
+    process. A killed process loses the value it was computing; the same command rerun
+    resumes from the parts.
     Returns:
         :class:`BasinSweep`.
     """
@@ -276,7 +285,11 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
                     match_tol=float(match_tol), version=__version__)
-    ck = Checkpoint(out, "basins", settings, restart)
+    n_proc, me = process_count(), process_index()
+    if n_proc > 1 and out is None:
+        raise ValueError(f"a basin sweep over {n_proc} processes needs out= (a folder every process can read): "
+                         "each process saves its values there and process 0 assembles them.")
+    ck = open_shared_checkpoint(out, "basins", settings, restart)
     results: list = [None] * len(vals)
     bar = progress_bar(len(vals), f"basins {param}", progress, unit="value")
     todo = []
@@ -284,25 +297,34 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
         part = f"value_{i:05d}.nc"
         results[i] = ck.load_result(part, load) if ck.has(part) else None
         if results[i] is None:
-            todo.append(i)
+            if i % n_proc == me:  # this process's share of the values
+                todo.append(i)
         else:
             bar.update(1)
     per_block = max(1, BLOCK_CELLS // grid.n_cells)
     for b in range(0, len(todo), per_block):
         block = todo[b:b + per_block]
-        for i, r in zip(block, _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid,
-                                               method, batched)):
+        with values_over_processes():  # this process's values: each analysis on this process's devices
+            done = _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid, method, batched)
+        for i, r in zip(block, done):
             if ck.dir is not None:
                 r.save(ck.path(f"value_{i:05d}.nc"))
             results[i] = r
         bar.update(len(block))
     bar.close()
+    if n_proc > 1:  # the other processes' values, from their parts
+        missing = [i for i in range(len(vals)) if results[i] is None]
+        wait_for_parts([ck.path(f"value_{i:05d}.nc") for i in missing])
+        for i in missing:
+            results[i] = ck.load_result(f"value_{i:05d}.nc", load)
+            if results[i] is None:
+                raise RuntimeError(f"the part of value {i} written by another process is unreadable; rerun.")
     sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
                              float(match_tol), system, params_to_dict(params),
                              {k: v for k, v in settings.items()
                               if k not in ("values", "params", "system", "param", "grid", "match_tol")},
                              __version__)
-    if out is not None and save:
+    if out is not None and save and me == 0:  # one process writes
         sweep.save(Path(out) / "basins.nc")
     return sweep
 

@@ -13,7 +13,7 @@ import numpy as np
 from .._checks import article
 from .._io import atomic_write
 
-__all__ = ["Checkpoint", "diff_settings"]
+__all__ = ["Checkpoint", "diff_settings", "open_shared_checkpoint"]
 
 
 def _hash(settings: Mapping) -> str:
@@ -87,6 +87,29 @@ class Checkpoint:
         """Save a finished block (atomically)."""
         if self.dir is not None:
             _save_part(self.parts / name, arrays)
+
+
+def open_shared_checkpoint(out, kind: str, settings: dict, restart: bool = False, timeout: float = 600.0):
+    """:class:`Checkpoint` of a sweep that several processes share (one JAX program,
+    :func:`jaxgear._devices.initialize`): process 0 opens (or restarts) the folder; the
+    others wait until its manifest holds these settings, then open it without
+    discarding anything. One process: ``Checkpoint(out, kind, settings, restart)``."""
+    import time
+
+    from .._devices import process_count, process_index
+
+    if out is None or process_count() == 1 or process_index() == 0:
+        return Checkpoint(out, kind, settings, restart)
+    man, key, t0 = Path(out) / "manifest.json", _hash(settings), time.monotonic()
+    while True:
+        try:
+            if json.loads(man.read_text()).get("hash") == key:
+                return Checkpoint(out, kind, settings, False)
+        except (OSError, ValueError, AttributeError):
+            pass
+        if time.monotonic() - t0 > timeout:
+            raise TimeoutError(f"process 0 did not open {out} for this sweep within {timeout:.0f} s.")
+        time.sleep(0.2)
 
 
 def _save_part(path: Path, arrays: dict) -> None:

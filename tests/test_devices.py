@@ -1,0 +1,282 @@
+"""Past one device (issue 16): the batch axes split over several devices give the results
+of one device.
+
+References that do not come from the code under test: the same analyses run with one
+device (``XLA_FLAGS=--xla_force_host_platform_device_count=1``), in a fresh process each;
+a spy on :func:`jaxgear._devices.on_devices` shows that the work really was split.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+SCRIPT = r'''
+import sys
+import numpy as np
+import jax
+import jaxgear as jg
+from jaxgear import _devices
+
+jobs = []
+real = _devices.on_devices
+
+
+def spy(fn, items, devices=None):
+    jobs.append(len(items))
+    return real(fn, items, devices)
+
+
+_devices.on_devices = spy
+what = sys.argv[2].split(",")
+out = {}
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
+method = jg.Direct(integrator=jg.RK4(64), max_period=4)
+if "direct" in what:
+    r = jg.analyze_global(jg.DUFFING, p, grid, method, progress=False)
+    out["direct_labels"] = np.asarray(r.labels)
+    out["direct_shares"] = np.array([a.share for a in r.attractors])
+    out["direct_points"] = np.concatenate([a.points for a in r.attractors])
+    out["direct_jobs"] = np.array(jobs[-1])
+if "sweep" in what:
+    s = jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.4], grid, method=method, progress=False)
+    out["sweep_labels"], out["sweep_shares"], out["sweep_points"] = s.labels, s.shares, s.points
+    out["sweep_jobs"] = np.array(jobs[-1])
+if "shoot" in what:
+    seeds = jg.seeds_in_box(12, [-3, -3], [3, 3], seed=1)
+    f = jg.find_periodic_orbits(jg.DUFFING, p, seeds, period=1, integrator=jg.RK4(64), progress=False)
+    out["shoot_points"] = np.concatenate([o.points for o in f.orbits])
+    out["shoot_iterations"] = np.asarray(f.shots[1].iterations)
+    out["shoot_status"] = np.asarray(f.shots[1].status)
+    out["shoot_jobs"] = np.array(jobs[-1])
+if "gear" in what:
+    g = jg.analyze_global(jg.REDUCED, jg.paper_params(), jg.CellGrid.paper((6, 4, 8)), progress=False, uncertainty=0)
+    out["gear_labels"] = np.asarray(g.labels)
+    out["gear_shares"] = np.array([a.share for a in g.attractors])
+    out["gear_points"] = np.concatenate([a.points for a in g.attractors])
+    out["gear_jobs"] = np.array(jobs[-1])
+if "cellmap" in what:
+    c = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (16, 12), names=("x", "v")),
+                          jg.StroboscopicCellMap(integrator=jg.RK4(64), max_period=4), progress=False, uncertainty=0)
+    out["cellmap_labels"] = np.asarray(c.labels)
+    out["cellmap_shares"] = np.array([a.share for a in c.attractors])
+    out["cellmap_points"] = np.concatenate([a.points for a in c.attractors])
+    out["cellmap_jobs"] = np.array(jobs[0])
+if "bifurcation" in what:
+    b = jg.bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 6),
+                               np.array([[0.0, 0.0], [2.0, 0.0]]),
+                               transient=30, record=17, direction="independent", integrator=jg.RK4(32), max_period=8,
+                               progress=False)
+    out["bifurcation_points"] = np.asarray(b.points)
+    out["bifurcation_labels"] = np.asarray(b.period)
+    out["bifurcation_jobs"] = np.array(jobs[-1])
+assert jax.local_device_count() == int(sys.argv[3])
+np.savez(sys.argv[1], **out)
+'''
+
+
+def run_on_devices(tmp_path, devices: int, what: str) -> dict:
+    """The script's arrays, run in a fresh process with ``devices`` forced host devices."""
+    out = tmp_path / f"{what}_{devices}.npz"
+    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}",
+               PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(out), what, str(devices)], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    with np.load(out) as z:
+        return {k: z[k] for k in z.files}
+
+
+def assert_same(one: dict, two: dict, what: str):
+    for key in one:
+        if key.endswith("_jobs"):
+            assert int(one[key]) == 1 and int(two[key]) == 2, key  # two devices really took a block each
+        elif key.endswith("_labels") or key.endswith("_shares") or key.endswith(("_iterations", "_status")):
+            np.testing.assert_array_equal(two[key], one[key], err_msg=key)
+        else:  # orbits: to round-off
+            np.testing.assert_allclose(two[key], one[key], rtol=0, atol=1e-10, err_msg=key)
+    assert {k.split("_")[0] for k in one} == set(what.split(","))
+
+
+def test_two_devices_give_the_one_device_results(tmp_path):
+    """The direct analysis (cells), a basin sweep (values x cells) and shooting (seeds) on
+    two forced host devices: the labels, shares and orbits of one device."""
+    what = "direct,sweep,shoot"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+
+
+@pytest.mark.slow
+def test_two_devices_with_the_compiled_kernel(tmp_path):
+    """The gear model through the compiled CPU kernel (an XLA FFI custom call) on two
+    devices: the labels and orbits of one device."""
+    assert_same(run_on_devices(tmp_path, 1, "gear"), run_on_devices(tmp_path, 2, "gear"), "gear")
+
+
+# ----------------------------------------------------------------- several processes
+PROCESS_SCRIPT = r'''
+import sys
+import jaxgear as jg
+from jaxgear import _devices
+from jaxgear.sweep import _basins
+
+out, n, pid, port = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+if n > 1:
+    _devices.initialize(f"localhost:{port}", n, pid)
+assert _devices.process_count() == n and _devices.process_index() == pid
+grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
+_basins.BLOCK_CELLS = grid.n_cells  # one value per block: a kill loses one value
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.2, 1.3, 1.4], grid, method=jg.Direct(integrator=jg.RK4(64), max_period=4),
+               progress=False, out=out)
+'''
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _start(out, n: int) -> list[subprocess.Popen]:
+    """``n`` processes of one JAX program (``jax.distributed.initialize`` on CPU) running
+    the basin sweep into ``out``."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    port = str(_free_port())
+    return [subprocess.Popen([sys.executable, "-c", PROCESS_SCRIPT, str(out), str(n), str(i), port], cwd=ROOT, env=env,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for i in range(n)]
+
+
+def _finish(procs, timeout=600):
+    for p in procs:
+        _, err = p.communicate(timeout=timeout)
+        assert p.returncode == 0, err.decode()[-3000:]
+
+
+def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
+    """A basin sweep as two JAX processes (each takes every other value; process 0 writes
+    the file): one of them killed (SIGKILL) after its first value, the job stopped, the
+    same command rerun: the finished values are kept and the file equals that of one
+    process."""
+    import signal
+    import time
+
+    from test_sweep import _assert_same_file
+
+    _finish(_start(tmp_path / "one", 1))
+    run = tmp_path / "two"
+    procs = _start(run, 2)
+    t0 = time.time()
+    while time.time() - t0 < 300 and procs[1].poll() is None and not (run / "parts" / "value_00001.nc").exists():
+        time.sleep(0.005)
+    procs[1].send_signal(signal.SIGKILL)
+    procs[1].wait()
+    assert procs[1].returncode == -signal.SIGKILL
+    assert not (run / "parts" / "value_00003.nc").exists()  # process 1's second value: lost
+    deadline = time.time() + 120  # process 0 finishes its own values, then waits for process 1's: stop the job
+    while time.time() < deadline and not all((run / "parts" / f"value_0000{i}.nc").exists() for i in (0, 2)):
+        time.sleep(0.05)
+    procs[0].send_signal(signal.SIGKILL)
+    procs[0].wait()
+    assert not (run / "basins.nc").exists()
+    kept = sorted(p.name for p in (run / "parts").glob("value_*.nc"))
+    assert kept == ["value_00000.nc", "value_00001.nc", "value_00002.nc"], kept
+    stamps = {n: (run / "parts" / n).stat().st_mtime_ns for n in kept}
+    _finish(_start(run, 2))
+    assert all((run / "parts" / n).stat().st_mtime_ns == t for n, t in stamps.items())  # not recomputed
+    _assert_same_file(tmp_path / "one" / "basins.nc", run / "basins.nc")
+
+
+@pytest.mark.slow
+def test_two_processes_write_the_one_process_file(tmp_path):
+    """An uninterrupted basin sweep as two JAX processes writes the file of one process."""
+    from test_sweep import _assert_same_file
+
+    _finish(_start(tmp_path / "one", 1))
+    _finish(_start(tmp_path / "two", 2))
+    _assert_same_file(tmp_path / "one" / "basins.nc", tmp_path / "two" / "basins.nc")
+
+
+@pytest.mark.slow
+def test_two_devices_cell_map_and_bifurcation(tmp_path):
+    """The stroboscopic cell map's images (cells) and an independent bifurcation diagram
+    (values x starts) on two devices: the results of one."""
+    what = "cellmap,bifurcation"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+
+
+ANALYSIS_SCRIPT = r'''
+import sys
+import jaxgear as jg
+from jaxgear import _devices
+
+out, n, pid, port = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+if n > 1:
+    _devices.initialize(f"localhost:{port}", n, pid)
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+r = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v")),
+                      jg.Direct(integrator=jg.RK4(64), max_period=4), progress=False)
+r.save(f"{out}_{pid}.nc")  # every process holds the whole result
+'''
+
+
+@pytest.mark.slow
+def test_two_processes_analyze_the_cells_of_one(tmp_path):
+    """The direct analysis as two JAX processes (the cells split over both, the blocks
+    exchanged): each process returns the result of one process."""
+    import jaxgear as jg
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    for n in (1, 2):
+        port = str(_free_port())
+        procs = [subprocess.Popen([sys.executable, "-c", ANALYSIS_SCRIPT, str(tmp_path / f"r{n}"), str(n), str(i), port],
+                                  cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                 for i in range(n)]
+        _finish(procs)
+    one = jg.load(tmp_path / "r1_0.nc")
+    for i in (0, 1):
+        two = jg.load(tmp_path / f"r2_{i}.nc")
+        np.testing.assert_array_equal(two.labels, one.labels)
+        assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
+        for a, b in zip(two.attractors, one.attractors):
+            np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-10)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", [["analyze", "--grid", "6,4,8"],
+                                     ["sweep", "--kind", "basins", "--param", "b", "--values", "4:5:2", "--grid", "3,2,3"]])
+def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
+    """`jaxgear analyze|sweep --distributed` as two processes (coordinator from the JAX_*
+    variables): process 0 writes the result file of one process."""
+    import jaxgear as jg
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    base = [sys.executable, "-m", "jaxgear", *command, "--quiet", "--no-figures"]
+    r = subprocess.run(base + ["--out", str(tmp_path / "one")], cwd=ROOT, env=env, capture_output=True, timeout=600)
+    assert r.returncode == 0, r.stderr.decode()[-3000:]
+    env.update(JAX_COORDINATOR_ADDRESS=f"localhost:{_free_port()}", JAX_NUM_PROCESSES="2")
+    _finish([subprocess.Popen(base + ["--out", str(tmp_path / "two"), "--distributed"], cwd=ROOT,
+                              env=dict(env, JAX_PROCESS_ID=str(i)), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+             for i in range(2)])
+    name = "result.nc" if command[0] == "analyze" else "basins.nc"
+    one, two = jg.load(tmp_path / "one" / name), jg.load(tmp_path / "two" / name)
+    np.testing.assert_array_equal(two.labels, one.labels)
+    if command[0] == "sweep":
+        from test_sweep import _assert_same_file
+
+        _assert_same_file(tmp_path / "one" / name, tmp_path / "two" / name)
+    else:
+        assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
+        assert two.uncertainty == one.uncertainty
