@@ -45,9 +45,15 @@ def local_devices() -> list:
 
 def put(tree, device):
     """``tree`` with its JAX and numpy array leaves committed to ``device`` (other leaves
-    kept as they are)."""
+    kept as they are). With one device in all, the leaves are placed there uncommitted:
+    the same device, and calls then share their compiled computations with the calls
+    of the rest of the library (a computation compiles once per input placement)."""
+    single = jax.device_count() == 1
+
     def one(a):
-        return jax.device_put(a, device) if isinstance(a, (jax.Array, np.ndarray)) else a
+        if not isinstance(a, (jax.Array, np.ndarray)):
+            return a
+        return jax.device_put(a) if single else jax.device_put(a, device)
 
     return jax.tree.map(one, tree)
 

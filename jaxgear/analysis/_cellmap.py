@@ -17,7 +17,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -55,7 +54,7 @@ class _AbstractCellMap(AbstractGlobalMethod):
         def block(ranges, dev):  # the chunks of one device (each cell's image alone: no dependence on devices)
             p = put(params, dev)
             for a, b in ranges:
-                X = jax.device_put(pad_rows(grid.centres(np.arange(a, b)), size), dev)
+                X = put(pad_rows(grid.centres(np.arange(a, b)), size), dev)
                 images[a:b] = grid.locate(np.asarray(self._map(system, p, X))[: b - a])
                 bar.update(b - a)
 

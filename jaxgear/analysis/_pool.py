@@ -36,6 +36,7 @@ full from one value to the next.
 from __future__ import annotations
 
 import functools
+import time
 from typing import NamedTuple
 
 import jax
@@ -84,7 +85,6 @@ class _Options(NamedTuple):
     max_periods: int
     bound: float
     capture: float | None  # None: "auto"
-    rounds_per_call: int
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
@@ -307,11 +307,13 @@ def _compact(s: PoolState) -> PoolState:
 
 
 @functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "n", "L_min"), donate_argnums=0)
-def _run(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n: int, L_min: int):
+def _run(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n: int, L_min: int, rounds):
+    """At most ``rounds`` rounds (a traced int: the host sizes its calls by their duration),
+    fewer when every state is decided, an attractor table overflows or the pool can shrink."""
     def cond(c):
         s, r = c
         shrink = (s.next_cell >= n) & (s.n_active <= L_min) & (s.Y.shape[1] > L_min)
-        return (r < o.rounds_per_call) & (s.n_done < n) & ~s.overflow & ~shrink
+        return (r < rounds) & (s.n_done < n) & ~s.overflow & ~shrink
 
     def body(c):
         s, r = c
@@ -429,7 +431,7 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
 def _options(R, max_periods, max_period, tol, capture, bound, merge_tol) -> _Options:
     return _Options(M=int(max_period), R=int(R), tol=float(tol), merge_tol=float(merge_tol),
                     max_periods=int(max_periods), bound=float(bound),
-                    capture=None if capture == "auto" else float(capture), rounds_per_call=4)
+                    capture=None if capture == "auto" else float(capture))
 
 
 def _stack(params_list):
@@ -464,11 +466,15 @@ def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) 
     _ready(system, integrator, o, n, L, att[1].shape)
     s = _init(n, L, dim, o.M, Xd, Xrow, *att)
     done = 0
+    rounds = 4
     while True:
         L_min = _next_pool(s.Y.shape[1])
         _ready(system, integrator, o, n, s.Y.shape[1], att[1].shape)
-        s, info = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min)
+        t = time.perf_counter()
+        s, info = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min, np.int32(rounds))
         n_done, overflow, n_active, next_cell, n_att = (int(v) for v in np.asarray(info))
+        # calls of about CALL_SECONDS: few host round trips, a progress bar still moving
+        rounds = int(np.clip(rounds * CALL_SECONDS / max(time.perf_counter() - t, 1e-3), 1, 4 * rounds))
         bar.update(n_done - done)
         done = n_done
         bar.set_postfix_str(f"{n_active} lanes busy, {n_att} attractors", refresh=False)
@@ -479,6 +485,10 @@ def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) 
         elif next_cell >= n and n_active <= L_min < s.Y.shape[1]:
             s = _resize(s, L=L_min)
 
+
+CALL_SECONDS = 0.5
+"""Wall time the host aims each call of a pool at (it sizes the next call's rounds by the
+last one's duration)."""
 
 TAIL_LANES = 1024
 """Lanes of the pool the last slow cells move to (a second compiled shape), so the rounds
@@ -528,7 +538,7 @@ def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L:
     if size == L:
         _init.lower(n, L, dim, o.M, X, Xrow, *att).compile()
     s = jax.eval_shape(functools.partial(_init, n, size, dim, o.M), X, Xrow, *att)
-    _run.lower(s, system, params, integrator, o, X, Xrow, n, _next_pool(size)).compile()
+    _run.lower(s, system, params, integrator, o, X, Xrow, n, _next_pool(size), np.int32(1)).compile()
 
 
 def _ready(system, integrator, o: _Options, n: int, L: int, att_shape) -> None:

@@ -55,8 +55,8 @@ def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray,
 
     def run(i, dev):
         a, b = blocks[i]
-        s = _drive(system, put(params, dev), integrator, o, jax.device_put(X[a:b], dev),
-                   jax.device_put(rows[a:b], dev), max(1, min(int(L), b - a)), put(att, dev), bar)
+        s = _drive(system, put(params, dev), integrator, o, put(X[a:b], dev),
+                   put(rows[a:b], dev), max(1, min(int(L), b - a)), put(att, dev), bar)
         return tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att)))
 
     local = on_devices(run, mine, devices[:len(mine)]) if mine else []

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
+from ._painter import Painter
 from .common import add_param_options, check_counts, check_options, check_region, parse_counts, parse_ranges
 
 OWNED = ("result.nc", "summary.json", "compare.json", "domains.png", "shares.png", "domains_3d.png",
@@ -97,9 +98,6 @@ def build_method(args):
 
 
 def run(args) -> int:
-    from .._cells import CellGrid
-    from .._model import REDUCED
-    from .._presets import resolve_params
 
     if args.distributed:  # before any JAX computation
         from .._devices import initialize
@@ -108,6 +106,20 @@ def run(args) -> int:
     # every option is checked before any integration and before --out is touched
     check_options(args, OPTIONS)
     check_output_folder(args.out)
+    # the figures' worker starts before the first JAX computation (see _painter)
+    painter = None if args.no_figures or args.distributed else Painter(_import_plotting, _figures)
+    try:
+        return _run_checked(args, painter)
+    finally:
+        if painter is not None:
+            painter.close()
+
+
+def _run_checked(args, painter) -> int:
+    from .._cells import CellGrid
+    from .._model import REDUCED
+    from .._presets import resolve_params
+
     gear_set, params = resolve_params(args.preset, args.overrides)
     if params.N and not params.is_uniform:
         raise ValueError("analyze uses the reduced 2-DOF model, which needs identical planets; "
@@ -134,17 +146,18 @@ def run(args) -> int:
 
             args.no_figures, args.quiet = True, True
             with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
-                _analyze(args, params, grid, method, Path(tmp))
+                _analyze(args, params, grid, method, Path(tmp), None)
             return 0
     print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, preset {args.preset}, Omega={float(params.Omega):.4g}")
     with OutputFolder(args.out, OWNED) as out:
-        written = _analyze(args, params, grid, method, out)
+        written = _analyze(args, params, grid, method, out, painter)
     print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0
 
 
-def _analyze(args, params, grid, method, out: Path) -> list[str]:
-    """The analysis, its report and its files (written into the staging folder ``out``)."""
+def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
+    """The analysis, its report and its files (written into the staging folder ``out``;
+    the figures by ``painter``, a :class:`~jaxgear.cli._painter.Painter`, or none)."""
     import numpy as np
 
     from .._model import REDUCED
@@ -153,12 +166,13 @@ def _analyze(args, params, grid, method, out: Path) -> list[str]:
     t0 = time.perf_counter()
     if args.uncertainty_samples:  # its pools compile while the analysis runs
         prepare_label_uncertainty(REDUCED, params, grid, method, args.uncertainty_samples)
-    # A second thread imports the output libraries while the analysis runs, then draws the
-    # figures while the label uncertainty is measured (compiled code releases the GIL).
+    # A second thread imports xarray while the analysis runs; the painter draws the figures
+    # while the label uncertainty is measured and the result saved.
     with ThreadPoolExecutor(1) as side:
-        side.submit(_import_output_libraries, not args.no_figures)
+        side.submit(_import_output_libraries)
         result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet, uncertainty=0)
-        figures = None if args.no_figures else side.submit(_figures, result, out)
+        if painter is not None:
+            painter.submit(result, out)
         if args.uncertainty_samples:
             result = with_label_uncertainty(result, REDUCED, params, method, args.uncertainty_samples,
                                             progress=not args.quiet)
@@ -168,7 +182,7 @@ def _analyze(args, params, grid, method, out: Path) -> list[str]:
         result.save(out / "result.nc")
         result.write_summary(out / "summary.json")
         written = ["result.nc", "summary.json"]
-        figure_names = figures.result() if figures is not None else []
+        figure_names = painter.names() if painter is not None else []
     if args.compare:
         rep = compare_with_direct(result, REDUCED, params, n_samples=args.compare, progress=not args.quiet)
         write_json(rep, out / "compare.json")
@@ -183,15 +197,18 @@ def _analyze(args, params, grid, method, out: Path) -> list[str]:
     return written + figure_names
 
 
-def _import_output_libraries(figures: bool) -> None:
+def _import_output_libraries() -> None:
     import xarray  # noqa: F401
 
-    if figures:
-        from .. import plotting  # noqa: F401
+
+def _import_plotting() -> None:
+    from .. import plotting  # noqa: F401
 
 
-def _figures(result, out: Path) -> list[str]:
+def _figures(result, out) -> list[str]:
     from ..plotting import plot_attractors, plot_domains, plot_domains_3d, plot_shares
+
+    out = Path(out)
 
     figs = {
         "domains.png": plot_domains(result, axis=-1, n_slices=4),

@@ -7,7 +7,6 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -265,10 +264,10 @@ def _run_kernel(system, params, X, t0_arr, k, integrator, opts, known, chunk_siz
 
     def block(Xb, dev):
         size = min(int(chunk_size), len(Xb))
-        p, kn, t0 = put(params, dev), put(known, dev), jax.device_put(t0_arr, dev)
+        p, kn, t0 = put(params, dev), put(known, dev), put(t0_arr, dev)
         parts = []
         for a, b in chunks(len(Xb), size):
-            res = shoot_kernel(system, p, jax.device_put(pad_rows(Xb[a:b], size), dev), t0, k, integrator,
+            res = shoot_kernel(system, p, put(pad_rows(Xb[a:b], size), dev), t0, k, integrator,
                                opts["tol"], opts["max_iter"], opts["max_norm"], opts["period_tol"], opts["solver"],
                                opts["segments"], kn, opts["power"], opts["shift"])
             parts.append([np.asarray(f)[: b - a] for f in res])

@@ -83,7 +83,7 @@ def independent_points(system, params, names, Vrows, size, X0, transient, record
     sub = -(-int(size) // max(1, min(len(devices), len(Vrows))))
 
     def block(rows, dev):
-        V = jax.device_put(pad_rows(rows, sub), dev)
+        V = put(pad_rows(rows, sub), dev)
         pts = _independent_kernel(system, put(params, dev), names, V, put(X0, dev), transient, record, integrator)
         return np.asarray(pts)[: len(rows)]
 
