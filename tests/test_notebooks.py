@@ -1,5 +1,6 @@
 """The notebooks: each runs top to bottom on its reduced setting (FULL = False), writes
-nothing into the repository, and matches its paired script.
+nothing into the repository, and matches its paired script (the three heaviest runs are
+``slow``: ``python -m pytest -m slow tests/test_notebooks.py``).
 
 Key numbers are asserted inside the notebooks; a failing assert fails the test. Each
 notebooks/<name>.ipynb (stored without outputs) is paired by jupytext with
@@ -20,6 +21,12 @@ ROOT = Path(__file__).parent.parent
 NOTEBOOK_DIR = ROOT / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 IDS = [p.stem for p in NOTEBOOKS]
+HEAVY = {"01_global_analysis", "02_shooting_and_floquet", "05_design"}
+"""Notebooks that take minutes each on the 2-core CI machine even at their reduced size:
+run by ``pytest -m slow`` (with the other heavier checks), so the default suite stays
+near ten minutes; the other notebooks run in the default suite."""
+RUNS = [pytest.param(p, id=p.stem, marks=pytest.mark.slow) if p.stem in HEAVY else pytest.param(p, id=p.stem)
+        for p in NOTEBOOKS]
 
 
 def _listing(folder: Path) -> set[Path]:
@@ -57,7 +64,7 @@ def _execute(path: Path, tmp: Path) -> dict:
     return {"error": error, "new": new, "scratch": sorted(tmp.glob("jaxgear-*/*"))}
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+@pytest.mark.parametrize("path", RUNS)
 def test_notebook_runs_and_leaves_the_repository_clean(path, tmp_path):
     """Each notebook runs top to bottom (its asserts hold) and, run from notebooks/ without
     ``JAXGEAR_SCRATCH``, writes nothing there (one test, so that a notebook runs once even

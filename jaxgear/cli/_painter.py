@@ -2,16 +2,18 @@
 
 matplotlib is pure Python for the most part: drawn on a thread of the computing process,
 the figures hold the interpreter while the analysis needs it to drive the device, and
-both slow down. Where processes can be forked and JAX's runtime has not started yet (a
-command-line run on Linux or macOS, called before its first computation), a
-:class:`Painter` forks a worker process that imports matplotlib at once and draws when
-it receives the result; elsewhere (Windows, or JAX already running, e.g. the CLI called
-from a notebook) it draws on a thread of this process, as before.
+both slow down. On Linux, where JAX's runtime has not started yet (a command-line run,
+before its first computation), a :class:`Painter` forks a worker process that imports
+matplotlib at once and draws when it receives the result; elsewhere (macOS and Windows,
+where forking a process that loaded system libraries is unsafe or impossible, or JAX
+already running, e.g. the CLI called from a notebook) it draws on a thread of this
+process.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import sys
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -59,7 +61,7 @@ class Painter:
 
     def __init__(self, prepare: Callable[[], None], draw: Callable):
         self._draw, self._conn, self._proc, self._thread, self._future = draw, None, None, None, None
-        if "fork" in multiprocessing.get_all_start_methods() and not _jax_running():
+        if sys.platform.startswith("linux") and not _jax_running():
             ctx = multiprocessing.get_context("fork")
             self._conn, child = ctx.Pipe()
             self._proc = ctx.Process(target=_work, args=(child, self._conn, prepare, draw), daemon=True,
