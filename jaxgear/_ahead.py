@@ -17,14 +17,17 @@ __all__ = ["compile_ahead", "wait_for"]
 
 _COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxgear-compile")
 _PENDING: dict[Hashable, Future] = {}
+_STARTED: set = set()  # every key ever submitted: a computation is compiled ahead once
 _LOCK = threading.Lock()
 
 
 def compile_ahead(key: Hashable, job: Callable[[], object]) -> None:
     """Run ``job`` (typically ``f.lower(...).compile()`` of a jitted ``f`` on abstract
-    arguments) on the side thread, unless a job with this key is already pending."""
+    arguments) on the side thread, unless a job with this key was started before. Jobs
+    run one at a time, in the order they were started."""
     with _LOCK:
-        if key not in _PENDING:
+        if key not in _STARTED:
+            _STARTED.add(key)
             _PENDING[key] = _COMPILER.submit(job)
 
 

@@ -21,6 +21,7 @@ from ._global import (
                       analyze_global,
                       analyze_global_values,
                       default_method,
+                      prepare_analysis,
                       prepare_label_uncertainty,
                       with_label_uncertainty,
 )
@@ -35,4 +36,4 @@ __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCel
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
            "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty",
-           "with_label_uncertainty", "prepare_label_uncertainty"]
+           "with_label_uncertainty", "prepare_label_uncertainty", "prepare_analysis"]

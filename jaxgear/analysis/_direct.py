@@ -18,7 +18,7 @@ from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import refine_orbits
-from ._pool import run_pools
+from ._pool import DEFAULT_PILOT, prepare_pools, run_pools
 
 __all__ = ["Direct"]
 
@@ -69,6 +69,12 @@ class Direct(AbstractGlobalMethod):
             return method
         return cls(integrator=method.integrator if integrator is None else integrator, max_period=method.max_period,
                    period_tol=method.period_tol, merge_tol=method.merge_tol, chunk_size=method.chunk_size)
+
+    def prepare(self, system, params, grid: CellGrid) -> None:
+        prepare_pools(system, [params], self.integrator, grid.n_cells, chunk=self.chunk_size, R=self.round_periods,
+                      max_periods=self.max_periods, max_period=self.max_period, tol=self.period_tol,
+                      capture=self.capture_radius, bound=self.escape_bound, merge_tol=self.merge_tol,
+                      pilot=DEFAULT_PILOT)
 
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         labels, atts, mean = self.label_states(system, params, grid.centres(), progress)

@@ -93,9 +93,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
     method.check(system, grid)
     check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
-    _prepare_assembly(system, params, method)
-    if uncertainty:
-        prepare_label_uncertainty(system, params, grid, method, uncertainty)
+    prepare_analysis(system, params, grid, method, uncertainty)
 
     labels, raw, cycles, mean_periods = method.classify(system, params, grid, progress)
     labels, raw, cycles = _merge_same(labels, raw, cycles, method)
@@ -117,6 +115,19 @@ def with_label_uncertainty(result: GlobalResult, system, params, method: Abstrac
     u = label_uncertainty(system, params, result.grid, result.labels, result.attractors, direct, samples=samples,
                           progress=progress)
     return dataclasses.replace(result, uncertainty=u)
+
+
+def prepare_analysis(system, params, grid: CellGrid, method: AbstractGlobalMethod,
+                     uncertainty: int = DEFAULT_SAMPLES) -> None:
+    """Start compiling, on a side thread and in the order they will run, the computations
+    of :func:`analyze_global` with these arguments (the method's, the section points',
+    those of a label uncertainty of ``uncertainty`` samples), and return at once.
+    :func:`analyze_global` calls it itself; a caller that measures the uncertainty later
+    (:func:`with_label_uncertainty`) calls it first, with the samples it will ask for."""
+    method.prepare(system, params, grid)
+    _prepare_assembly(system, params, method)
+    if uncertainty:
+        prepare_label_uncertainty(system, params, grid, method, uncertainty)
 
 
 def prepare_label_uncertainty(system, params, grid: CellGrid, method: AbstractGlobalMethod,

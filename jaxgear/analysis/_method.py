@@ -84,6 +84,11 @@ class AbstractGlobalMethod(eqx.Module):
     def check(self, system, grid: CellGrid) -> None:
         """Raise ``ValueError`` when the method cannot run on ``system`` with ``grid``."""
 
+    def prepare(self, system, params, grid: CellGrid) -> None:
+        """Start compiling, on a side thread, what :meth:`classify` with these arguments
+        will run (and return at once); the default does nothing."""
+        return None
+
     @abc.abstractmethod
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         """Label every cell of ``grid`` and return the attractors found."""

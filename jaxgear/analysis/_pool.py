@@ -344,8 +344,12 @@ def _resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolSta
     return s
 
 
+DEFAULT_PILOT = 1024
+"""States of the pilot pool (the first phase, see :func:`run_pool`)."""
+
+
 def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, max_periods: int, max_period: int,
-             tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = 1024,
+             tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = DEFAULT_PILOT,
              attractors=(), label: str = "direct"):
     """Label the states ``X (n, dim)`` (see the module): ``(labels (n,) with attractor slot,
     SINK or UNRESOLVED; [(points (k, dim) in cycle order, k)]; periods per state (n,))``.
@@ -362,7 +366,7 @@ def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, m
 
 
 def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, max_periods: int, max_period: int,
-              tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = 1024,
+              tol: float, capture, bound: float, merge_tol: float, progress: bool, pilot: int = DEFAULT_PILOT,
               attractors=None, label: str = "direct"):
     """:func:`run_pool` for ``V`` parameter sets at once, in one pool: the states
     ``X_list[v] (n_v, dim)`` under the parameters ``params_list[v]`` (one pytree
@@ -387,7 +391,7 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     orders, n_ps = [], []
     for X in Xs:
         n = len(X)
-        n_p = min(int(pilot), n) if 0 < int(pilot) < n else 0
+        n_p = _pilot_size(pilot, n)
         first = np.sort(np.random.default_rng(0).choice(n, size=n_p, replace=False))
         orders.append(np.concatenate([first, np.setdiff1d(np.arange(n), first)]))
         n_ps.append(n_p)
@@ -426,6 +430,11 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
         atts = [(att_pts[v, a, : int(att_k[v, a])], int(att_k[v, a])) for a in range(int(n_att[v]))]
         out.append((labels[v], atts, used[v]))
     return out
+
+
+def _pilot_size(pilot: int, n: int) -> int:
+    """States of the pilot phase among ``n`` (none when the pilot would hold them all)."""
+    return min(int(pilot), n) if 0 < int(pilot) < n else 0
 
 
 def _options(R, max_periods, max_period, tol, capture, bound, merge_tol) -> _Options:
@@ -511,15 +520,20 @@ def _key(system, integrator, o: _Options, n: int, L: int, att_shape) -> tuple:
 
 
 def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int, max_periods: int,
-                  max_period: int, tol: float, capture, bound: float, merge_tol: float, attractors=None) -> None:
-    """Compile, on a side thread, the pool that :func:`run_pools` with these arguments and
-    ``pilot=0`` will run over ``n`` states per value (a later call then starts at once).
-    Returns immediately; a failure here is left for the real call to report."""
+                  max_period: int, tol: float, capture, bound: float, merge_tol: float, attractors=None,
+                  pilot: int = 0) -> None:
+    """Compile, on a side thread, the pools that :func:`run_pools` with these arguments
+    will run over ``n`` states per value (the pilot's first, then the main one's; a
+    later call then starts at once). Returns immediately; a failure here is left for
+    the real call to report."""
     V = len(params_list)
     o = _options(R, max_periods, max_period, tol, capture, bound, merge_tol)
     params = params_list[0] if V == 1 else _stack(params_list)
     A = _seed_attractors(attractors if attractors is not None else [()] * V, o.M, system.dim)[1].shape[1]
-    _prepare(system, params, integrator, o, V * int(n), max(1, min(int(chunk), int(n))), system.dim, V, A)
+    n_p = _pilot_size(pilot, int(n))
+    for size in (n_p, int(n) - n_p):
+        if size:
+            _prepare(system, params, integrator, o, V * size, max(1, min(int(chunk), size)), system.dim, V, A)
 
 
 def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:

@@ -18,6 +18,8 @@ result's attractors as the known ones:
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from .._cells import CellGrid
@@ -99,8 +101,10 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
         return outs
 
     fine = direct.integrator.refined()
-    steps = relabel(X, fine, "uncertainty: step halved")
-    starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
+    with ThreadPoolExecutor(1) as side:  # the two pools at once: each one's draining tail leaves cores idle
+        moved = side.submit(relabel, X + dX, direct.integrator, "uncertainty: start moved")
+        steps = relabel(X, fine, "uncertainty: step halved")
+        starts = moved.result()
     return [dict(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
                  perturbation=float(perturbation), refined_integrator=fine.to_dict())
             for step, start, ref in zip(steps, starts, refs)]

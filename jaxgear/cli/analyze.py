@@ -161,11 +161,11 @@ def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
     import numpy as np
 
     from .._model import REDUCED
-    from ..analysis import analyze_global, compare_with_direct, prepare_label_uncertainty, with_label_uncertainty
+    from ..analysis import analyze_global, compare_with_direct, prepare_analysis, with_label_uncertainty
 
     t0 = time.perf_counter()
-    if args.uncertainty_samples:  # its pools compile while the analysis runs
-        prepare_label_uncertainty(REDUCED, params, grid, method, args.uncertainty_samples)
+    # everything the run will compute compiles on a side thread, in order, while it runs
+    prepare_analysis(REDUCED, params, grid, method, args.uncertainty_samples)
     # A second thread imports xarray while the analysis runs; the painter draws the figures
     # while the label uncertainty is measured and the result saved.
     with ThreadPoolExecutor(1) as side:
