@@ -239,3 +239,39 @@ def test_capture_radius_stays_below_attractor_separation():
     assert _capture_radius([[a, 2, 0.0]], 0.3) == 0.3
     with pytest.raises(ValueError, match="capture_radius"):
         jg.Direct(capture_radius=-1)
+
+
+def test_pool_compaction_keeps_every_busy_lane_and_its_history():
+    """The direct pool's compaction (a device op moving only the busy lanes beyond the
+    busy count into free lanes below it, in chunks): afterwards lanes [0, c) hold exactly
+    the busy lanes, each with the state, ring, streaks, row and age it had."""
+    import jax
+
+    from jaxgear.analysis import _pool
+
+    rng = np.random.default_rng(3)
+    L, dim, M = 6000, 4, 3  # more lanes to move (about 1,500) than one chunk of MOVE_CHUNK (1,024)
+    X = rng.normal(size=(L, dim))
+    att = _pool._seed_attractors([()], M, dim)
+    s = _pool._init(L, L, dim, M, jax.device_put(X), jax.device_put(np.zeros(L, np.int32)), *att)
+    busy = rng.random(L) < 0.45
+    s = s._replace(hist=jax.device_put(rng.normal(size=s.hist.shape)),
+                   streak=jax.device_put(rng.integers(0, 9, size=s.streak.shape).astype(np.int32)),
+                   age=jax.device_put(rng.integers(0, 99, size=L).astype(np.int32)),
+                   cell=jax.device_put(np.where(busy, np.arange(L), -1).astype(np.int32)))
+    before = {int(c): (np.asarray(s.Y)[:, j], np.asarray(s.hist)[:, :, j], np.asarray(s.streak)[:, j],
+                       int(s.age[j])) for j, c in enumerate(np.asarray(s.cell)) if c >= 0}
+    out = jax.jit(_pool._compact)(s)
+    c = int(busy.sum())
+    cell = np.asarray(out.cell)
+    assert int(out.n_active) == c
+    assert (cell[:c] >= 0).all() and (cell[c:] < 0).all()
+    assert sorted(cell[:c].tolist()) == sorted(before)
+    for j in range(c):
+        y, h, st, age = before[int(cell[j])]
+        np.testing.assert_array_equal(np.asarray(out.Y)[:, j], y)
+        np.testing.assert_array_equal(np.asarray(out.hist)[:, :, j], h)
+        np.testing.assert_array_equal(np.asarray(out.streak)[:, j], st)
+        assert int(out.age[j]) == age
+    kept = np.flatnonzero(busy[:c])  # lanes already in place do not move
+    np.testing.assert_array_equal(cell[kept], kept)
