@@ -163,7 +163,6 @@ def _finish(procs, timeout=600):
         assert p.returncode == 0, err.decode()[-3000:]
 
 
-@pytest.mark.slow  # timing-sensitive: on a loaded machine process 0 has been seen to end before its last value
 def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
     """A basin sweep as two JAX processes (each takes every other value; process 0 writes
     the file): one of them killed (SIGKILL) after its first value, the job stopped, the

@@ -18,12 +18,14 @@ result's attractors as the known ones:
 
 from __future__ import annotations
 
+import contextvars
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
+from .._devices import cell_processes
 from ._pool import prepare_pools, run_pools
 
 __all__ = ["label_uncertainty", "label_uncertainties", "prepare_label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
@@ -101,10 +103,15 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
         return outs
 
     fine = direct.integrator.refined()
-    with ThreadPoolExecutor(1) as side:  # the two pools at once: each one's draining tail leaves cores idle
-        moved = side.submit(relabel, X + dX, direct.integrator, "uncertainty: start moved")
+    if cell_processes()[1] > 1:  # the pools exchange blocks between processes: one after the other
         steps = relabel(X, fine, "uncertainty: step halved")
-        starts = moved.result()
+        starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
+    else:  # the two pools at once (each one's draining tail leaves cores idle), in this context
+        with ThreadPoolExecutor(1) as side:
+            moved = side.submit(contextvars.copy_context().run, relabel, X + dX, direct.integrator,
+                                "uncertainty: start moved")
+            steps = relabel(X, fine, "uncertainty: step halved")
+            starts = moved.result()
     return [dict(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
                  perturbation=float(perturbation), refined_integrator=fine.to_dict())
             for step, start, ref in zip(steps, starts, refs)]
