@@ -13,7 +13,7 @@ import threading
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future, ThreadPoolExecutor
 
-__all__ = ["compile_ahead", "wait_for"]
+__all__ = ["compile_ahead", "wait_for", "wait_all"]
 
 _COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxgear-compile")
 _PENDING: dict[Hashable, Future] = {}
@@ -39,4 +39,16 @@ def wait_for(key: Hashable) -> None:
         try:
             fut.result()
         except Exception:  # the call itself will raise what is wrong
+            pass
+
+
+def wait_all() -> None:
+    """Wait until every job started so far has finished (a process about to exit without
+    its interpreter's teardown must not cut a compilation, or its cache entry, short)."""
+    with _LOCK:
+        futures = list(_PENDING.values())
+    for fut in futures:
+        try:
+            fut.result()
+        except Exception:
             pass

@@ -83,3 +83,12 @@ def test_python_dash_m_jaxgear_params_json():
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout) == jg.paper_params().to_dict()
+
+
+def test_python_dash_m_jaxgear_exit_code_and_message_of_bad_input():
+    """The command's quick exit keeps the exit code and flushes what was printed."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    r = subprocess.run([sys.executable, "-m", "jaxgear", "params", "--preset", "nosuch", "--json"], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    assert "nosuch" in r.stderr and "Traceback" not in r.stderr

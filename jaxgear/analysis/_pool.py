@@ -20,7 +20,8 @@ decides happens on the device inside one ``lax.while_loop`` over rounds of
   queue is empty, the busy lanes beyond the first ``c`` (the busy count) move into the
   free lanes below it after a round that left the active range 1/8 free, so only
   ``n_active = c`` lanes are integrated (a compaction moves only the lanes out of place),
-  and the host moves the last ones to a smaller pool when few remain.
+  and the host moves them to a pool 8 times smaller whenever they fit (down to 1,024
+  lanes), so the bookkeeping of the last rounds covers few idle lanes.
 
 The host only reads a few scalars per call (progress, a full attractor table, a pool
 to shrink).
@@ -176,7 +177,6 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     live = busy & ~esc
     label = jnp.full(L, -1, jnp.int32)
     i = jnp.arange(M, dtype=jnp.int32)
-    W_now = _back(s.hist, g, 0, M)  # (M, dim, L): the point i periods back
     radius = _lanes(s.radius, s.row)  # (L,) or (1,)
 
     def against(a, label):
@@ -189,18 +189,31 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
         dn = jnp.where(valid, dn, jnp.inf)
         m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
         dmin = jnp.min(dn, axis=0)
-        back = jnp.mod(m[None] - i[:, None], jnp.maximum(k, 1)[None])  # ... the one i back near P[m - i]
-        if V == 1:
-            Q = jnp.moveaxis(P[:, :, 0][back], 2, 1)  # (M, dim, L)
-            W_bef = _back(s.hist, g, 0, M, extra=k[0])  # the k points before those
-        else:
-            Q = jnp.take_along_axis(P, jnp.broadcast_to(back[:, None, :], (M, dim, L)), axis=0)
-            slot = g % H + H - i[:, None] - k[None]  # (M, L): the point i + k periods back
-            W_bef = jnp.take_along_axis(s.hist, jnp.broadcast_to(slot[:, None, :], (M, dim, L)), axis=0)
-        now = jnp.sqrt(_sqdist(W_now, Q))  # (M, L)
-        before = jnp.sqrt(_sqdist(W_bef, Q))
-        d_now = jnp.where(s.age >= k, jnp.max(jnp.where(valid, now, 0.0), axis=0), jnp.inf)
-        d_bef = jnp.where(s.age >= 2 * k, jnp.max(jnp.where(valid, before, 0.0), axis=0), jnp.inf)
+        kk = jnp.maximum(k, 1)
+
+        def point(j, dists):
+            """The distances of the point ``j`` periods back (and of the one ``k`` before
+            it) to the cycle point it should be near, ``P[m - j]``: one slice of the ring
+            per step, so no ``(M, dim, L)`` copy of the ring or of the cycle is made."""
+            d_now, d_bef = dists
+            b = jnp.mod(m - j, kk)  # (L,)
+            if V == 1:
+                q = jnp.take(P[:, :, 0], b, axis=0).T  # (dim, L)
+                w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k[0], axis=0, keepdims=False)
+            else:
+                q = jnp.take_along_axis(P, jnp.broadcast_to(b[None, None], (1, dim, L)), axis=0)[0]
+                slot = g % H + H - j - k  # (L,): the point j + k periods back
+                w_bef = jnp.take_along_axis(s.hist, jnp.broadcast_to(slot[None, None], (1, dim, L)), axis=0)[0]
+            w_now = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j, axis=0, keepdims=False)
+            inside = j < k
+            d_now = jnp.where(inside, jnp.maximum(d_now, _sqdist(w_now, q)), d_now)
+            d_bef = jnp.where(inside, jnp.maximum(d_bef, _sqdist(w_bef, q)), d_bef)
+            return d_now, d_bef
+
+        zero = jnp.zeros(L)
+        d_now, d_bef = jax.lax.fori_loop(0, jnp.max(k), point, (zero, zero))
+        d_now = jnp.where(s.age >= k, jnp.sqrt(d_now), jnp.inf)
+        d_bef = jnp.where(s.age >= 2 * k, jnp.sqrt(d_bef), jnp.inf)
         cap = live & (k > 0) & (d_now <= radius) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
         scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0), axis=(0, 1))
         same = rec & (k > 0) & (per == k) & (dmin <= o.merge_tol * scale)
@@ -216,7 +229,7 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     room = s.n_att < A
     l0 = jnp.argmax(new_v, axis=1)  # (V,)
     k0 = per[l0]
-    last = jnp.moveaxis(_back(s.hist, g, 0, M)[:, :, l0], 2, 0)  # (V, M, dim), newest first
+    last = jnp.moveaxis(_back(s.hist[:, :, l0], g, 0, M), 2, 0)  # (V, M, dim), newest first
     pts0 = jax.vmap(lambda p, k: p[jnp.clip(k - 1 - i, 0, M - 1)])(last, k0)  # oldest of the last k0 first
     valid0 = i[None] < k0[:, None]  # (V, M)
     pts0 = jnp.where(valid0[..., None], pts0, jnp.nan)
@@ -393,7 +406,9 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
         n = len(X)
         n_p = _pilot_size(pilot, n)
         first = np.sort(np.random.default_rng(0).choice(n, size=n_p, replace=False))
-        orders.append(np.concatenate([first, np.setdiff1d(np.arange(n), first)]))
+        rest = np.ones(n, dtype=bool)
+        rest[first] = False
+        orders.append(np.concatenate([first, np.flatnonzero(rest)]))
         n_ps.append(n_p)
     att = _seed_attractors(attractors if attractors is not None else [()] * V, M, dim)
     bar = progress_bar(sum(len(X) for X in Xs), label, progress)
@@ -500,13 +515,26 @@ CALL_SECONDS = 0.5
 last one's duration)."""
 
 TAIL_LANES = 1024
-"""Lanes of the pool the last slow cells move to (a second compiled shape), so the rounds
-of a draining pool stop costing the bookkeeping of the full one."""
+"""Lanes of the smallest pool the last slow cells move to."""
+
+SHRINK = 8
+"""A draining pool moves to one ``SHRINK`` times smaller once its busy lanes fit (down to
+:data:`TAIL_LANES`): the bookkeeping of a round covers every lane of the pool, so a pool
+that stayed large would spend most of its last rounds on lanes that are idle (each size
+is one more compiled shape)."""
 
 
 def _next_pool(L: int) -> int:
-    """The pool size the lanes move to once they fit (:data:`TAIL_LANES`)."""
-    return TAIL_LANES if L > 2 * TAIL_LANES else L
+    """The pool size the lanes move to once they fit (``L`` itself: no smaller pool)."""
+    return max(TAIL_LANES, L // SHRINK) if L > 2 * TAIL_LANES else L
+
+
+def _pool_sizes(L: int) -> list[int]:
+    """The sizes a pool of ``L`` lanes runs at as it drains, largest first."""
+    sizes = [L]
+    while _next_pool(sizes[-1]) < sizes[-1]:
+        sizes.append(_next_pool(sizes[-1]))
+    return sizes
 
 
 # ----------------------------------------------------------------------------- compiling ahead
@@ -537,8 +565,7 @@ def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int
 
 
 def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
-    sizes = [L] + ([_next_pool(L)] if _next_pool(L) < L else [])
-    for size in sizes:
+    for size in _pool_sizes(L):
         compile_ahead(_key(system, integrator, o, n, size, (V, A)),
                       functools.partial(_compile_pool, system, params, integrator, o, n, size, L, dim, V, A))
 

@@ -8,7 +8,9 @@ multipliers), ``jaxgear sweep`` (bifurcation diagrams, basin shares, continuatio
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
+import os
 import re
 import sys
 import warnings
@@ -93,5 +95,35 @@ def main(argv=None) -> int:
         warnings.showwarning = previous
 
 
+def console() -> None:
+    """The ``jaxgear`` command (and ``python -m jaxgear``): :func:`main`, then an exit that
+    skips the interpreter's teardown.
+
+    Tearing the interpreter down collects and frees every object of every module JAX
+    loaded, on one core: about 0.4 s after the work is done, a twentieth of an analysis.
+    A command that returned has flushed its files and joined its workers, so after the
+    pending compilations (a cache entry must not be cut short), the exit handlers
+    (``atexit``: JAX's, a distributed run's shutdown) and flushing the output, the
+    process ends with :func:`os._exit`. An exception leaves the normal way, with its
+    traceback.
+    """
+    code = main()
+    from .._ahead import wait_all
+
+    wait_all()
+    try:
+        run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
+        if run_exit_handlers is None:  # not CPython: the ordinary exit
+            sys.exit(code)
+        run_exit_handlers()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

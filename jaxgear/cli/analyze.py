@@ -205,19 +205,21 @@ def _import_plotting() -> None:
     from .. import plotting  # noqa: F401
 
 
-def _figures(result, out) -> list[str]:
+def _figures(result, out, part: int = 0, parts: int = 1) -> list[str]:
+    """Draw the analysis's figures into ``out``; with ``parts`` painters, the share
+    ``part`` of them (the list is ordered so that alternate figures split the cost evenly:
+    the slices and the 3D view cost the most)."""
     from ..plotting import plot_attractors, plot_domains, plot_domains_3d, plot_shares
 
     out = Path(out)
-
-    figs = {
-        "domains.png": plot_domains(result, axis=-1, n_slices=4),
-        "shares.png": plot_shares(result),
-    }
+    figures = [("domains.png", lambda: plot_domains(result, axis=-1, n_slices=4))]
     if len(result.grid.axes) >= 3:
-        figs["domains_3d.png"] = plot_domains_3d(result)
+        figures.append(("domains_3d.png", lambda: plot_domains_3d(result)))
+    figures.append(("shares.png", lambda: plot_shares(result)))
     if result.attractors:
-        figs["attractors.png"] = plot_attractors(result, section=result.method == "poincare-like")
-    for name, fig in figs.items():
-        save_figure(fig, out / name, dpi=120)
-    return list(figs)
+        figures.append(("attractors.png", lambda: plot_attractors(result, section=result.method == "poincare-like")))
+    names = []
+    for name, plot in figures[part::parts]:
+        save_figure(plot(), out / name, dpi=120)
+        names.append(name)
+    return names

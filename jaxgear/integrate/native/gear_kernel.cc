@@ -16,6 +16,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <omp.h>
+
 #include "xla/ffi/api/ffi.h"
 
 namespace ffi = xla::ffi;
@@ -24,6 +26,8 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kBlock = 256;
+constexpr int kMinBlock = 32;  // the shortest block a small pool is cut into
+constexpr int kBlocksPerThread = 4;  // blocks per thread below kBlock lanes each (balance)
 constexpr int kHermiteIters = 12;
 constexpr double kEps = 2.220446049250313e-16;
 constexpr double kBreakTol = 1e-10;  // BREAK_TOL of _kink.py
@@ -644,7 +648,6 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
   const double* t0s = t0_buf.typed_data();
   const int32_t* nas = n_active_buf.typed_data();
   double* o = out->typed_data();
-  const int nblocks = static_cast<int>((n + kBlock - 1) / kBlock);
   for (int64_t bi = 0; bi < batch; ++bi) {
     const double* pb = pp + (pbatch == 1 ? 0 : bi) * rows * NPARAM;
     std::vector<Model> models(rows);
@@ -662,15 +665,20 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     double* ob = o + bi * 4 * n;
     for (int64_t i = 0; i < 4; ++i)
       for (int64_t j = n_act; j < n; ++j) ob[i * n + j] = yb[i * n + j];
-    const int nb = static_cast<int>((n_act + kBlock - 1) / kBlock);
+    // blocks of kBlock lanes; a pool too small to give every thread several of those is
+    // cut into shorter blocks (at least kMinBlock lanes), so its last lanes keep every core
+    // busy (a lane's result does not depend on the block it is in)
+    const int64_t threads = std::max(1, omp_get_max_threads());
+    int64_t bl = (n_act + threads * kBlocksPerThread - 1) / (threads * kBlocksPerThread);
+    bl = std::min<int64_t>(kBlock, std::max<int64_t>(kMinBlock, (bl + 7) / 8 * 8));
+    const int nb = static_cast<int>((n_act + bl - 1) / bl);
 #pragma omp parallel for schedule(dynamic, 1)
     for (int blk = 0; blk < nb; ++blk) {
-      const int64_t a = static_cast<int64_t>(blk) * kBlock;
-      const int64_t b = std::min<int64_t>(a + kBlock, n_act);
+      const int64_t a = static_cast<int64_t>(blk) * bl;
+      const int64_t b = std::min<int64_t>(a + bl, n_act);
       run_block(yb, ob, n, a, b, rowp, models, coefs, tables, t0, static_cast<int>(periods),
                 static_cast<int>(steps), static_cast<int>(max_splits));
     }
-    (void)nblocks;
   }
   return ffi::Error::Success();
 }
