@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import pad_rows
-from .._devices import local_devices, map_rows, put
+from .._devices import shard_rows
 from ._values import apply_values
 
 __all__ = ["advance_values", "record_values", "independent_points", "sequential_points"]
@@ -75,19 +75,12 @@ def independent_points(system, params, names, Vrows, size, X0, transient, record
     """One block of parameter rows ``Vrows (n, m)``, every start from ``X0``, padded to
     ``size`` rows (one compiled shape). Returns points ``(n, S, R, dim)``.
 
-    The rows are split over the local devices (:func:`jaxgear._devices.map_rows`), each
-    device's part padded to ``ceil(size / devices)`` rows; every value is integrated
-    alone, so the points do not depend on the number of devices."""
+    The rows are sharded over the local devices (:func:`jaxgear._devices.shard_rows`);
+    every value is integrated alone, so the points do not depend on the number of
+    devices."""
     Vrows = np.asarray(Vrows, dtype=float)
-    devices = local_devices()
-    sub = -(-int(size) // max(1, min(len(devices), len(Vrows))))
-
-    def block(rows, dev):
-        V = put(pad_rows(rows, sub), dev)
-        pts = _independent_kernel(system, put(params, dev), names, V, put(X0, dev), transient, record, integrator)
-        return np.asarray(pts)[: len(rows)]
-
-    return np.concatenate(map_rows(block, Vrows, devices), axis=0)
+    return shard_rows(_independent_kernel, system, params, names, pad_rows(Vrows, int(size)), X0, transient, record,
+                      integrator, batch=3)[: len(Vrows)]
 
 
 def sequential_points(system, params, names, seq, size, X0, carry, transient, record, integrator, bound):
