@@ -23,10 +23,12 @@ change the kernel's round-off, see :func:`shard_rows`).
 
 Several processes (one per host or GPU, :func:`initialize`): an analysis splits its
 cells over the devices of every process (the direct method's blocks are exchanged with
-:func:`allgather`, every process returns the whole result); a basin sweep splits its
-values instead: process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``,
-saves each to the sweep's checkpoint folder (shared by the processes), and process 0
-assembles the parts and writes the result file (:func:`wait_for_parts`).
+:func:`allgather`, every process returns the whole result); a bifurcation diagram or a
+parameter map splits each block of its independent values over the processes and
+exchanges the parts with :func:`allgather`; a basin sweep splits its values instead:
+process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``, saves each to the
+sweep's checkpoint folder (shared by the processes), and process 0 assembles the parts
+and writes the result file (:func:`wait_for_parts`).
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ from jax.sharding import PartitionSpec as P
 
 __all__ = ["local_devices", "on_devices", "put", "split_rows", "map_rows", "shard_rows", "batch_mesh",
            "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
-           "values_over_processes", "allgather"]
+           "values_over_processes", "allgather", "rows_over_processes"]
 
 BATCH = "batch"  # the name of the mesh axis the batches are sharded over
 
@@ -203,8 +205,9 @@ def values_over_processes():
 
 
 def cell_processes() -> tuple[int, int]:
-    """``(index, count)`` of the processes an analysis splits its cells over: all the
-    processes of the JAX program, or this one alone inside :func:`values_over_processes`."""
+    """``(index, count)`` of the processes an analysis splits its cells (a sweep its
+    independent values, :func:`rows_over_processes`) over: all the processes of the JAX
+    program, or this one alone inside :func:`values_over_processes`."""
     if _VALUES_SPLIT.get():
         return 0, 1
     return process_index(), process_count()
@@ -216,6 +219,24 @@ def allgather(x: np.ndarray) -> np.ndarray:
     from jax.experimental import multihost_utils
 
     return np.asarray(multihost_utils.process_allgather(np.asarray(x)))
+
+
+def rows_over_processes(fn: Callable, X: np.ndarray) -> np.ndarray:
+    """``fn(X)`` for every row of ``X`` with the rows split over the processes
+    (:func:`cell_processes`): process ``p`` of ``P`` runs ``fn`` on the ``p``-th contiguous
+    block of ``ceil(n / P)`` rows (padded with ``X``'s first row: the same shape on every
+    process), and the blocks are exchanged (:func:`allgather`), so every process returns
+    the whole, identical array (``fn`` returns one array whose axis 0 are its rows, each
+    row computed alone). One process: ``fn(X)``."""
+    me, count = cell_processes()
+    if count == 1:
+        return fn(X)
+    n = len(X)
+    sub = -(-n // count)
+    mine = X[min(me * sub, n): min((me + 1) * sub, n)]
+    mine = np.concatenate([mine, np.repeat(X[:1], sub - len(mine), axis=0)], axis=0)
+    every = allgather(np.asarray(fn(mine)))  # (processes, sub, ...)
+    return np.concatenate([every[q, : max(0, min((q + 1) * sub, n) - q * sub)] for q in range(count)], axis=0)
 
 
 def initialize(coordinator_address: str | None = None, num_processes: int | None = None,
