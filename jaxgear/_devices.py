@@ -1,24 +1,34 @@
 """Past one device: batches split over every local device, and the multi-process runtime.
 
-Every batch axis of jaxgear (the cells of the direct analysis, the seeds of shooting, the
-values of a sweep) is cut into one contiguous block per local device
-(:func:`local_devices`: every GPU of this process, or the CPU devices that
-``XLA_FLAGS=--xla_force_host_platform_device_count=N`` makes). Each block runs the same
-compiled program a single device runs, its inputs committed to its device
-(``jax.device_put``), driven from one Python thread per device: JAX dispatch is
-thread-safe and asynchronous, so the devices work at the same time. Per-device programs
-rather than one partitioned program (``NamedSharding`` / ``shard_map``) because the
-direct method's pool takes data-dependent host decisions per block, and because the
-integrator's compiled CPU kernel (an XLA FFI custom call) has no sharding rule: each
-lane computes exactly what it computes on one device, so results do not depend on the
-device count.
+Every batch axis of jaxgear (the cells of an analysis, the seeds of shooting, the values
+of a sweep) is split over the local devices (:func:`local_devices`: every GPU of this
+process, or the CPU devices that ``XLA_FLAGS=--xla_force_host_platform_device_count=N``
+makes), in one of two ways:
+
+- stateless batched maps (the values of an independent sweep, the seeds of shooting, the
+  cell images of the cell maps) run as one ``jax.jit`` of a ``jax.shard_map`` over a 1-D
+  mesh of the local devices (:func:`shard_rows`): the batch is sharded
+  (``NamedSharding(mesh, P("batch"))``), everything else replicated, and each device runs
+  the kernel of one device on its local block. The per-device body sees local shapes
+  only, so the integrator's compiled CPU kernel (an XLA FFI custom call, which has no
+  sharding rule) runs in it unchanged;
+- the direct method's lane pools take data-dependent host decisions per block: they run
+  one pool per device, each driven from its own Python thread (:func:`on_devices`,
+  :func:`map_rows`); JAX dispatch is thread-safe and asynchronous, so the devices work
+  at the same time.
+
+Either way each row is computed alone by the kernel of one device, so results do not
+depend on the device count (bit for bit where the batch shape a device runs does not
+change the kernel's round-off, see :func:`shard_rows`).
 
 Several processes (one per host or GPU, :func:`initialize`): an analysis splits its
 cells over the devices of every process (the direct method's blocks are exchanged with
-:func:`allgather`, every process returns the whole result); a basin sweep splits its
-values instead: process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``,
-saves each to the sweep's checkpoint folder (shared by the processes), and process 0
-assembles the parts and writes the result file (:func:`wait_for_parts`).
+:func:`allgather`, every process returns the whole result); a bifurcation diagram or a
+parameter map splits each block of its independent values over the processes and
+exchanges the parts with :func:`allgather`; a basin sweep splits its values instead:
+process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``, saves each to the
+sweep's checkpoint folder (shared by the processes), and process 0 assembles the parts
+and writes the result file (:func:`wait_for_parts`).
 """
 
 from __future__ import annotations
@@ -26,16 +36,23 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import contextvars
+import functools
 import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
 
-__all__ = ["local_devices", "on_devices", "put", "split_rows", "map_rows", "initialize", "process_index",
-           "process_count", "wait_for_parts", "cell_processes", "values_over_processes", "allgather"]
+__all__ = ["local_devices", "on_devices", "put", "split_rows", "map_rows", "shard_rows", "batch_mesh",
+           "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
+           "values_over_processes", "allgather", "rows_over_processes"]
+
+BATCH = "batch"  # the name of the mesh axis the batches are sharded over
 
 
 def local_devices() -> list:
@@ -95,6 +112,83 @@ def map_rows(fn: Callable, X: np.ndarray, devices: Sequence | None = None, min_r
     return on_devices(lambda ab, dev: fn(X[ab[0]:ab[1]], dev), blocks, devices[:len(blocks)])
 
 
+# ------------------------------------------------------------------ one program, sharded
+@functools.cache
+def batch_mesh(devices: tuple) -> Mesh:
+    """The 1-D mesh (axis ``"batch"``) of ``devices``, in their order."""
+    return Mesh(np.array(devices, dtype=object), (BATCH,))
+
+
+def _spec(axis: int) -> P:
+    """The partition spec of an array whose axis ``axis`` is the batch."""
+    return P(*([None] * int(axis)), BATCH)
+
+
+@eqx.filter_jit
+def _sharded_call(kernel, mesh, batch, axis, out_axes, args):
+    """``kernel(*args)`` as one ``shard_map`` over ``mesh``: ``args[batch]`` split along
+    ``axis``, the other array leaves replicated, the outputs concatenated along
+    ``out_axes``. The non-array leaves of ``args`` are static, as in ``kernel``'s own jit."""
+    dyn, static = eqx.partition(args, eqx.is_array)
+    rest = dyn[:batch] + (None,) + dyn[batch + 1:]
+
+    def body(x, rest):
+        a = list(eqx.combine(rest, static))
+        a[batch] = x
+        return kernel(*a)
+
+    # check_vma off: the body has no collectives and every output is sharded (a loop whose
+    # carry starts from replicated values only would otherwise need jax.lax.pcast)
+    return jax.shard_map(body, mesh=mesh, in_specs=(_spec(axis), P()), out_specs=jax.tree.map(_spec, out_axes),
+                         check_vma=False)(dyn[batch], rest)
+
+
+def _pad_axis(X: np.ndarray, size: int, axis: int) -> np.ndarray:
+    """``X`` padded along ``axis`` to ``size`` by repeating its first entry there."""
+    k = size - X.shape[axis]
+    return X if k == 0 else np.concatenate([X, np.repeat(np.take(X, [0], axis=axis), k, axis=axis)], axis=axis)
+
+
+def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=0, per_device: int | None = None):
+    """``kernel(*args)`` with the batch ``args[batch]`` split over the local devices: the
+    outputs as numpy arrays (a pytree like ``kernel``'s).
+
+    ``kernel`` is a jitted computation (``eqx.filter_jit``) that treats the entries along
+    axis ``axis`` of ``args[batch]`` independently; ``out_axes`` (an int, or a prefix of
+    the output's pytree of ints) is the batch axis of each output. The batch is cut into
+    one block per device: ``per_device`` entries each (the batch then holds at most one
+    block per local device), or else ``n`` entries split evenly over ``D = min(devices,
+    n)`` devices (padded to a multiple of ``D`` by repeating its first entry). The batch
+    is placed with ``NamedSharding(mesh, P("batch"))``, every other array replicated
+    (``P()``), one ``jax.jit`` of a ``jax.shard_map`` runs ``kernel`` on each device's
+    block, and the padding is stripped from the outputs. A device computes what one
+    device computes on a batch of its block's shape: with ``per_device`` set to the chunk
+    of one device the results are those of one device bit for bit. An even split changes
+    the batch shape; the results are still bit for bit those of one device when the
+    kernel's round-off does not depend on its batch shape (true of the integrators,
+    checked in ``tests/test_devices.py``; not of the shooting kernel). With one block
+    this is the plain call ``kernel(*args)``.
+    """
+    X = args[batch]
+    n = int(X.shape[axis])
+    local = local_devices()
+    per = -(-n // max(1, min(len(local), n))) if per_device is None else int(per_device)
+    D = max(1, -(-n // per))
+    if D > len(local):
+        raise ValueError(f"{n} entries in blocks of {per} need {D} devices; there are {len(local)}.")
+    if D == 1:
+        return jax.tree.map(np.asarray, kernel(*args))
+    mesh = batch_mesh(tuple(local[:D]))
+    Xp = _pad_axis(np.asarray(X), D * per, axis)
+    rep = NamedSharding(mesh, P())
+    args = tuple(jax.device_put(Xp, NamedSharding(mesh, _spec(axis))) if i == batch
+                 else jax.tree.map(lambda a: jax.device_put(a, rep) if eqx.is_array(a) else a, a)
+                 for i, a in enumerate(args))
+    out = _sharded_call(kernel, mesh, int(batch), int(axis), out_axes, args)
+    strip = lambda ax, sub: jax.tree.map(lambda a: np.asarray(a)[(slice(None),) * ax + (slice(0, n),)], sub)
+    return jax.tree.map(strip, out_axes, out)
+
+
 # ------------------------------------------------------------------ several processes
 _VALUES_SPLIT = contextvars.ContextVar("jaxgear_values_over_processes", default=False)
 
@@ -111,8 +205,9 @@ def values_over_processes():
 
 
 def cell_processes() -> tuple[int, int]:
-    """``(index, count)`` of the processes an analysis splits its cells over: all the
-    processes of the JAX program, or this one alone inside :func:`values_over_processes`."""
+    """``(index, count)`` of the processes an analysis splits its cells (a sweep its
+    independent values, :func:`rows_over_processes`) over: all the processes of the JAX
+    program, or this one alone inside :func:`values_over_processes`."""
     if _VALUES_SPLIT.get():
         return 0, 1
     return process_index(), process_count()
@@ -124,6 +219,24 @@ def allgather(x: np.ndarray) -> np.ndarray:
     from jax.experimental import multihost_utils
 
     return np.asarray(multihost_utils.process_allgather(np.asarray(x)))
+
+
+def rows_over_processes(fn: Callable, X: np.ndarray) -> np.ndarray:
+    """``fn(X)`` for every row of ``X`` with the rows split over the processes
+    (:func:`cell_processes`): process ``p`` of ``P`` runs ``fn`` on the ``p``-th contiguous
+    block of ``ceil(n / P)`` rows (padded with ``X``'s first row: the same shape on every
+    process), and the blocks are exchanged (:func:`allgather`), so every process returns
+    the whole, identical array (``fn`` returns one array whose axis 0 are its rows, each
+    row computed alone). One process: ``fn(X)``."""
+    me, count = cell_processes()
+    if count == 1:
+        return fn(X)
+    n = len(X)
+    sub = -(-n // count)
+    mine = X[min(me * sub, n): min((me + 1) * sub, n)]
+    mine = np.concatenate([mine, np.repeat(X[:1], sub - len(mine), axis=0)], axis=0)
+    every = allgather(np.asarray(fn(mine)))  # (processes, sub, ...)
+    return np.concatenate([every[q, : max(0, min((q + 1) * sub, n) - q * sub)] for q in range(count)], axis=0)
 
 
 def initialize(coordinator_address: str | None = None, num_processes: int | None = None,

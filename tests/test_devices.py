@@ -3,7 +3,9 @@ of one device.
 
 References that do not come from the code under test: the same analyses run with one
 device (``XLA_FLAGS=--xla_force_host_platform_device_count=1``), in a fresh process each;
-a spy on :func:`jaxgear._devices.on_devices` shows that the work really was split.
+spies on :func:`jaxgear._devices.on_devices` (the direct method's pools) and on the
+``shard_map`` call of :func:`jaxgear._devices.shard_rows` (the stateless maps: the
+sharding of its output) show that the work really was split.
 """
 
 from __future__ import annotations
@@ -35,6 +37,25 @@ def spy(fn, items, devices=None):
 
 
 _devices.on_devices = spy
+shards = []  # devices spanned by the output of each shard_map call
+real_call = _devices._sharded_call
+
+
+def shard_spy(*a):
+    out = real_call(*a)
+    shards.extend(len(x.sharding.device_set) for x in jax.tree.leaves(out))
+    return out
+
+
+def spanned():
+    """The devices every sharded call of the section spanned (1: only plain calls)."""
+    n = set(shards) or {1}
+    shards.clear()
+    assert len(n) == 1, n
+    return np.array(n.pop())
+
+
+_devices._sharded_call = shard_spy
 what = sys.argv[2].split(",")
 out = {}
 p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
@@ -51,12 +72,14 @@ if "sweep" in what:
     out["sweep_labels"], out["sweep_shares"], out["sweep_points"] = s.labels, s.shares, s.points
     out["sweep_jobs"] = np.array(jobs[-1])
 if "shoot" in what:
+    shards.clear()
     seeds = jg.seeds_in_box(12, [-3, -3], [3, 3], seed=1)
-    f = jg.find_periodic_orbits(jg.DUFFING, p, seeds, period=1, integrator=jg.RK4(64), progress=False)
+    f = jg.find_periodic_orbits(jg.DUFFING, p, seeds, period=1, integrator=jg.RK4(64), chunk_size=6,
+                                progress=False)  # two chunks: one per device
     out["shoot_points"] = np.concatenate([o.points for o in f.orbits])
     out["shoot_iterations"] = np.asarray(f.shots[1].iterations)
     out["shoot_status"] = np.asarray(f.shots[1].status)
-    out["shoot_jobs"] = np.array(jobs[-1])
+    out["shoot_shards"] = spanned()
 if "gear" in what:
     g = jg.analyze_global(jg.REDUCED, jg.paper_params(), jg.CellGrid.paper((6, 4, 8)), progress=False, uncertainty=0)
     out["gear_labels"] = np.asarray(g.labels)
@@ -64,20 +87,32 @@ if "gear" in what:
     out["gear_points"] = np.concatenate([a.points for a in g.attractors])
     out["gear_jobs"] = np.array(jobs[-1])
 if "cellmap" in what:
+    shards.clear()
     c = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (16, 12), names=("x", "v")),
                           jg.StroboscopicCellMap(integrator=jg.RK4(64), max_period=4), progress=False, uncertainty=0)
     out["cellmap_labels"] = np.asarray(c.labels)
     out["cellmap_shares"] = np.array([a.share for a in c.attractors])
     out["cellmap_points"] = np.concatenate([a.points for a in c.attractors])
-    out["cellmap_jobs"] = np.array(jobs[0])
+    out["cellmap_images"] = jg.cell_images(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (16, 12)),
+                                           jg.StroboscopicCellMap(integrator=jg.RK4(64)), progress=False)
+    out["cellmap_shards"] = spanned()
 if "bifurcation" in what:
+    shards.clear()
     b = jg.bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 6),
                                np.array([[0.0, 0.0], [2.0, 0.0]]),
                                transient=30, record=17, direction="independent", integrator=jg.RK4(32), max_period=8,
                                progress=False)
     out["bifurcation_points"] = np.asarray(b.points)
     out["bifurcation_labels"] = np.asarray(b.period)
-    out["bifurcation_jobs"] = np.array(jobs[-1])
+    out["bifurcation_shards"] = spanned()
+if "gearmaps" in what:  # the compiled kernel (an FFI custom call) inside shard_map
+    shards.clear()
+    g = jg.bifurcation_diagram(None, None, "b", [4.0, 4.5, 5.0], np.array([[0.1, 0, 0, 0], [0.5, 0, 0, 0]]),
+                               transient=5, record=9, max_period=4, progress=False)
+    out["gearmaps_points"] = np.asarray(g.points)
+    out["gearmaps_images"] = jg.cell_images(jg.REDUCED, jg.paper_params(), jg.CellGrid.paper((5, 3, 4)),
+                                            jg.PoincareCellMap(mapping_steps=3), progress=False)
+    out["gearmaps_shards"] = spanned()
 assert jax.local_device_count() == int(sys.argv[3])
 np.savez(sys.argv[1], **out)
 '''
@@ -95,10 +130,15 @@ def run_on_devices(tmp_path, devices: int, what: str) -> dict:
         return {k: z[k] for k in z.files}
 
 
+EXACT = ("shoot", "cellmap", "bifurcation", "gearmaps")  # the sharded maps: bit for bit
+
+
 def assert_same(one: dict, two: dict, what: str):
     for key in one:
-        if key.endswith("_jobs"):
+        if key.endswith(("_jobs", "_shards")):
             assert int(one[key]) == 1 and int(two[key]) == 2, key  # two devices really took a block each
+        elif key.split("_")[0] in EXACT:
+            np.testing.assert_array_equal(two[key], one[key], err_msg=key)
         elif key.endswith("_labels") or key.endswith("_shares") or key.endswith(("_iterations", "_status")):
             np.testing.assert_array_equal(two[key], one[key], err_msg=key)
         else:  # orbits: to round-off
@@ -107,17 +147,28 @@ def assert_same(one: dict, two: dict, what: str):
 
 
 def test_two_devices_give_the_one_device_results(tmp_path):
-    """The direct analysis (cells), a basin sweep (values x cells) and shooting (seeds) on
-    two forced host devices: the labels, shares and orbits of one device."""
-    what = "direct,sweep,shoot"
+    """The direct analysis (cells) and a basin sweep (values x cells) on two forced host
+    devices, one lane pool each: the labels, shares and orbits of one device."""
+    what = "direct,sweep"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+
+
+def test_two_devices_shard_the_stateless_maps(tmp_path):
+    """Shooting (seeds), the stroboscopic cell map (its cell images and the analysis) and
+    an independent bifurcation diagram (values x starts), each batch sharded over two
+    forced host devices by one shard_map (its output spans both): the arrays of one
+    device, bit for bit."""
+    what = "shoot,cellmap,bifurcation"
     assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
 
 
 @pytest.mark.slow
 def test_two_devices_with_the_compiled_kernel(tmp_path):
     """The gear model through the compiled CPU kernel (an XLA FFI custom call) on two
-    devices: the labels and orbits of one device."""
-    assert_same(run_on_devices(tmp_path, 1, "gear"), run_on_devices(tmp_path, 2, "gear"), "gear")
+    devices, in the direct method's pools and inside shard_map (a bifurcation diagram, the
+    Poincaré-like cell images): the labels and orbits of one device."""
+    what = "gear,gearmaps"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
 
 
 # ----------------------------------------------------------------- several processes
@@ -207,14 +258,6 @@ def test_two_processes_write_the_one_process_file(tmp_path):
     _assert_same_file(tmp_path / "one" / "basins.nc", tmp_path / "two" / "basins.nc")
 
 
-@pytest.mark.slow
-def test_two_devices_cell_map_and_bifurcation(tmp_path):
-    """The stroboscopic cell map's images (cells) and an independent bifurcation diagram
-    (values x starts) on two devices: the results of one."""
-    what = "cellmap,bifurcation"
-    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
-
-
 ANALYSIS_SCRIPT = r'''
 import sys
 import jaxgear as jg
@@ -280,3 +323,69 @@ def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
     else:
         assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
         assert two.uncertainty == one.uncertainty
+
+
+SWEEP_SCRIPT = r'''
+import sys
+import numpy as np
+import jaxgear as jg
+from jaxgear import _devices
+from jaxgear.sweep import _kernels
+
+out, n, pid, port = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+if n > 1:
+    _devices.initialize(f"localhost:{port}", n, pid)
+computed = []  # the parameter rows this process integrated
+real = _kernels.shard_rows
+
+
+def spy(kernel, *args, **kw):
+    computed.extend(np.asarray(args[3])[:, 0].tolist())
+    return real(kernel, *args, **kw)
+
+
+_kernels.shard_rows = spy
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+X0 = np.array([[0.0, 0.0], [2.0, 0.0]])
+b = jg.bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 7), X0, transient=30, record=17,
+                           direction="all", integrator=jg.RK4(32), max_period=8, chunk_size=8, progress=False,
+                           out=f"{out}/bif_{pid}")
+m = jg.parameter_map(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 3), "gamma", [0.2, 0.3], X0, transient=30,
+                     integrator=jg.RK4(32), max_period=4, chunk_size=6, progress=False, out=f"{out}/map_{pid}")
+np.savez(f"{out}/arrays_{pid}.npz", points=b.points, period=b.period, attractor=b.attractor, map_period=m.period,
+         map_attractor=m.attractor, map_last=m.last_point, computed=np.array(computed))
+'''
+
+
+@pytest.mark.slow
+def test_two_processes_sweep_the_values_of_one(tmp_path):
+    """A bifurcation diagram (independent values and the up and down sweeps) and a
+    parameter map as two JAX processes: each process integrates its part of every block of
+    independent values, every process returns the arrays of one process, and only process
+    0 writes its folder (the file of one process)."""
+    from test_sweep import _assert_same_file
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    for n in (1, 2):
+        port = str(_free_port())
+        (tmp_path / f"r{n}").mkdir()
+        _finish([subprocess.Popen([sys.executable, "-c", SWEEP_SCRIPT, str(tmp_path / f"r{n}"), str(n), str(i), port],
+                                  cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                 for i in range(n)])
+    with np.load(tmp_path / "r1" / "arrays_0.npz") as z:
+        one = {k: z[k] for k in z.files}
+    parts = []
+    for i in (0, 1):
+        with np.load(tmp_path / "r2" / f"arrays_{i}.npz") as z:
+            two = {k: z[k] for k in z.files}
+        for key in one:
+            if key != "computed":
+                np.testing.assert_array_equal(two[key], one[key], err_msg=key)
+        parts.append(two["computed"])
+    # the values split: each process integrated a part of them, together every value
+    assert all(len(c) < len(one["computed"]) for c in parts)
+    assert set(np.concatenate(parts).tolist()) == set(one["computed"].tolist())
+    for kind, name in (("bif", "bifurcation.nc"), ("map", "parameter_map.nc")):
+        assert not (tmp_path / "r2" / f"{kind}_1").exists()  # process 1 writes nothing
+        _assert_same_file(tmp_path / "r1" / f"{kind}_0" / name, tmp_path / "r2" / f"{kind}_0" / name)

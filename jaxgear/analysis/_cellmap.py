@@ -23,13 +23,13 @@ import numpy as np
 from .._batching import chunks, equal_chunk_size, pad_rows, progress_bar
 from .._cells import PAPER_REGION, CellGrid
 from .._checks import check_choice, check_int
-from .._devices import local_devices, map_rows, put
+from .._devices import local_devices, shard_rows
 from .._matching import group_attractors
 from .._poincare import check_section, section_kernel
 from .._status import Status
 from ._graph import analyze_cell_map
 from ._method import AbstractGlobalMethod, Classification, register_method
-from ._orbits import advance_states, follow, refine_orbits
+from ._orbits import advance_rows, follow, refine_orbits
 from ._result import SINK
 
 __all__ = ["PoincareCellMap", "StroboscopicCellMap", "cell_images"]
@@ -44,21 +44,20 @@ class _AbstractCellMap(AbstractGlobalMethod):
         check_int(self.settle_periods, "settle_periods", 0)
 
     def images(self, system, params, grid: CellGrid, progress: bool) -> np.ndarray:
-        """Image cell of every cell: ``(n_cells,)`` ints, the sink is ``n_cells``."""
+        """Image cell of every cell: ``(n_cells,)`` ints, the sink is ``n_cells``.
+
+        In chunks of at most ``chunk_size`` cells per local device, each chunk sharded
+        over the devices (:func:`jaxgear._devices.shard_rows`; each cell's image alone:
+        no dependence on the devices)."""
         n = grid.n_cells
-        devices = local_devices()
-        size = equal_chunk_size(n, min(self.chunk_size, -(-n // len(devices))))  # a chunk per device at least
+        D = len(local_devices())
+        size = equal_chunk_size(n, D * min(self.chunk_size, -(-n // D)))
         images = np.empty(n, dtype=np.int64)
         bar = progress_bar(n, f"{self.name} map", progress)
-
-        def block(ranges, dev):  # the chunks of one device (each cell's image alone: no dependence on devices)
-            p = put(params, dev)
-            for a, b in ranges:
-                X = put(pad_rows(grid.centres(np.arange(a, b)), size), dev)
-                images[a:b] = grid.locate(np.asarray(self._map(system, p, X))[: b - a])
-                bar.update(b - a)
-
-        map_rows(block, np.array(list(chunks(n, size))), devices)
+        for a, b in chunks(n, size):
+            X = pad_rows(grid.centres(np.arange(a, b)), size)
+            images[a:b] = grid.locate(self._map(system, params, X)[: b - a])
+            bar.update(b - a)
         bar.close()
         return images
 
@@ -107,8 +106,9 @@ class PoincareCellMap(_AbstractCellMap):
 
     def _map(self, system, params, X):
         idx = check_section(system, self.section_index, self.direction)
-        Yc, _, _, status = section_kernel(system, params, jnp.asarray(X.T), jnp.asarray(0.0),
-                                          int(self.mapping_steps), idx, int(self.direction), 4.0, self.integrator)
+        Yc, _, _, status = shard_rows(section_kernel, system, params, np.ascontiguousarray(X.T), jnp.asarray(0.0),
+                                      int(self.mapping_steps), idx, int(self.direction), 4.0, self.integrator,
+                                      batch=2, axis=1, out_axes=(1, 0, 0, 0))
         Y = np.array(Yc.T)
         Y[np.asarray(status) != Status.CONVERGED] = np.nan
         return Y
@@ -150,7 +150,8 @@ class StroboscopicCellMap(_AbstractCellMap):
         return None
 
     def _map(self, system, params, X):
-        return advance_states(system, params, X, int(self.mapping_steps), self.integrator)
+        return shard_rows(advance_rows, system, params, np.asarray(X, np.float64), int(self.mapping_steps),
+                          self.integrator, batch=2)
 
 
 def cell_images(system, params, grid: CellGrid, method: _AbstractCellMap | None = None, *,

@@ -13,7 +13,7 @@ import numpy as np
 from .._batching import chunks, pad_rows, progress_bar
 from .._checks import check_int, check_number
 from .._codec import array_field, items_field, result_type
-from .._devices import map_rows, put
+from .._devices import local_devices, shard_rows
 from .._format import format_table
 from .._matching import group_attractors, same_attractor
 from .._params import params_to_dict
@@ -258,25 +258,24 @@ def _with_trajectories(system, params, orbits: list[PeriodicOrbit], samples: int
 def _run_kernel(system, params, X, t0_arr, k, integrator, opts, known, chunk_size, bar):
     """``shoot_kernel`` over ``X (n, dim)`` in chunks of ``chunk_size``: a numpy :class:`ShootResult`.
 
-    The seeds are split into one block per local device (each seed converges alone, so
-    the result does not depend on the number of devices), every block in chunks on its
-    device."""
-
-    def block(Xb, dev):
-        size = min(int(chunk_size), len(Xb))
-        p, kn, t0 = put(params, dev), put(known, dev), put(t0_arr, dev)
-        parts = []
-        for a, b in chunks(len(Xb), size):
-            res = shoot_kernel(system, p, put(pad_rows(Xb[a:b], size), dev), t0, k, integrator,
-                               opts["tol"], opts["max_iter"], opts["max_norm"], opts["period_tol"], opts["solver"],
-                               opts["segments"], kn, opts["power"], opts["shift"])
-            parts.append([np.asarray(f)[: b - a] for f in res])
-            if bar is not None:
-                bar.update(b - a)
-        return [np.concatenate(f, axis=0) for f in zip(*parts)]
-
-    blocks = map_rows(block, np.asarray(X))
-    return ShootResult(*[np.concatenate(f, axis=0) for f in zip(*blocks)])
+    The chunks of one device, one per local device at a time (sharded over the devices,
+    :func:`jaxgear._devices.shard_rows`): each device runs the chunk shape of one device,
+    so the result (each seed converges alone) is that of one device bit for bit (the
+    Newton kernel's round-off depends on its batch shape). Several devices pay off once
+    there are more seeds than ``chunk_size``."""
+    X = np.asarray(X)
+    size = min(int(chunk_size), len(X))
+    D = len(local_devices())
+    parts = []
+    for a, b in chunks(len(X), D * size):
+        rows = -(-(b - a) // size) * size  # whole chunks
+        res = shard_rows(shoot_kernel, system, params, pad_rows(X[a:b], rows), t0_arr, k, integrator, opts["tol"],
+                         opts["max_iter"], opts["max_norm"], opts["period_tol"], opts["solver"], opts["segments"],
+                         known, opts["power"], opts["shift"], batch=2, per_device=size)
+        parts.append(ShootResult(*[f[: b - a] for f in res]))
+        if bar is not None:
+            bar.update(b - a)
+    return _concat(parts)
 
 
 def _known_points(orbits: Sequence[PeriodicOrbit], k: int, rows: int, dim: int):

@@ -16,6 +16,7 @@ enter the compiled kernels as array leaves, so nothing is recompiled per value. 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -25,12 +26,13 @@ import numpy as np
 from .._batching import progress_bar
 from .._checks import check_bool, check_choice, check_int, check_number
 from .._codec import array_field, result_type
+from .._devices import cell_processes
 from .._format import format_table
 from .._params import param_targets, params_to_dict, with_param
 from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
-from ._checkpoint import Checkpoint
+from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import ESCAPED, classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points, sequential_points
 from ._values import check_starts, check_values, coord_name, sorted_values
@@ -275,6 +277,14 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
             final ``DIR/bifurcation.nc``; restart: discard a folder of other settings;
             save: ``False`` keeps only the resume parts in ``out`` (the command line writes
             the result with its summary and figures as one set).
+
+    Run as several JAX processes (:func:`jaxgear._devices.initialize`), every process
+    calls this with the same arguments: each block of independent values is split over
+    the processes (one contiguous part each, :func:`jaxgear._devices.rows_over_processes`)
+    and the parts are exchanged, so every process returns the whole, identical diagram;
+    the sequential sweeps (``"up"``, ``"down"``, ``"both"``: the state carried from
+    value to value) run on process 0 alone and are sent to the others. Only process 0
+    keeps ``out`` (it need not be shared) and writes the file.
     Returns:
         :class:`BifurcationDiagram`.
     """
@@ -307,12 +317,23 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                     direction=direction, integrator=integrator.to_dict(), max_period=int(max_period),
                     tol=float(tol), merge_tol=float(merge_tol), escape_bound=float(escape_bound),
                     block_values=blocks, version=__version__)
-    ck = Checkpoint(out, "bifurcation", settings, restart)
+    ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
     names = (param,)
     R = int(record)
     points = np.empty((len(dirs), V, S, R, system.dim))
     bar = progress_bar(len(dirs) * V, f"sweep {param}", progress, unit="value")
     jX0 = jnp.asarray(X0)
+
+    def compute(name, B, orders, a, b, carry):  # one block of values a:b of a pass
+        if name == "independent":
+            pts = independent_points(system, params, names, vals[a:b, None], B, jX0, int(transient), R,
+                                     integrator)[:, None]
+        else:
+            seq = np.stack([vals[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
+            pts, carry = sequential_points(system, params, names, seq, B, jX0, carry, int(transient), R,
+                                           integrator, float(escape_bound))
+        return dict(points=pts, carry=carry)
+
     for name, ds in passes:
         B, nd = blocks[name], len(ds)
         rows = [dirs.index(d) for d in ds]
@@ -320,19 +341,10 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
         carry = np.broadcast_to(X0, (nd, S, system.dim)).copy()
         for bi, a in enumerate(range(0, V, B)):
             b = min(a + B, V)
-            part = f"{name}_{bi:05d}.npz"
-            z = ck.load(part) if ck.has(part) else None
-            if z is not None:
-                pts, carry = z["points"], z["carry"]
-            else:
-                if name == "independent":
-                    pts = independent_points(system, params, names, vals[a:b, None], B, jX0, int(transient), R,
-                                             integrator)[:, None]
-                else:
-                    seq = np.stack([vals[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
-                    pts, carry = sequential_points(system, params, names, seq, B, jX0, carry, int(transient), R,
-                                                   integrator, float(escape_bound))
-                ck.save(part, points=pts, carry=carry)
+            like = dict(points=((b - a, nd, S, R, system.dim), float), carry=((nd, S, system.dim), float))
+            z = shared_block(ck, f"{name}_{bi:05d}.npz", functools.partial(compute, name, B, orders, a, b, carry),
+                             like, collective=name == "independent")
+            pts, carry = z["points"], z["carry"]
             for j in range(nd):
                 points[rows[j], orders[j][a:b]] = pts[:, j]
             bar.update(nd * (b - a))
@@ -347,7 +359,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                                                if k not in ("values", "starts", "params", "system", "param")},
         version=__version__,
     )
-    if out is not None and save:
+    if out is not None and save and cell_processes()[0] == 0:  # one process writes
         diagram.save(Path(out) / "bifurcation.nc")
     return diagram
 

@@ -13,7 +13,7 @@ import numpy as np
 from .._checks import article
 from .._io import atomic_write
 
-__all__ = ["Checkpoint", "diff_settings", "open_shared_checkpoint"]
+__all__ = ["Checkpoint", "diff_settings", "open_shared_checkpoint", "checkpoint_on_zero", "shared_block"]
 
 
 def _hash(settings: Mapping) -> str:
@@ -110,6 +110,58 @@ def open_shared_checkpoint(out, kind: str, settings: dict, restart: bool = False
         if time.monotonic() - t0 > timeout:
             raise TimeoutError(f"process 0 did not open {out} for this sweep within {timeout:.0f} s.")
         time.sleep(0.2)
+
+
+def checkpoint_on_zero(out, kind: str, settings: dict, restart: bool = False) -> Checkpoint:
+    """:class:`Checkpoint` of a sweep whose processes compute every block together
+    (:func:`shared_block`): process 0 alone opens ``out`` (which need not be shared); the
+    others keep nothing. When process 0 cannot open it, every process raises. One process
+    (:func:`jaxgear._devices.cell_processes`): ``Checkpoint(out, kind, settings, restart)``."""
+    from .._devices import allgather, cell_processes
+
+    me, count = cell_processes()
+    if count == 1:
+        return Checkpoint(out, kind, settings, restart)
+    ck, err = Checkpoint(None, kind, settings), None
+    if me == 0:
+        try:
+            ck = Checkpoint(out, kind, settings, restart)
+        except Exception as e:  # raised below, once the others know
+            err = e
+    if int(allgather(np.int32(err is not None))[0]):
+        if err is not None:
+            raise err
+        raise RuntimeError(f"process 0 could not open the sweep folder {out} (see its error).")
+    return ck
+
+
+def shared_block(ck: Checkpoint, part: str, compute, like: Mapping[str, tuple], collective: bool = True) -> dict:
+    """The arrays of one block of a sweep, the same on every process (every process calls
+    it for every block, in the same order): the saved part when process 0 has a readable
+    one (sent to the others), else ``compute()`` (saved by process 0). ``collective``:
+    ``compute`` runs on every process and exchanges the parts itself (an independent
+    block split over the processes); otherwise process 0 alone computes the block (a
+    sequential one) and sends it. ``like``: ``{name: (shape, dtype)}`` of the arrays.
+    One process: the saved part, or ``compute()`` saved."""
+    from .._devices import allgather, cell_processes
+
+    me, count = cell_processes()
+    z = ck.load(part) if ck.has(part) else None
+    if count > 1:
+        saved = bool(allgather(np.int32(z is not None))[0])
+        if not saved and collective:
+            z = compute()
+            ck.save(part, **z)
+            return z
+        if not saved and me == 0:
+            z = compute()
+            ck.save(part, **z)
+        return {k: allgather(np.asarray(z[k], dtype) if me == 0 else np.zeros(shape, dtype))[0]
+                for k, (shape, dtype) in like.items()}
+    if z is None:
+        z = compute()
+        ck.save(part, **z)
+    return z
 
 
 def _save_part(path: Path, arrays: dict) -> None:

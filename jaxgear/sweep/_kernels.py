@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import pad_rows
-from .._devices import local_devices, map_rows, put
+from .._devices import rows_over_processes, shard_rows
 from ._values import apply_values
 
 __all__ = ["advance_values", "record_values", "independent_points", "sequential_points"]
@@ -75,19 +75,17 @@ def independent_points(system, params, names, Vrows, size, X0, transient, record
     """One block of parameter rows ``Vrows (n, m)``, every start from ``X0``, padded to
     ``size`` rows (one compiled shape). Returns points ``(n, S, R, dim)``.
 
-    The rows are split over the local devices (:func:`jaxgear._devices.map_rows`), each
-    device's part padded to ``ceil(size / devices)`` rows; every value is integrated
-    alone, so the points do not depend on the number of devices."""
+    With several processes (:func:`jaxgear._devices.rows_over_processes`) each computes
+    one contiguous part of the ``size`` rows and the parts are exchanged, so every
+    process returns the whole block; a process's part is sharded over its local devices
+    (:func:`jaxgear._devices.shard_rows`). Every value is integrated alone, so the points
+    do not depend on the number of devices or processes."""
     Vrows = np.asarray(Vrows, dtype=float)
-    devices = local_devices()
-    sub = -(-int(size) // max(1, min(len(devices), len(Vrows))))
 
-    def block(rows, dev):
-        V = put(pad_rows(rows, sub), dev)
-        pts = _independent_kernel(system, put(params, dev), names, V, put(X0, dev), transient, record, integrator)
-        return np.asarray(pts)[: len(rows)]
+    def part(V):
+        return shard_rows(_independent_kernel, system, params, names, V, X0, transient, record, integrator, batch=3)
 
-    return np.concatenate(map_rows(block, Vrows, devices), axis=0)
+    return rows_over_processes(part, pad_rows(Vrows, int(size)))[: len(Vrows)]
 
 
 def sequential_points(system, params, names, seq, size, X0, carry, transient, record, integrator, bound):

@@ -12,13 +12,14 @@ import numpy as np
 from .._batching import progress_bar
 from .._checks import check_choice
 from .._codec import array_field, result_type
+from .._devices import cell_processes
 from .._format import format_table
 from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
 from ._bifurcation import check_common, read_only
-from ._checkpoint import Checkpoint
+from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points
 from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
@@ -128,6 +129,11 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     ``2 max_period + 2``), all batched with ``vmap`` in blocks of ``chunk_size``
     trajectories; both period codes and attractor counts are always computed. ``out``:
     kill-and-resume folder and the final ``DIR/parameter_map.nc``.
+
+    Several JAX processes (:func:`jaxgear._devices.initialize`), each calling this with
+    the same arguments, split every block of grid points over the processes and
+    exchange the parts: every process returns the whole, identical map, and only
+    process 0 keeps ``out`` and writes the file.
     """
     if record is None:
         record = 2 * int(max_period) + 2
@@ -151,7 +157,7 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
                     transient=int(transient), record=int(record), integrator=integrator.to_dict(),
                     max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
                     escape_bound=float(escape_bound), block_points=int(B), version=__version__)
-    ck = Checkpoint(out, "parameter_map", settings, restart)
+    ck = checkpoint_on_zero(out, "parameter_map", settings, restart)
     M = int(max_period)
     period = np.empty((n, S), dtype=np.int64)
     attractor = np.empty((n, S), dtype=np.int64)
@@ -160,14 +166,15 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     jX0 = jnp.asarray(X0)
     for bi, a in enumerate(range(0, n, B)):
         b = min(a + B, n)
-        part = f"map_{bi:05d}.npz"
-        z = ck.load(part) if ck.has(part) else None
-        if z is None:
+
+        def compute(a=a, b=b):
             pts = independent_points(system, params, names, VV[a:b], B, jX0, int(transient), int(record),
                                      integrator)
             per = classify_sequences(pts, M, float(tol), float(escape_bound))
-            z = dict(period=per, attractor=group_starts(pts[..., -M:, :], per, float(merge_tol)), last=pts[:, :, -1])
-            ck.save(part, **z)
+            return dict(period=per, attractor=group_starts(pts[..., -M:, :], per, float(merge_tol)), last=pts[:, :, -1])
+
+        like = dict(period=((b - a, S), np.int64), attractor=((b - a, S), np.int64), last=((b - a, S, system.dim), float))
+        z = shared_block(ck, f"map_{bi:05d}.npz", compute, like)
         period[a:b], attractor[a:b], last[a:b] = z["period"], z["attractor"], z["last"]
         bar.update(b - a)
     bar.close()
@@ -183,7 +190,7 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
                   if k not in ("values_x", "values_y", "starts", "params", "system", "param_x", "param_y")},
         version=__version__,
     )
-    if out is not None:
+    if out is not None and cell_processes()[0] == 0:  # one process writes
         pmap.save(Path(out) / "parameter_map.nc")
     return pmap
 
