@@ -298,10 +298,14 @@ def test_two_processes_analyze_the_cells_of_one(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("command", [["analyze", "--grid", "6,4,8"],
-                                     ["sweep", "--kind", "basins", "--param", "b", "--values", "4:5:2", "--grid", "3,2,3"]])
+                                     ["sweep", "--kind", "basins", "--param", "b", "--values", "4:5:2", "--grid", "3,2,3"],
+                                     ["sweep", "--kind", "bifurcation", "--param", "b", "--values", "4:6:5",
+                                      "--starts", "3", "--transient", "20", "--record", "40",
+                                      "--direction", "all"]])
 def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
-    """`jaxgear analyze|sweep --distributed` as two processes (coordinator from the JAX_*
-    variables): process 0 writes the result file of one process."""
+    """`jaxgear analyze|sweep --distributed` (basins, bifurcation) as two processes
+    (coordinator from the JAX_* variables): process 0 writes the result file of one
+    process."""
     import jaxgear as jg
 
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
@@ -313,14 +317,14 @@ def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
     _finish([subprocess.Popen(base + ["--out", str(tmp_path / "two"), "--distributed"], cwd=ROOT,
                               env=dict(env, JAX_PROCESS_ID=str(i)), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
              for i in range(2)])
-    name = "result.nc" if command[0] == "analyze" else "basins.nc"
-    one, two = jg.load(tmp_path / "one" / name), jg.load(tmp_path / "two" / name)
-    np.testing.assert_array_equal(two.labels, one.labels)
-    if command[0] == "sweep":
+    if command[0] == "sweep":  # basins.nc, bifurcation.nc: the whole file
         from test_sweep import _assert_same_file
 
+        name = f"{command[2]}.nc"
         _assert_same_file(tmp_path / "one" / name, tmp_path / "two" / name)
     else:
+        one, two = jg.load(tmp_path / "one" / "result.nc"), jg.load(tmp_path / "two" / "result.nc")
+        np.testing.assert_array_equal(two.labels, one.labels)
         assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
         assert two.uncertainty == one.uncertainty
 

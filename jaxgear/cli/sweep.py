@@ -114,9 +114,10 @@ def add_parser(sub) -> None:
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--distributed", action="store_true",
-                   help="basins: run as one process of a multi-process JAX program (jax.distributed.initialize: "
-                   "detects Slurm and Open MPI, or reads JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, "
-                   "JAX_PROCESS_ID); every process takes a share of the values, process 0 writes --out")
+                   help="basins, bifurcation: run as one process of a multi-process JAX program "
+                   "(jax.distributed.initialize: detects Slurm and Open MPI, or reads JAX_COORDINATOR_ADDRESS, "
+                   "JAX_NUM_PROCESSES, JAX_PROCESS_ID); every process takes a share of the values, process 0 "
+                   "writes --out")
     p.set_defaults(func=run)
 
 
@@ -135,8 +136,8 @@ def run(args) -> int:
     if args.distributed:  # before any JAX computation
         from .._devices import initialize
 
-        if args.kind != "basins":
-            raise ValueError("--distributed runs --kind basins (the other kinds run in one process).")
+        if args.kind not in ("basins", "bifurcation"):
+            raise ValueError("--distributed runs --kind basins and bifurcation (continuation runs in one process).")
         initialize()
     # every option is checked before any integration and before --out is touched
     start, stop, count, values = _values(args.values)
@@ -182,11 +183,17 @@ def run(args) -> int:
     if args.distributed:
         from .._devices import process_index
 
-        if process_index() != 0:  # a share of the values into --out/parts; process 0 writes the files
-            from ..sweep import basin_sweep
+        if process_index() != 0:  # its share of the values (exchanged, or parts in --out); process 0 writes
+            from ..sweep import basin_sweep, bifurcation_diagram
 
-            basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=False, out=Path(args.out),
-                        restart=args.restart, save=False)
+            if args.kind == "basins":
+                basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=False,
+                            out=Path(args.out), restart=args.restart, save=False)
+            else:
+                bifurcation_diagram(REDUCED, params, args.param, values, _starts(args), transient=args.transient,
+                                    record=args.record, direction=args.direction, integrator=integ,
+                                    max_period=args.max_period, progress=False, out=Path(args.out),
+                                    restart=args.restart, save=False)
             return 0
 
     with OutputFolder(args.out, OWNED, create=True) as work:
@@ -200,24 +207,32 @@ def run(args) -> int:
     return 0
 
 
-def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, method) -> list[str]:
-    """A bifurcation or basin sweep: resume parts in ``--out``, its files into ``work``."""
+def _starts(args):
+    """The starts of a bifurcation sweep: ``--from`` points, or ``--starts`` seeded points of
+    the region on the section x4 = 0 (the same on every process)."""
     import numpy as np
 
     from .._cells import PAPER_REGION
-    from .._model import REDUCED
     from ..shooting import seeds_in_box
+
+    if args.points:
+        return np.asarray(args.points, dtype=float)
+    n = 16 if args.starts is None else args.starts
+    region = np.asarray(args.region or PAPER_REGION, dtype=float)
+    X0 = np.zeros((n, 4))  # on the section x4 = 0, like the paper's cells
+    X0[:, :3] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
+    return X0
+
+
+def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, method) -> list[str]:
+    """A bifurcation or basin sweep: resume parts in ``--out``, its files into ``work``."""
+
+    from .._model import REDUCED
     from ..sweep import basin_sweep, bifurcation_diagram
 
     out = Path(args.out)
     if args.kind == "bifurcation":
-        if args.points:
-            X0 = np.asarray(args.points, dtype=float)
-        else:
-            n = 16 if args.starts is None else args.starts
-            region = np.asarray(args.region or PAPER_REGION, dtype=float)
-            X0 = np.zeros((n, 4))  # on the section x4 = 0, like the paper's cells
-            X0[:, :3] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
+        X0 = _starts(args)
         print(head + f", {len(X0)} starts, direction {args.direction}")
         result = bifurcation_diagram(REDUCED, params, args.param, values, X0, transient=args.transient,
                                      record=args.record, direction=args.direction, integrator=integ,
