@@ -4,7 +4,9 @@ does not add to the wall time of the call that needs it.
 
 :func:`compile_ahead` starts a job under a key; the code about to call the computation
 calls :func:`wait_for` with the same key first, so nothing compiles twice. A job that
-fails is forgotten: the real call then reports what is wrong.
+fails is forgotten: the real call then reports what is wrong. The same thread takes
+other one-time preparations in their turn (the command line imports the libraries it
+saves with there, after the compilations).
 """
 
 from __future__ import annotations

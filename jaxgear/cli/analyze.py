@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from .._ahead import compile_ahead, wait_for
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
 from ._painter import Painter
@@ -135,6 +135,10 @@ def _run_checked(args, painter) -> int:
     check_counts(counts, f"--grid {where}", n_axes, default.axis_names)
     grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
     method.check(REDUCED, grid)
+    # everything the run will compute compiles on a side thread, in order, from now on
+    from ..analysis import prepare_analysis
+
+    prepare_analysis(REDUCED, params, grid, method, args.uncertainty_samples)
 
     if args.distributed:
         from .._devices import process_index
@@ -161,28 +165,27 @@ def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
     import numpy as np
 
     from .._model import REDUCED
-    from ..analysis import analyze_global, compare_with_direct, prepare_analysis, with_label_uncertainty
+    from ..analysis import analyze_global, compare_with_direct, with_label_uncertainty
 
     t0 = time.perf_counter()
-    # everything the run will compute compiles on a side thread, in order, while it runs
-    prepare_analysis(REDUCED, params, grid, method, args.uncertainty_samples)
-    # A second thread imports xarray while the analysis runs; the painter draws the figures
-    # while the label uncertainty is measured and the result saved.
-    with ThreadPoolExecutor(1) as side:
-        side.submit(_import_output_libraries)
-        result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet, uncertainty=0)
-        if painter is not None:
-            painter.submit(result, out)
-        if args.uncertainty_samples:
-            result = with_label_uncertainty(result, REDUCED, params, method, args.uncertainty_samples,
-                                            progress=not args.quiet)
-        result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
-        print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
-        print(result.table())
-        result.save(out / "result.nc")
-        result.write_summary(out / "summary.json")
-        written = ["result.nc", "summary.json"]
-        figure_names = painter.names() if painter is not None else []
+    # xarray (for saving) is imported on the side thread after the compilations
+    # (prepare_analysis), once the device is busy: imported at once, its quarter second
+    # of Python would delay the first computations
+    compile_ahead(_OUTPUT_LIBRARIES, _import_output_libraries)
+    result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet, uncertainty=0)
+    if painter is not None:  # the figures are drawn while the label uncertainty is measured and the result saved
+        painter.submit(result, out)
+    if args.uncertainty_samples:
+        result = with_label_uncertainty(result, REDUCED, params, method, args.uncertainty_samples,
+                                        progress=not args.quiet)
+    result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
+    print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
+    print(result.table())
+    wait_for(_OUTPUT_LIBRARIES)
+    result.save(out / "result.nc")
+    result.write_summary(out / "summary.json")
+    written = ["result.nc", "summary.json"]
+    figure_names = painter.names() if painter is not None else []
     if args.compare:
         rep = compare_with_direct(result, REDUCED, params, n_samples=args.compare, progress=not args.quiet)
         write_json(rep, out / "compare.json")
@@ -195,6 +198,10 @@ def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
             print(f"  found only by direct integration: P-{d['period']} at {np.round(d['point'], 4).tolist()} "
                   f"({d['cells']} of the sampled cells)")
     return written + figure_names
+
+
+_OUTPUT_LIBRARIES = ("import", "xarray")
+"""Key of the side thread's import of the saving libraries (:mod:`jaxgear._ahead`)."""
 
 
 def _import_output_libraries() -> None:
