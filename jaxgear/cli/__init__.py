@@ -113,12 +113,16 @@ def console() -> None:
     from .._ahead import wait_all
 
     wait_all()
-    _skip_jax_teardown()
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
+    if run_exit_handlers is None:  # not CPython: the ordinary exit
+        sys.exit(code)
     try:
-        run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
-        if run_exit_handlers is None:  # not CPython: the ordinary exit
-            sys.exit(code)
+        skipped = _unregister_jax_teardown()
         run_exit_handlers()
+        if skipped:  # what JAX's handler does that matters at exit, in its place (after the others)
+            import jax
+
+            jax.distributed.shutdown()
     finally:
         for stream in (sys.stdout, sys.stderr):
             try:
@@ -128,20 +132,19 @@ def console() -> None:
     os._exit(code)
 
 
-def _skip_jax_teardown() -> None:
-    """Take JAX's exit handler off the list: it clears JAX's caches and destroys its
-    backends (0.14 s of an analysis run), nothing a process about to end needs, except
-    the shutdown of a distributed run, done here instead."""
+def _unregister_jax_teardown() -> bool:
+    """Take JAX's exit handler off the list (True if it was found): it clears JAX's caches
+    and destroys its backends (0.14 s of an analysis run), nothing a process about to end
+    needs but the shutdown of a distributed run, which :func:`console` does instead."""
     try:
         from jax._src import api
     except ImportError:
-        return
+        return False
     handler = getattr(api, "clean_up", None)
-    if handler is not None:
-        atexit.unregister(handler)
-        import jax
-
-        jax.distributed.shutdown()
+    if handler is None:
+        return False
+    atexit.unregister(handler)
+    return True
 
 
 if __name__ == "__main__":
