@@ -13,9 +13,9 @@ makes), in one of two ways:
   only, so the integrator's compiled CPU kernel (an XLA FFI custom call, which has no
   sharding rule) runs in it unchanged;
 - the direct method's lane pools take data-dependent host decisions per block: they run
-  one pool per device, each driven from its own Python thread (:func:`on_devices`,
-  :func:`map_rows`); JAX dispatch is thread-safe and asynchronous, so the devices work
-  at the same time.
+  one pool per device over one block of the rows (:func:`split_rows`), each driven from
+  its own Python thread (:func:`on_devices`); JAX dispatch is thread-safe and
+  asynchronous, so the devices work at the same time.
 
 Either way each row is computed alone by the kernel of one device, so results do not
 depend on the device count (bit for bit where the batch shape a device runs does not
@@ -48,7 +48,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-__all__ = ["local_devices", "on_devices", "put", "split_rows", "map_rows", "shard_rows", "batch_mesh",
+__all__ = ["local_devices", "on_devices", "put", "split_rows", "shard_rows", "batch_mesh",
            "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
            "values_over_processes", "allgather", "rows_over_processes"]
 
@@ -99,17 +99,6 @@ def split_rows(n: int, parts: int) -> list[tuple[int, int]]:
             out.append((start, stop))
         start = stop
     return out
-
-
-def map_rows(fn: Callable, X: np.ndarray, devices: Sequence | None = None, min_rows: int = 1) -> list:
-    """``fn(rows, device)`` on one block of the rows of ``X`` per device (blocks of at
-    least ``min_rows`` rows; one block on the first device when ``X`` is smaller), in
-    device order: the list of what it returns for each block, whose rows concatenated are
-    ``X``'s."""
-    devices = local_devices() if devices is None else list(devices)
-    D = max(1, min(len(devices), len(X) // max(1, int(min_rows))))
-    blocks = split_rows(len(X), D)
-    return on_devices(lambda ab, dev: fn(X[ab[0]:ab[1]], dev), blocks, devices[:len(blocks)])
 
 
 # ------------------------------------------------------------------ one program, sharded

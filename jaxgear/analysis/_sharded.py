@@ -2,7 +2,7 @@
 
 After the pilot (:func:`jaxgear.analysis._pool.run_pools`, on the first device), the
 queue of the other cells is cut into one contiguous block per local device
-(:func:`jaxgear._devices.map_rows`); each device runs its own pool over its block (the
+(:func:`jaxgear._devices.split_rows`); each device runs its own pool over its block (the
 same ``_drive`` as one device, its inputs committed to that device, one host thread per
 device), seeded with the pilot's attractor table. Afterwards the attractors each block
 registered are merged (:func:`jaxgear._matching.same_attractor`) and every block's
