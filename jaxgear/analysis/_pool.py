@@ -112,12 +112,11 @@ def _sqdist(a, b):
     return sum((a[..., i, :] - b[..., i, :]) ** 2 for i in range(a.shape[-2]))
 
 
-def _back(hist, g, start: int, count: int, extra=0):
+def _back(hist, g, start: int, count: int):
     """The points ``start, ..., start + count - 1`` periods back from period ``g`` (newest
-    first), plus ``extra`` more periods back: ``(count, dim, L)`` (one contiguous slice of
-    the doubled ring)."""
+    first): ``(count, dim, L)`` (one contiguous slice of the doubled ring)."""
     H = hist.shape[0] // 2
-    top = g % H + H - start - extra  # slot of the point `start + extra` periods back
+    top = g % H + H - start  # slot of the point `start` periods back
     return jax.lax.dynamic_slice_in_dim(hist, top - count + 1, count, axis=0)[::-1]
 
 
