@@ -29,7 +29,7 @@ from .._poincare import check_section, section_kernel
 from .._status import Status
 from ._graph import analyze_cell_map
 from ._method import AbstractGlobalMethod, Classification, register_method
-from ._orbits import advance_rows, follow, refine_orbits
+from ._orbits import advance_state_rows, follow, refine_orbits
 from ._result import SINK
 
 __all__ = ["PoincareCellMap", "StroboscopicCellMap", "cell_images"]
@@ -150,7 +150,7 @@ class StroboscopicCellMap(_AbstractCellMap):
         return None
 
     def _map(self, system, params, X):
-        return shard_rows(advance_rows, system, params, np.asarray(X, np.float64), int(self.mapping_steps),
+        return shard_rows(advance_state_rows, system, params, np.asarray(X, np.float64), int(self.mapping_steps),
                           self.integrator, batch=2)
 
 

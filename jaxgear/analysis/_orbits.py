@@ -45,13 +45,16 @@ def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
 
 
 @eqx.filter_jit
-def advance_rows(system, params, X, periods, integrator):
+def advance_state_rows(system, params, X, periods, integrator):
+    """States ``X (n, dim)`` (rows) advanced by ``periods`` forcing periods, jitted (the
+    kernel :func:`jaxgear._devices.shard_rows` shards for the stroboscopic cell map)."""
     return integrator.advance(system, params, X.T, jnp.asarray(0.0), periods).T
 
 
 def advance_states(system, params, X, periods: int, integrator) -> np.ndarray:
     """States ``X (n, dim)`` at phase 0 advanced by ``periods`` forcing periods: ``(n, dim)``."""
-    return np.asarray(advance_rows(system, params, jax.device_put(np.asarray(X, np.float64)), int(periods), integrator))
+    X = jax.device_put(np.asarray(X, np.float64))
+    return np.asarray(advance_state_rows(system, params, X, int(periods), integrator))
 
 
 def follow(system, params, X: np.ndarray, integrator, settle: int, max_period: int, tol: float):
