@@ -1,7 +1,7 @@
 """Scaling past one device and one process: plain script, figures printed, nothing asserted.
 
-    python benchmarks/devices.py                          # 20 x 12 x 24 cells, 4 sweep values
-    python benchmarks/devices.py --counts 10 6 12 --values 2 --repeat 1
+    python benchmarks/devices.py           # 20 x 12 x 24 cells on devices, the paper grid on processes
+    python benchmarks/devices.py --counts 10 6 12 --process-counts 10 6 12 --repeat 1
 
 Measures in one run on this machine (the reduced gear model, paper preset, the default
 method :class:`jaxgear.Direct`):
@@ -10,13 +10,14 @@ method :class:`jaxgear.Direct`):
    forced host devices (``XLA_FLAGS=--xla_force_host_platform_device_count``, each in a
    fresh process; ``min`` over ``--repeat`` calls after a warm-up call, compilation
    apart), and whether both give the same labels and shares;
-2. *processes*: the basin sweep of ``--values`` backlash values on the same grid as one
-   process pinned to core 0 (``taskset -c 0``) and as two JAX processes
-   (``jax.distributed.initialize``) pinned to cores 0 and 1, wall time of the whole
-   command (start, compilation and the written file included in both), and whether
-   both write the same file; as a reference for what the machine itself allows, two
-   independent one-process sweeps of half the values each, pinned the same way, started
-   together (on a machine shared with other jobs this is far from 2x).
+2. *processes*: ``jaxgear analyze`` (no figures, no label uncertainty) on
+   ``--process-counts`` cells (default the paper grid) as one process pinned to core 0
+   (``taskset -c 0``) and as two processes of one JAX program (``--distributed``) pinned
+   to cores 0 and 1, wall time of the whole command (start and the written file
+   included), with a warm compilation cache (a first run of each fills it); whether both
+   write the same labels and shares; and, as the floor two processes can reach, one
+   process on half the cells (each of the two pays the start, the loading of the
+   compiled computations, the pilot and the draining tail in full).
 
 Each section's last line is its ratio (one / two: above 1 is faster on two).
 """
@@ -54,22 +55,6 @@ np.savez(out, labels=np.asarray(r.labels), shares=np.array([a.share for a in r.a
 print(json.dumps(dict(devices=jax.local_device_count(), seconds=min(times))))
 '''
 
-SWEEP = r'''
-import json, sys, warnings
-import numpy as np
-import jaxgear as jg
-warnings.simplefilter("ignore")
-counts, n_values, out, n, pid, port = json.loads(sys.argv[1]), int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), int(sys.argv[5]), sys.argv[6]
-if n > 1:
-    import jax
-    jax.distributed.initialize(f"localhost:{port}", n, pid)
-values = np.linspace(4.0, 6.0, n_values)
-if len(sys.argv) > 7:  # one half of the values (the reference run)
-    values = values[int(sys.argv[7])::2]
-jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, jg.CellGrid.paper(tuple(counts)), progress=False, out=out)
-'''
-
-
 def env(**extra) -> dict:
     e = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu", **extra)
     if "XLA_FLAGS" not in extra:
@@ -100,45 +85,67 @@ def devices(counts, repeat: int, tmp: Path) -> None:
     print(f"   devices ratio (1 device / 2 devices): {out[1]['seconds'] / out[2]['seconds']:.2f}x")
 
 
-def processes(counts, n_values: int, tmp: Path) -> None:
-    import xarray as xr
+def _cli(args, cores, cache: Path, n: int = 1, pid: int = 0, port: str = "") -> subprocess.Popen:
+    """``jaxgear ARGS`` pinned to ``cores``, as process ``pid`` of ``n`` (``--distributed``)."""
+    extra = dict(JAXGEAR_CACHE_DIR=str(cache))
+    if n > 1:
+        extra.update(JAX_COORDINATOR_ADDRESS=f"localhost:{port}", JAX_NUM_PROCESSES=str(n), JAX_PROCESS_ID=str(pid))
+        args = [*args, "--distributed"]
+    return subprocess.Popen(["taskset", "-c", cores, sys.executable, "-m", "jaxgear", *args], env=env(**extra),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
-    print(f"2. basin sweep, {n_values} values x {counts} cells: 1 process on core 0 vs 2 processes on cores 0, 1")
-    walls = {}
-    for n in (1, 2):
-        out, port = tmp / f"sweep{n}", str(free_port())
-        t = time.perf_counter()
-        procs = [subprocess.Popen(["taskset", "-c", str(i), sys.executable, "-c", SWEEP, json.dumps(counts),
-                                   str(n_values), str(out), str(n), str(i), port], env=env(),
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for i in range(n)]
-        for p in procs:
-            _, err = p.communicate()
-            if p.returncode:
-                raise SystemExit(err.decode()[-2000:])
-        walls[n] = time.perf_counter() - t
-        print(f"   {n} process(es): {walls[n]:.2f} s")
-    # the machine's own capacity: two independent one-process sweeps of half the values each
+
+def _wall(runs) -> float:
+    """Start the commands ``runs`` (a list of argument tuples for :func:`_cli`) together
+    and return the wall time until the last one ends."""
     t = time.perf_counter()
-    procs = [subprocess.Popen(["taskset", "-c", str(i), sys.executable, "-c", SWEEP, json.dumps(counts),
-                               str(n_values), str(tmp / f"half{i}"), "1", "0", "0", str(i)], env=env(),
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for i in range(2)]
+    procs = [_cli(*r) for r in runs]
     for p in procs:
         _, err = p.communicate()
         if p.returncode:
             raise SystemExit(err.decode()[-2000:])
-    walls["free"] = time.perf_counter() - t
-    print(f"   reference, 2 independent processes of half the values each (no JAX runtime): {walls['free']:.2f} s")
-    with xr.open_dataset(tmp / "sweep1" / "basins.nc", engine="h5netcdf") as a, \
-            xr.open_dataset(tmp / "sweep2" / "basins.nc", engine="h5netcdf") as b:
-        print(f"   identical files: {a.identical(b)}")
-    print(f"   machine's parallel capacity (1 process / 2 independent halves): {walls[1] / walls['free']:.2f}x")
-    print(f"   processes ratio (1 process / 2 processes): {walls[1] / walls[2]:.2f}x")
+    return time.perf_counter() - t
+
+
+def processes(counts, repeat: int, tmp: Path) -> None:
+    import numpy as np
+
+    import jaxgear as jg
+
+    grid = ",".join(str(c) for c in counts)
+    half = ",".join(str(c) for c in (*counts[:-1], counts[-1] // 2))
+    print(f"2. jaxgear analyze, {counts} cells: 1 process on core 0 vs 2 processes (--distributed) on cores 0, 1 "
+          f"(warm compilation cache, min of {repeat} after a warm-up)")
+    base = ["analyze", "--no-figures", "--uncertainty-samples", "0", "--quiet"]
+    cache = tmp / "cache"
+    configs = {
+        "1 process": lambda: [(base + ["--grid", grid, "--out", str(tmp / "one")], "0", cache)],
+        "2 processes": lambda: [(base + ["--grid", grid, "--out", str(tmp / "two")], str(i), cache, 2, i, port)
+                                for i in range(2)],
+        "1 process, half the cells": lambda: [(base + ["--grid", half, "--out", str(tmp / "half")], "0", cache)],
+    }
+    walls = {}
+    for name, runs in configs.items():
+        times = []
+        for _ in range(repeat + 1):  # the first fills the compilation cache
+            port = str(free_port())
+            times.append(_wall(runs()))
+        walls[name] = min(times[1:])
+        print(f"   {name}: {walls[name]:.2f} s")
+    one, two = jg.load(tmp / "one" / "result.nc"), jg.load(tmp / "two" / "result.nc")
+    same = np.array_equal(one.labels, two.labels) and [a.share for a in one.attractors] == [
+        a.share for a in two.attractors]
+    print(f"   identical labels and shares: {same}")
+    print(f"   the floor of 2 processes (1 process of half the cells: start, compilation cache, pilot and "
+          f"tail are paid in full): {walls['1 process'] / walls['1 process, half the cells']:.2f}x")
+    print(f"   processes ratio (1 process / 2 processes): {walls['1 process'] / walls['2 processes']:.2f}x")
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--counts", type=int, nargs=3, default=(20, 12, 24))
-    ap.add_argument("--values", type=int, default=4)
+    ap.add_argument("--counts", type=int, nargs=3, default=(20, 12, 24), help="cells of section 1")
+    ap.add_argument("--process-counts", type=int, nargs=3, default=(50, 30, 60),
+                    help="cells of section 2 (default the paper grid)")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--only", choices=("devices", "processes"), default=None)
     a = ap.parse_args()
@@ -146,7 +153,7 @@ def main():
         if a.only != "processes":
             devices(list(a.counts), a.repeat, Path(tmp))
         if a.only != "devices":
-            processes(list(a.counts), a.values, Path(tmp))
+            processes(list(a.process_counts), a.repeat, Path(tmp))
 
 
 if __name__ == "__main__":

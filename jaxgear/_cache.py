@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["cache_root", "native_dir", "enable_compilation_cache"]
+__all__ = ["cache_root", "native_dir", "enable_compilation_cache", "write_from_every_process"]
 
 _OFF = ("", "0", "off", "none", "false", "no")
 
@@ -57,3 +57,45 @@ def enable_compilation_cache() -> Path | None:
     except (OSError, AttributeError):  # read-only home or an older jax: run without the cache
         return None
     return path
+
+
+def write_from_every_process() -> bool:
+    """Let every process of a multi-process CPU program write its own entries into JAX's
+    persistent compilation cache; returns whether it could.
+
+    JAX writes cache entries from process 0 only (so that processes do not contend for
+    the same entry on a shared file system). On CPUs the key of a computation holds the
+    ids of the devices it runs on, so the other processes never find process 0's entries:
+    without their own, they compile every computation again at every start (seconds per
+    pool program on one core, more than the analysis of their share of the cells). Their
+    keys differ from process 0's and from each other's, so writing them contends for
+    nothing. Other platforms keep JAX's rule (GPU keys leave the devices out: process 0's
+    entries serve every process). This reaches into JAX's compiler module; a JAX without
+    the hook it replaces keeps its own behaviour (and this returns ``False``)."""
+    try:
+        from jax._src import compilation_cache, compiler, distributed
+    except ImportError:
+        return False
+    own = getattr(compiler, "_cache_write", None)
+    put = getattr(compilation_cache, "put_executable_and_time", None)
+    if own is None or put is None:
+        return False
+    if getattr(own, "writes_from_every_process", False):
+        return True
+
+    def write(cache_key, compile_time_secs, module_name, backend, executable, host_callbacks):
+        if distributed.global_state.process_id == 0 or getattr(backend, "platform", None) != "cpu":
+            return own(cache_key, compile_time_secs, module_name, backend, executable, host_callbacks)
+        import jax
+
+        if host_callbacks or compile_time_secs < jax.config.jax_persistent_cache_min_compile_time_secs:
+            return None  # JAX's other conditions for writing
+        try:
+            put(cache_key, module_name, executable, backend, int(compile_time_secs))
+        except Exception:  # a cache that cannot be written costs a compilation, nothing else
+            pass
+        return None
+
+    write.writes_from_every_process = True
+    compiler._cache_write = write
+    return True

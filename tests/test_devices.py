@@ -393,3 +393,44 @@ def test_two_processes_sweep_the_values_of_one(tmp_path):
     for kind, name in (("bif", "bifurcation.nc"), ("map", "parameter_map.nc")):
         assert not (tmp_path / "r2" / f"{kind}_1").exists()  # process 1 writes nothing
         _assert_same_file(tmp_path / "r1" / f"{kind}_0" / name, tmp_path / "r2" / f"{kind}_0" / name)
+
+
+CACHE_SCRIPT = r'''
+import sys
+from pathlib import Path
+import jax
+import jax.numpy as jnp
+from jax._src import distributed
+from jaxgear import _cache
+
+cache, patch = Path(sys.argv[1]), sys.argv[2] == "patch"
+jax.config.update("jax_compilation_cache_dir", str(cache))
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+if patch:
+    assert _cache.write_from_every_process()
+    assert _cache.write_from_every_process()  # a second call changes nothing
+distributed.global_state.process_id = 1  # what the runtime sets in the second process
+
+
+def wave(x):
+    return jnp.sin(x) * 3.0 + 1.0
+
+
+jax.jit(wave)(jnp.arange(5.0)).block_until_ready()
+print(sum(1 for p in cache.rglob("jit_wave-*") if "-atime" not in p.name))
+'''
+
+
+@pytest.mark.parametrize("patch", [False, True])
+def test_every_process_writes_its_compilation_cache_entries(tmp_path, patch):
+    """JAX writes persistent-cache entries from process 0 only; on CPUs a process other
+    than 0 never finds process 0's entries (its keys hold its own device ids), so
+    :func:`jaxgear._cache.write_from_every_process` lets it write its own: without it the
+    compilation of process 1 leaves no entry, with it its entry."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    r = subprocess.run([sys.executable, "-c", CACHE_SCRIPT, str(tmp_path / "xla"), "patch" if patch else "plain"],
+                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    entries = int(r.stdout.split()[-1])
+    assert entries == (1 if patch else 0)

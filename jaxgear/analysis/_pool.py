@@ -414,10 +414,10 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     labels = [np.empty(len(X), dtype=np.int64) for X in Xs]
     used = [np.empty(len(X), dtype=np.int64) for X in Xs]
     n_main = sum(len(X) - n_p for X, n_p in zip(Xs, n_ps))
-    if any(n_ps) and n_main:  # the main pool's computations compile while the pilot runs
-        _prepare(system, params, integrator, o, n_main, max(1, min(int(chunk), max(len(X) - n_p for X, n_p in
-                                                                                     zip(Xs, n_ps)))), dim, V,
-                 att[1].shape[1])
+    if any(n_ps) and n_main:  # the main pools' computations compile while the pilot runs
+        _prepare_blocks(system, params, integrator, o, n_main,
+                        max(1, min(int(chunk), max(len(X) - n_p for X, n_p in zip(Xs, n_ps)))), dim, V,
+                        att[1].shape[1])
     for phase in (0, 1):
         parts = [o_[:n_p] if phase == 0 else o_[n_p:] for o_, n_p in zip(orders, n_ps)]
         total = sum(len(p) for p in parts)
@@ -482,17 +482,18 @@ def _seed_attractors(attractors, M: int, dim: int):
     return jax.device_put((pts, ks, np.array([len(kn) for kn in known], np.int32)))
 
 
-def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar) -> PoolState:
+def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar, device=None) -> PoolState:
     """Run one pool over the states ``Xd (n, dim)`` (of parameter rows ``Xrow (n,)``)
-    until every one is decided."""
+    until every one is decided (``device``: the device its inputs are committed to, or
+    ``None``: the default device, uncommitted)."""
     n, dim = Xd.shape
-    _ready(system, integrator, o, n, L, att[1].shape)
+    _ready(system, integrator, o, n, L, att[1].shape, device)
     s = _init(n, L, dim, o.M, Xd, Xrow, *att)
     done = 0
     rounds = 4
     while True:
         L_min = _next_pool(s.Y.shape[1])
-        _ready(system, integrator, o, n, s.Y.shape[1], att[1].shape)
+        _ready(system, integrator, o, n, s.Y.shape[1], att[1].shape, device)
         t = time.perf_counter()
         s, info = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min, np.int32(rounds))
         n_done, overflow, n_active, next_cell, n_att = (int(v) for v in np.asarray(info))
@@ -542,8 +543,8 @@ def _pool_sizes(L: int) -> list[int]:
 # earlier pool); the pool waits for its own warm-up before its first call.
 
 
-def _key(system, integrator, o: _Options, n: int, L: int, att_shape) -> tuple:
-    return (system, integrator, o, int(n), int(L), tuple(att_shape))
+def _key(system, integrator, o: _Options, n: int, L: int, att_shape, device=None) -> tuple:
+    return (system, integrator, o, int(n), int(L), tuple(att_shape), None if device is None else device.id)
 
 
 def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int, max_periods: int,
@@ -558,29 +559,52 @@ def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int
     params = params_list[0] if V == 1 else _stack(params_list)
     A = _seed_attractors(attractors if attractors is not None else [()] * V, o.M, system.dim)[1].shape[1]
     n_p = _pilot_size(pilot, int(n))
-    for size in (n_p, int(n) - n_p):
-        if size:
-            _prepare(system, params, integrator, o, V * size, max(1, min(int(chunk), size)), system.dim, V, A)
+    if n_p:
+        _prepare(system, params, integrator, o, V * n_p, max(1, min(int(chunk), n_p)), system.dim, V, A)
+    if int(n) - n_p:
+        _prepare_blocks(system, params, integrator, o, V * (int(n) - n_p), max(1, min(int(chunk), int(n) - n_p)),
+                        system.dim, V, A)
 
 
-def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
+def _prepare_blocks(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
+    """:func:`_prepare` for the pools that the queue of ``n`` states runs in after the
+    pilot: one per block of the queue (:func:`jaxgear.analysis._sharded.block_pools`)."""
+    from ._sharded import block_pools
+
+    for n_b, L_b, device in block_pools(n, L):
+        _prepare(system, params, integrator, o, n_b, L_b, dim, V, A, device)
+
+
+def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int,
+             device=None) -> None:
     for size in _pool_sizes(L):
-        compile_ahead(_key(system, integrator, o, n, size, (V, A)),
-                      functools.partial(_compile_pool, system, params, integrator, o, n, size, L, dim, V, A))
+        compile_ahead(_key(system, integrator, o, n, size, (V, A), device),
+                      functools.partial(_compile_pool, system, params, integrator, o, n, size, L, dim, V, A, device))
 
 
-def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L: int, dim: int, V: int, A: int):
+def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L: int, dim: int, V: int, A: int,
+                  device=None):
+    """Compile ``_init`` and ``_run`` of a pool of ``size`` lanes (of a pool started at
+    ``L``) over ``n`` states, for inputs placed on ``device`` as
+    :func:`jaxgear._devices.put` places them (``None``: uncommitted), as the pool will
+    call them (a call whose inputs are placed otherwise is a different computation to
+    JAX, traced and compiled again)."""
     f64, i32 = jnp.float64, jnp.int32
-    X = jax.ShapeDtypeStruct((n, dim), f64)
-    Xrow = jax.ShapeDtypeStruct((n,), i32)
-    att = (jax.ShapeDtypeStruct((V, A, o.M, dim), f64), jax.ShapeDtypeStruct((V, A), i32),
-           jax.ShapeDtypeStruct((V,), i32))
+    committed = device is not None and jax.device_count() > 1  # as jaxgear._devices.put places them
+    where = {"sharding": jax.sharding.SingleDeviceSharding(device)} if committed else {}
+    X = jax.ShapeDtypeStruct((n, dim), f64, **where)
+    Xrow = jax.ShapeDtypeStruct((n,), i32, **where)
+    att = (jax.ShapeDtypeStruct((V, A, o.M, dim), f64, **where), jax.ShapeDtypeStruct((V, A), i32, **where),
+           jax.ShapeDtypeStruct((V,), i32, **where))
+    if committed:
+        params = jax.device_put(params, device)
     if size == L:
         _init.lower(n, L, dim, o.M, X, Xrow, *att).compile()
     s = jax.eval_shape(functools.partial(_init, n, size, dim, o.M), X, Xrow, *att)
+    s = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype, **where), s)
     _run.lower(s, system, params, integrator, o, X, Xrow, n, _next_pool(size), np.int32(1)).compile()
 
 
-def _ready(system, integrator, o: _Options, n: int, L: int, att_shape) -> None:
+def _ready(system, integrator, o: _Options, n: int, L: int, att_shape, device=None) -> None:
     """Wait for the side thread's compilation of this pool, if one was started."""
-    wait_for(_key(system, integrator, o, n, L, att_shape))
+    wait_for(_key(system, integrator, o, n, L, att_shape, device))

@@ -27,7 +27,7 @@ import numpy as np
 from .._devices import allgather, cell_processes, local_devices, on_devices, put, split_rows
 from .._matching import same_attractor
 
-__all__ = ["drive_blocks", "MIN_BLOCK_CELLS"]
+__all__ = ["drive_blocks", "block_pools", "MIN_BLOCK_CELLS"]
 
 MIN_BLOCK_CELLS = 16
 """Fewest cells a device's block holds (smaller queues run on the first device alone)."""
@@ -50,13 +50,12 @@ def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray,
     att = tuple(np.asarray(a) for a in jax.device_get(att))
     me, P = cell_processes()
     D = len(devices)
-    blocks = split_rows(len(X), max(1, min(P * D, len(X) // MIN_BLOCK_CELLS)))
-    mine = [i for i in range(len(blocks)) if i % P == me]
+    blocks, mine = _blocks(len(X), D)
 
     def run(i, dev):
         a, b = blocks[i]
         s = _drive(system, put(params, dev), integrator, o, put(X[a:b], dev),
-                   put(rows[a:b], dev), max(1, min(int(L), b - a)), put(att, dev), bar)
+                   put(rows[a:b], dev), max(1, min(int(L), b - a)), put(att, dev), bar, device=dev)
         return tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att)))
 
     local = on_devices(run, mine, devices[:len(mine)]) if mine else []
@@ -64,6 +63,27 @@ def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray,
     labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], o.merge_tol)
     used = np.concatenate([results[i][1] for i in range(len(blocks))])
     return labels, used, tables
+
+
+def _blocks(n: int, D: int) -> tuple[list[tuple[int, int]], list[int]]:
+    """The blocks ``(start, stop)`` a queue of ``n`` cells is cut into for ``D`` local
+    devices in every process, and the indices of this process's blocks."""
+    me, P = cell_processes()
+    blocks = split_rows(n, max(1, min(P * D, n // MIN_BLOCK_CELLS)))
+    return blocks, [i for i in range(len(blocks)) if i % P == me]
+
+
+def block_pools(n: int, L: int, devices=None) -> list[tuple[int, int, object]]:
+    """The ``(cells, lanes, device)`` of the pools :func:`drive_blocks` runs in this
+    process for a queue of ``n`` cells and pools of at most ``L`` lanes (each distinct
+    one once): what to compile ahead."""
+    devices = local_devices() if devices is None else list(devices)
+    blocks, mine = _blocks(n, len(devices))
+    pools = {}
+    for i, dev in zip(mine, devices):
+        a, b = blocks[i]
+        pools[(b - a, max(1, min(int(L), b - a)), dev.id)] = dev
+    return [(n_b, L_b, dev) for (n_b, L_b, _), dev in pools.items()]
 
 
 def _exchange(blocks, local: dict, me: int, P: int, D: int) -> dict:
