@@ -396,7 +396,7 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     The pilots of all values run first in one pool, then all the other states in one
     pool, value after value: the compilation, the pilot's draining and the draining tail
     are paid once. With several local devices the other states run in one pool per
-    device, a block of the queue each (:mod:`jaxgear.analysis._sharded`).
+    device, a block of the queue each, in one sharded program (:mod:`jaxgear.analysis._sharded`).
     """
     from ._sharded import drive_blocks
 
