@@ -12,10 +12,11 @@ makes), in one of two ways:
   the kernel of one device on its local block. The per-device body sees local shapes
   only, so the integrator's compiled CPU kernel (an XLA FFI custom call, which has no
   sharding rule) runs in it unchanged;
-- the direct method's lane pools take data-dependent host decisions per block: they run
-  one pool per device over one block of the rows (:func:`split_rows`), each driven from
-  its own Python thread (:func:`on_devices`); JAX dispatch is thread-safe and
-  asynchronous, so the devices work at the same time.
+- the direct method's lane pools run one pool per device over one block of the rows
+  (:func:`split_rows`), also as one ``jax.jit`` of a ``jax.shard_map`` over the mesh: each
+  device runs the pool's loop of one device on its block, and the host makes the
+  data-dependent decisions (stop, grow the attractor tables, shrink the pools) from the
+  devices' progress rows (:mod:`jaxgear.analysis._sharded`).
 
 Either way each row is computed alone by the kernel of one device, so results do not
 depend on the device count (bit for bit where the batch shape a device runs does not
@@ -33,7 +34,6 @@ and writes the result file (:func:`wait_for_parts`).
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import contextvars
 import functools
@@ -50,7 +50,7 @@ from jax.sharding import PartitionSpec as P
 
 from ._cache import write_from_every_process
 
-__all__ = ["local_devices", "on_devices", "put", "split_rows", "shard_rows", "batch_mesh",
+__all__ = ["local_devices", "put", "split_rows", "shard_rows", "batch_mesh",
            "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
            "values_over_processes", "allgather", "rows_over_processes"]
 
@@ -75,19 +75,6 @@ def put(tree, device):
         return jax.device_put(a) if single else jax.device_put(a, device)
 
     return jax.tree.map(one, tree)
-
-
-def on_devices(fn: Callable, jobs: Sequence, devices: Sequence | None = None) -> list:
-    """``[fn(job, device)]`` for each job and its device (``jobs[i]`` on ``devices[i]``),
-    one thread per device so that the devices compute at the same time."""
-    devices = local_devices() if devices is None else list(devices)
-    if len(jobs) > len(devices):
-        raise ValueError(f"{len(jobs)} jobs for {len(devices)} devices")
-    if len(jobs) == 1:
-        return [fn(jobs[0], devices[0])]
-    with concurrent.futures.ThreadPoolExecutor(max_workers=len(jobs)) as pool:
-        futures = [pool.submit(fn, job, dev) for job, dev in zip(jobs, devices)]
-        return [f.result() for f in futures]
 
 
 def split_rows(n: int, parts: int) -> list[tuple[int, int]]:

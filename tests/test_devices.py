@@ -3,9 +3,10 @@ of one device.
 
 References that do not come from the code under test: the same analyses run with one
 device (``XLA_FLAGS=--xla_force_host_platform_device_count=1``), in a fresh process each;
-spies on :func:`jaxgear._devices.on_devices` (the direct method's pools) and on the
-``shard_map`` call of :func:`jaxgear._devices.shard_rows` (the stateless maps: the
-sharding of its output) show that the work really was split.
+spies on the sharded pool of the direct method (:mod:`jaxgear.analysis._sharded`: the
+sharding of its state, the threads that call it) and on the ``shard_map`` call of
+:func:`jaxgear._devices.shard_rows` (the stateless maps: the sharding of its output) show
+that the work really was split.
 """
 
 from __future__ import annotations
@@ -22,21 +23,43 @@ ROOT = Path(__file__).resolve().parent.parent
 
 SCRIPT = r'''
 import sys
+import threading
 import numpy as np
 import jax
 import jaxgear as jg
 from jaxgear import _devices
+from jaxgear.analysis import _pool, _sharded
 
-jobs = []
-real = _devices.on_devices
-
-
-def spy(fn, items, devices=None):
-    jobs.append(len(items))
-    return real(fn, items, devices)
+pools = []  # devices spanned by the state of each call of the sharded pool
+callers = set()  # the threads that ran pool rounds
+plain = []  # calls of the one-device pool
+real_blocks, real_run = _sharded._run_blocks, _pool._run
 
 
-_devices.on_devices = spy
+def blocks_spy(*a, **k):
+    callers.add(threading.get_ident())
+    s, info = real_blocks(*a, **k)
+    pools.append(len(s.cell.sharding.device_set))
+    return s, info
+
+
+def run_spy(*a, **k):
+    callers.add(threading.get_ident())
+    plain.append(1)
+    return real_run(*a, **k)
+
+
+blocks_spy.lower, run_spy.lower = real_blocks.lower, real_run.lower  # compiling ahead
+_sharded._run_blocks, _pool._run = blocks_spy, run_spy
+
+
+def pooled():
+    """The devices every call of the sharded pool spanned since the last section (1: none)."""
+    n = set(pools) or {1}
+    pools.clear()
+    assert len(n) == 1, n
+    return np.array(n.pop())
+
 shards = []  # devices spanned by the output of each shard_map call
 real_call = _devices._sharded_call
 
@@ -66,11 +89,21 @@ if "direct" in what:
     out["direct_labels"] = np.asarray(r.labels)
     out["direct_shares"] = np.array([a.share for a in r.attractors])
     out["direct_points"] = np.concatenate([a.points for a in r.attractors])
-    out["direct_jobs"] = np.array(jobs[-1])
+    out["direct_jobs"] = pooled()
 if "sweep" in what:
     s = jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.4], grid, method=method, progress=False)
     out["sweep_labels"], out["sweep_shares"], out["sweep_points"] = s.labels, s.shares, s.points
-    out["sweep_jobs"] = np.array(jobs[-1])
+    out["sweep_jobs"] = pooled()
+if "sharded" in what:  # no pilot; blocks of 46 and 45 cells: the shorter one padded
+    pools.clear(), callers.clear(), plain.clear()
+    r = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (13, 7), names=("x", "v")), method,
+                          progress=False, uncertainty=0)  # the pools of the analysis alone
+    out["sharded_labels"] = np.asarray(r.labels)
+    out["sharded_shares"] = np.array([a.share for a in r.attractors])
+    out["sharded_points"] = np.concatenate([a.points for a in r.attractors])
+    out["sharded_jobs"] = pooled()
+    out["sharded_threads"] = np.array(callers == {threading.main_thread().ident})
+    out["sharded_plain"] = np.array(len(plain))
 if "shoot" in what:
     shards.clear()
     seeds = jg.seeds_in_box(12, [-3, -3], [3, 3], seed=1)
@@ -85,7 +118,7 @@ if "gear" in what:
     out["gear_labels"] = np.asarray(g.labels)
     out["gear_shares"] = np.array([a.share for a in g.attractors])
     out["gear_points"] = np.concatenate([a.points for a in g.attractors])
-    out["gear_jobs"] = np.array(jobs[-1])
+    out["gear_jobs"] = pooled()
 if "cellmap" in what:
     shards.clear()
     c = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (16, 12), names=("x", "v")),
@@ -137,6 +170,10 @@ def assert_same(one: dict, two: dict, what: str):
     for key in one:
         if key.endswith(("_jobs", "_shards")):
             assert int(one[key]) == 1 and int(two[key]) == 2, key  # two devices really took a block each
+        elif key.endswith("_threads"):
+            assert one[key] and two[key], key  # the pools ran from the main thread alone
+        elif key.endswith("_plain"):
+            assert int(one[key]) > 0 and int(two[key]) == 0, key  # two devices: the sharded pool alone
         elif key.split("_")[0] in EXACT:
             np.testing.assert_array_equal(two[key], one[key], err_msg=key)
         elif key.endswith("_labels") or key.endswith("_shares") or key.endswith(("_iterations", "_status")):
@@ -150,6 +187,15 @@ def test_two_devices_give_the_one_device_results(tmp_path):
     """The direct analysis (cells) and a basin sweep (values x cells) on two forced host
     devices, one lane pool each: the labels, shares and orbits of one device."""
     what = "direct,sweep"
+    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+
+
+def test_two_devices_run_one_sharded_pool(tmp_path):
+    """The direct analysis on two forced host devices runs both devices' pools in one
+    shard_map program (its state spans both devices; no one-device pool, no other thread
+    runs pool rounds), the shorter block padded: the labels, shares and orbits of one
+    device."""
+    what = "sharded"
     assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
 
 

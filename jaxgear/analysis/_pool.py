@@ -251,7 +251,7 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     unres = live & (label < 0) & (s.age >= o.max_periods)
     decided = esc | (label >= 0) | unres
     value = jnp.where(esc, _SINK, jnp.where(unres, _UNRESOLVED, label)).astype(jnp.int32)
-    target = jnp.where(decided, s.cell, n)  # n: dropped
+    target = jnp.where(decided, s.cell, s.labels.shape[0])  # dropped
     labels = s.labels.at[target].set(value, mode="drop")
     used = s.used.at[target].set(s.age, mode="drop")
 
@@ -322,6 +322,12 @@ def _compact(s: PoolState) -> PoolState:
 def _run(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n: int, L_min: int, rounds):
     """At most ``rounds`` rounds (a traced int: the host sizes its calls by their duration),
     fewer when every state is decided, an attractor table overflows or the pool can shrink."""
+    return _rounds(s, system, params, integrator, o, X, Xrow, n, L_min, rounds)
+
+
+def _rounds(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n, L_min: int, rounds):
+    """:func:`_run`'s loop, traced; ``n`` may be traced too: the queue is ``X[:n]`` (a block
+    padded to the shape of the other devices' blocks, :mod:`jaxgear.analysis._sharded`)."""
     def cond(c):
         s, r = c
         shrink = (s.next_cell >= n) & (s.n_active <= L_min) & (s.Y.shape[1] > L_min)
@@ -390,7 +396,7 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     The pilots of all values run first in one pool, then all the other states in one
     pool, value after value: the compilation, the pilot's draining and the draining tail
     are paid once. With several local devices the other states run in one pool per
-    device, a block of the queue each (:mod:`jaxgear.analysis._sharded`).
+    device, a block of the queue each, in one sharded program (:mod:`jaxgear.analysis._sharded`).
     """
     from ._sharded import drive_blocks
 
@@ -489,25 +495,37 @@ def _drive(system, params, integrator, o: _Options, Xd, Xrow, L: int, att, bar, 
     n, dim = Xd.shape
     _ready(system, integrator, o, n, L, att[1].shape, device)
     s = _init(n, L, dim, o.M, Xd, Xrow, *att)
+    return _steer(s, lambda s, L_min, rounds: _run(s, system, params, integrator, o, Xd, Xrow, n, L_min, rounds),
+                  _resize, np.array([n]), bar, lambda L: _ready(system, integrator, o, n, L, att[1].shape, device))
+
+
+def _steer(s, run, resize, n: np.ndarray, bar, ready):
+    """Call ``run(s, L_min, rounds)`` until every pool is decided, making the host's
+    decisions from the ``info`` rows of the pools (one row, or one per device of a
+    sharded pool whose queues hold ``n`` states each): grow every attractor table when one
+    overflows, move every pool to the next size (:func:`_next_pool`) once the busy lanes
+    of every one fit. ``ready(L)`` waits for the compilation of pools of ``L`` lanes."""
     done = 0
     rounds = 4
     while True:
-        L_min = _next_pool(s.Y.shape[1])
-        _ready(system, integrator, o, n, s.Y.shape[1], att[1].shape, device)
+        L = s.Y.shape[-1]
+        L_min = _next_pool(L)
+        ready(L)
         t = time.perf_counter()
-        s, info = _run(s, system, params, integrator, o, Xd, Xrow, n, L_min, np.int32(rounds))
-        n_done, overflow, n_active, next_cell, n_att = (int(v) for v in np.asarray(info))
+        s, info = run(s, L_min, np.int32(rounds))
+        n_done, overflow, n_active, next_cell, n_att = np.asarray(info).reshape(-1, 5).T
         # calls of about CALL_SECONDS: few host round trips, a progress bar still moving
         rounds = int(np.clip(rounds * CALL_SECONDS / max(time.perf_counter() - t, 1e-3), 1, 4 * rounds))
-        bar.update(n_done - done)
-        done = n_done
-        bar.set_postfix_str(f"{n_active} lanes busy, {n_att} attractors", refresh=False)
-        if n_done >= n:
+        bar.update(int(n_done.sum()) - done)
+        done = int(n_done.sum())
+        bar.set_postfix_str(f"{int(n_active.sum())} lanes busy, {int(n_att.max())} attractors", refresh=False)
+        finished = n_done >= n
+        if finished.all():
             return s
-        if overflow:
-            s = _resize(s, A=2 * s.att_k.shape[1])
-        elif next_cell >= n and n_active <= L_min < s.Y.shape[1]:
-            s = _resize(s, L=L_min)
+        if overflow.any():
+            s = resize(s, A=2 * s.att_k.shape[-1])
+        elif L_min < L and np.all(finished | ((next_cell >= n) & (n_active <= L_min))):
+            s = resize(s, L=L_min)
 
 
 CALL_SECONDS = 0.5
@@ -544,7 +562,12 @@ def _pool_sizes(L: int) -> list[int]:
 
 
 def _key(system, integrator, o: _Options, n: int, L: int, att_shape, device=None) -> tuple:
-    return (system, integrator, o, int(n), int(L), tuple(att_shape), None if device is None else device.id)
+    """``device``: ``None``, a device, or the mesh of a sharded pool (its devices)."""
+    if isinstance(device, jax.sharding.Mesh):
+        where = tuple(d.id for d in device.devices.flat)
+    else:
+        where = None if device is None else device.id
+    return (system, integrator, o, int(n), int(L), tuple(att_shape), where)
 
 
 def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int, max_periods: int,
@@ -568,7 +591,8 @@ def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int
 
 def _prepare_blocks(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
     """:func:`_prepare` for the pools that the queue of ``n`` states runs in after the
-    pilot: one per block of the queue (:func:`jaxgear.analysis._sharded.block_pools`)."""
+    pilot: one block of the queue on one device, or a block per device in one sharded pool
+    (:func:`jaxgear.analysis._sharded.block_pools`)."""
     from ._sharded import block_pools
 
     for n_b, L_b, device in block_pools(n, L):
@@ -588,7 +612,12 @@ def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L:
     ``L``) over ``n`` states, for inputs placed on ``device`` as
     :func:`jaxgear._devices.put` places them (``None``: uncommitted), as the pool will
     call them (a call whose inputs are placed otherwise is a different computation to
-    JAX, traced and compiled again)."""
+    JAX, traced and compiled again). On a mesh (``device``), those of the sharded pool
+    whose blocks hold ``n`` states each (:func:`jaxgear.analysis._sharded.compile_blocks`)."""
+    if isinstance(device, jax.sharding.Mesh):
+        from ._sharded import compile_blocks
+
+        return compile_blocks(system, params, integrator, o, n, size, L, dim, V, A, device)
     f64, i32 = jnp.float64, jnp.int32
     committed = device is not None and jax.device_count() > 1  # as jaxgear._devices.put places them
     where = {"sharding": jax.sharding.SingleDeviceSharding(device)} if committed else {}
