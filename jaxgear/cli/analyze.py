@@ -209,7 +209,22 @@ def _import_output_libraries() -> None:
 
 
 def _import_plotting() -> None:
+    """What the figure workers do before the result comes (the computing process has a
+    core to spare while it starts): import the plotting module and draw a throwaway
+    figure with a 3D axis into memory, so that what matplotlib loads on first use (fonts,
+    the 3D toolkit, the PNG writer) is loaded then, not while the figures are drawn
+    (about 0.13 s of the drawing)."""
+    import io
+
+    import matplotlib.pyplot as plt
+
     from .. import plotting  # noqa: F401
+
+    fig = plt.figure(figsize=(2, 2))
+    fig.add_subplot(121).plot([0, 1], [0, 1])
+    fig.add_subplot(122, projection="3d").scatter([0], [0], [0])
+    fig.savefig(io.BytesIO(), format="png", dpi=20)
+    plt.close(fig)
 
 
 def _figures(result, out, part: int = 0, parts: int = 1) -> list[str]:
