@@ -146,11 +146,10 @@ def _run_checked(args, painter) -> int:
         if process_index() != 0:  # the same computations (they exchange blocks), nothing written or printed
             import contextlib
             import io
-            import tempfile
 
             args.no_figures, args.quiet = True, True
-            with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
-                _analyze(args, params, grid, method, Path(tmp), None)
+            with contextlib.redirect_stdout(io.StringIO()):
+                _analyze(args, params, grid, method, None, None)
             return 0
     print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, preset {args.preset}, Omega={float(params.Omega):.4g}")
     with OutputFolder(args.out, OWNED) as out:
@@ -159,9 +158,10 @@ def _run_checked(args, painter) -> int:
     return 0
 
 
-def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
-    """The analysis, its report and its files (written into the staging folder ``out``;
-    the figures by ``painter``, a :class:`~jaxgear.cli._painter.Painter`, or none)."""
+def _analyze(args, params, grid, method, out: Path | None, painter) -> list[str]:
+    """The analysis, its report and its files (written into the staging folder ``out``,
+    none when ``out`` is ``None``: a process of a multi-process run other than 0; the
+    figures by ``painter``, a :class:`~jaxgear.cli._painter.Painter`, or none)."""
     import numpy as np
 
     from .._model import REDUCED
@@ -171,7 +171,8 @@ def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
     # xarray (for saving) is imported on the side thread after the compilations
     # (prepare_analysis), once the device is busy: imported at once, its quarter second
     # of Python would delay the first computations
-    compile_ahead(_OUTPUT_LIBRARIES, _import_output_libraries)
+    if out is not None:
+        compile_ahead(_OUTPUT_LIBRARIES, _import_output_libraries)
     result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet, uncertainty=0)
     if painter is not None:  # the figures are drawn while the label uncertainty is measured and the result saved
         painter.submit(result, out)
@@ -181,15 +182,18 @@ def _analyze(args, params, grid, method, out: Path, painter) -> list[str]:
     result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
     print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
     print(result.table())
-    wait_for(_OUTPUT_LIBRARIES)
-    result.save(out / "result.nc")
-    result.write_summary(out / "summary.json")
-    written = ["result.nc", "summary.json"]
+    written = []
+    if out is not None:
+        wait_for(_OUTPUT_LIBRARIES)
+        result.save(out / "result.nc")
+        result.write_summary(out / "summary.json")
+        written += ["result.nc", "summary.json"]
     figure_names = painter.names() if painter is not None else []
     if args.compare:
         rep = compare_with_direct(result, REDUCED, params, n_samples=args.compare, progress=not args.quiet)
-        write_json(rep, out / "compare.json")
-        written.append("compare.json")
+        if out is not None:
+            write_json(rep, out / "compare.json")
+            written.append("compare.json")
         print(f"\nagreement with the direct method on {rep['n_samples']} random cells: "
               f"{100 * rep['agreement']:.1f} %")
         for aid, d in rep["per_attractor"].items():
