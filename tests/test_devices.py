@@ -480,3 +480,30 @@ def test_every_process_writes_its_compilation_cache_entries(tmp_path, patch):
     assert r.returncode == 0, r.stderr[-3000:]
     entries = int(r.stdout.split()[-1])
     assert entries == (1 if patch else 0)
+
+
+def test_every_pool_was_compiled_ahead(monkeypatch):
+    """Each pool the direct analysis runs (the pilot, the queue's block after it, every
+    size it shrinks to, the label-uncertainty pools) waits on a compilation started
+    ahead under the same key: a pool whose shape or placement the preparation missed
+    would be traced and compiled on the main thread, in the run's serial path."""
+    import jaxgear as jg
+    from jaxgear import _ahead
+    from jaxgear.analysis import _pool
+
+    asked, missed = [], []
+    real = _pool.wait_for
+
+    def spy(key):
+        asked.append(key)
+        if key not in _ahead._STARTED:
+            missed.append(key)
+        real(key)
+
+    monkeypatch.setattr(_pool, "wait_for", spy)
+    p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.25)
+    method = jg.Direct(integrator=jg.RK4(48), max_period=4, chunk_size=4000)
+    grid = jg.CellGrid.box([(-3.1, 3.1), (-3.1, 3.1)], (70, 40), names=("x", "v"))  # 2,800 cells: a pilot, a block
+    jg.analyze_global(jg.DUFFING, p, grid, method, progress=False, uncertainty=256)
+    assert len({k[3:5] for k in asked}) >= 3  # pools of several shapes ran
+    assert not missed, missed
