@@ -50,7 +50,7 @@ from jax.sharding import PartitionSpec as P
 
 from ._cache import write_from_every_process
 
-__all__ = ["local_devices", "put", "split_rows", "shard_rows", "batch_mesh",
+__all__ = ["local_devices", "put", "placement", "split_rows", "shard_rows", "batch_mesh",
            "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
            "values_over_processes", "allgather", "rows_over_processes"]
 
@@ -67,14 +67,22 @@ def put(tree, device):
     kept as they are). With one device in all, the leaves are placed there uncommitted:
     the same device, and calls then share their compiled computations with the calls
     of the rest of the library (a computation compiles once per input placement)."""
-    single = jax.device_count() == 1
+    sharding = placement(device)
 
     def one(a):
         if not isinstance(a, (jax.Array, np.ndarray)):
             return a
-        return jax.device_put(a) if single else jax.device_put(a, device)
+        return jax.device_put(a) if sharding is None else jax.device_put(a, sharding)
 
     return jax.tree.map(one, tree)
+
+
+def placement(device):
+    """The sharding :func:`put` commits arrays to on ``device``: ``None`` (uncommitted)
+    when there is no device or one device in all."""
+    if device is None or jax.device_count() == 1:
+        return None
+    return jax.sharding.SingleDeviceSharding(device)
 
 
 def split_rows(n: int, parts: int) -> list[tuple[int, int]]:

@@ -46,6 +46,7 @@ import numpy as np
 
 from .._ahead import compile_ahead, wait_for
 from .._batching import progress_bar
+from .._devices import placement
 
 __all__ = ["PoolState", "run_pool", "run_pools", "prepare_pools", "NOT_DONE"]
 
@@ -619,14 +620,14 @@ def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L:
 
         return compile_blocks(system, params, integrator, o, n, size, L, dim, V, A, device)
     f64, i32 = jnp.float64, jnp.int32
-    committed = device is not None and jax.device_count() > 1  # as jaxgear._devices.put places them
-    where = {"sharding": jax.sharding.SingleDeviceSharding(device)} if committed else {}
+    sharding = placement(device)  # as jaxgear._devices.put places the pool's inputs
+    where = {} if sharding is None else {"sharding": sharding}
     X = jax.ShapeDtypeStruct((n, dim), f64, **where)
     Xrow = jax.ShapeDtypeStruct((n,), i32, **where)
     att = (jax.ShapeDtypeStruct((V, A, o.M, dim), f64, **where), jax.ShapeDtypeStruct((V, A), i32, **where),
            jax.ShapeDtypeStruct((V,), i32, **where))
-    if committed:
-        params = jax.device_put(params, device)
+    if sharding is not None:
+        params = jax.device_put(params, sharding)
     if size == L:
         _init.lower(n, L, dim, o.M, X, Xrow, *att).compile()
     s = jax.eval_shape(functools.partial(_init, n, size, dim, o.M), X, Xrow, *att)
