@@ -316,13 +316,18 @@ p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
 r = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v")),
                       jg.Direct(integrator=jg.RK4(64), max_period=4), progress=False)
 r.save(f"{out}_{pid}.nc")  # every process holds the whole result
+# 20 cells: one block of at least MIN_BLOCK_CELLS for the two processes, process 1 has none
+t = jg.analyze_global(jg.DUFFING, p, jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 4), names=("x", "v")),
+                      jg.Direct(integrator=jg.RK4(64), max_period=4), progress=False, uncertainty=0)
+t.save(f"{out}_{pid}_tiny.nc")
 '''
 
 
 @pytest.mark.slow
 def test_two_processes_analyze_the_cells_of_one(tmp_path):
     """The direct analysis as two JAX processes (the cells split over both, the blocks
-    exchanged): each process returns the result of one process."""
+    exchanged): each process returns the result of one process, also when the queue is
+    too short for a block per process."""
     import jaxgear as jg
 
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
@@ -333,13 +338,14 @@ def test_two_processes_analyze_the_cells_of_one(tmp_path):
                                   cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
                  for i in range(n)]
         _finish(procs)
-    one = jg.load(tmp_path / "r1_0.nc")
-    for i in (0, 1):
-        two = jg.load(tmp_path / f"r2_{i}.nc")
-        np.testing.assert_array_equal(two.labels, one.labels)
-        assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
-        for a, b in zip(two.attractors, one.attractors):
-            np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-10)
+    for tiny in ("", "_tiny"):  # the tiny queue: a process without a block
+        one = jg.load(tmp_path / f"r1_0{tiny}.nc")
+        for i in (0, 1):
+            two = jg.load(tmp_path / f"r2_{i}{tiny}.nc")
+            np.testing.assert_array_equal(two.labels, one.labels)
+            assert [a.share for a in two.attractors] == [a.share for a in one.attractors]
+            for a, b in zip(two.attractors, one.attractors):
+                np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-10)
 
 
 @pytest.mark.slow

@@ -593,11 +593,13 @@ def prepare_pools(system, params_list, integrator, n: int, *, chunk: int, R: int
 def _prepare_blocks(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int) -> None:
     """:func:`_prepare` for the pools that the queue of ``n`` states runs in after the
     pilot: one block of the queue on one device, or a block per device in one sharded pool
-    (:func:`jaxgear.analysis._sharded.block_pools`)."""
-    from ._sharded import block_pools
+    (:func:`jaxgear.analysis._sharded.block_pool`)."""
+    from ._sharded import block_pool
 
-    for n_b, L_b, device in block_pools(n, L):
-        _prepare(system, params, integrator, o, n_b, L_b, dim, V, A, device)
+    pool = block_pool(n, L)
+    if pool is not None:
+        n_b, L_b, where = pool
+        _prepare(system, params, integrator, o, n_b, L_b, dim, V, A, where)
 
 
 def _prepare(system, params, integrator, o: _Options, n: int, L: int, dim: int, V: int, A: int,

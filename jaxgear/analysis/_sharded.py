@@ -39,14 +39,13 @@ from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devic
 from .._matching import same_attractor
 from ._pool import _drive, _init, _next_pool, _ready, _resize, _rounds, _steer
 
-__all__ = ["drive_blocks", "block_pools", "compile_blocks", "MIN_BLOCK_CELLS"]
+__all__ = ["drive_blocks", "block_pool", "compile_blocks", "MIN_BLOCK_CELLS"]
 
 MIN_BLOCK_CELLS = 16
 """Fewest cells a device's block holds (smaller queues run on the first device alone)."""
 
 
-def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray, L: int, att, bar,
-                 devices=None):
+def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray, L: int, att, bar):
     """Label the queue ``X (n, dim)`` (parameter rows ``rows (n,)``) in one pool per device,
     each with at most ``L`` lanes, starting from the attractor tables ``att = (points
     (V, A, M, dim), periods (V, A), counts (V,))``. Returns ``(labels (n,), periods used
@@ -54,47 +53,51 @@ def drive_blocks(system, params, integrator, o, X: np.ndarray, rows: np.ndarray,
 
     With several processes (:func:`jaxgear._devices.cell_processes`) the queue is cut into
     blocks for every device of every process (process ``p`` takes the blocks ``i`` with
-    ``i % P == p``, on its own devices), and the blocks' results are exchanged, so every
-    process returns the whole queue's."""
-    devices = local_devices() if devices is None else list(devices)
+    ``i % P == p``, on its own devices; a short queue leaves some processes none), and
+    the blocks' results are exchanged, so every process returns the whole queue's."""
     att = tuple(np.asarray(a) for a in jax.device_get(att))
     me, procs = cell_processes()
-    D = len(devices)
-    blocks, mine = _blocks(len(X), D)
+    blocks, mine, where = _my_blocks(len(X))
     spans = [blocks[i] for i in mine]
-    if len(mine) == 1:  # one device: the plain pool
-        (a, b), dev = spans[0], devices[0]
+    if not mine:
+        local = []
+    elif len(mine) == 1:  # one device: the plain pool
+        (a, b), dev = spans[0], where
         s = _drive(system, put(params, dev), integrator, o, put(X[a:b], dev), put(rows[a:b], dev),
                    max(1, min(int(L), b - a)), put(att, dev), bar, device=dev)
         local = [tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att)))]
     else:
-        local = _drive_sharded(system, params, integrator, o, X, rows, spans, L, att, bar,
-                               batch_mesh(tuple(devices[:len(mine)])))
-    results = dict(zip(mine, local)) if procs == 1 else _exchange(blocks, dict(zip(mine, local)), me, procs, D)
+        local = _drive_sharded(system, params, integrator, o, X, rows, spans, L, att, bar, where)
+    results = dict(zip(mine, local))
+    if procs > 1:
+        results = _exchange(blocks, results, me, procs, len(local_devices()))
     labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], o.merge_tol)
     used = np.concatenate([results[i][1] for i in range(len(blocks))])
     return labels, used, tables
 
 
-def _blocks(n: int, D: int) -> tuple[list[tuple[int, int]], list[int]]:
-    """The blocks ``(start, stop)`` a queue of ``n`` cells is cut into for ``D`` local
-    devices in every process, and the indices of this process's blocks."""
+def _my_blocks(n: int) -> tuple[list[tuple[int, int]], list[int], object]:
+    """The blocks ``(start, stop)`` a queue of ``n`` cells is cut into for the local devices
+    of every process, the indices of this process's blocks, and where they run: its first
+    device (one block), the mesh of its first devices (one block each), or ``None``."""
+    devices = local_devices()
     me, procs = cell_processes()
-    blocks = split_rows(n, max(1, min(procs * D, n // MIN_BLOCK_CELLS)))
-    return blocks, [i for i in range(len(blocks)) if i % procs == me]
+    blocks = split_rows(n, max(1, min(procs * len(devices), n // MIN_BLOCK_CELLS)))
+    mine = [i for i in range(len(blocks)) if i % procs == me]
+    where = None if not mine else devices[0] if len(mine) == 1 else batch_mesh(tuple(devices[:len(mine)]))
+    return blocks, mine, where
 
 
-def block_pools(n: int, L: int, devices=None) -> list[tuple[int, int, object]]:
+def block_pool(n: int, L: int) -> tuple[int, int, object] | None:
     """The ``(cells, lanes, device or mesh)`` of the pool :func:`drive_blocks` runs in this
     process for a queue of ``n`` cells and pools of at most ``L`` lanes (on several
-    devices, the sharded pool's block shape): what to compile ahead."""
-    devices = local_devices() if devices is None else list(devices)
-    blocks, mine = _blocks(n, len(devices))
+    devices, the sharded pool's block shape), or ``None`` (no block here): what to
+    compile ahead."""
+    blocks, mine, where = _my_blocks(n)
     if not mine:
-        return []
+        return None
     n_b = max(blocks[i][1] - blocks[i][0] for i in mine)
-    where = devices[0] if len(mine) == 1 else batch_mesh(tuple(devices[:len(mine)]))
-    return [(n_b, max(1, min(int(L), n_b)), where)]
+    return n_b, max(1, min(int(L), n_b)), where
 
 
 # ------------------------------------------------------------------ the sharded pool
