@@ -4,11 +4,13 @@ One root folder, ``$JAXGEAR_CACHE_DIR`` (default ``~/.cache/jaxgear``), holds
 
 - ``xla/``: JAX's persistent compilation cache, enabled by the command line (a repeated
   command loads its compiled computations instead of compiling them again);
+- ``kept/``: the lowered computations a command keeps for the next
+  (:mod:`jaxgear._kept`: a warm command loads its lane pools instead of tracing them);
 - ``native/``: the compiled CPU kernel of the gear models
   (:mod:`jaxgear.integrate._native`), built on first use.
 
-``JAXGEAR_CACHE_DIR=off`` turns the compilation cache off; the kernel is then built in
-the default folder.
+``JAXGEAR_CACHE_DIR=off`` turns the compilation cache and the kept computations off; the
+kernel is then built in the default folder.
 """
 
 from __future__ import annotations

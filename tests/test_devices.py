@@ -49,7 +49,7 @@ def run_spy(*a, **k):
     return real_run(*a, **k)
 
 
-blocks_spy.lower, run_spy.lower = real_blocks.lower, real_run.lower  # compiling ahead
+blocks_spy.lower, run_spy.prepare = real_blocks.lower, real_run.prepare  # compiling ahead
 _sharded._run_blocks, _pool._run = blocks_spy, run_spy
 
 

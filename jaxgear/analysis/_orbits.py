@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import functools
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._ahead import compile_ahead, wait_for
+from .._kept import kept_jit
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
@@ -104,7 +103,7 @@ def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_perio
     return out
 
 
-@functools.partial(jax.jit, static_argnames=("system", "stepper", "index", "direction"))
+@kept_jit(static_argnames=("system", "stepper", "index", "direction"))
 def _crossings(system, params, X, stepper, index: int, direction: int):
     """One forcing period from each state ``X (n, dim)`` at phase 0 with the fixed-step
     ``stepper``, and at every step the crossing of ``x_index = 0`` inside it: whether the
@@ -158,8 +157,8 @@ def prepare_section_points(system, params, integrator, index, direction) -> None
     stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
     X = jax.ShapeDtypeStruct((SECTION_ROWS, system.dim), jnp.float64)
     compile_ahead(_section_key(system, stepper, SECTION_ROWS, index, direction),
-                  lambda: _crossings.lower(system, params, X, stepper=stepper, index=int(index),
-                                           direction=direction).compile())
+                  lambda: _crossings.prepare(system, params, X, stepper=stepper, index=int(index),
+                                             direction=direction))
 
 
 def section_points_of(system, params, cycles, integrator, index, direction) -> list[np.ndarray]:

@@ -47,6 +47,7 @@ import numpy as np
 from .._ahead import compile_ahead, wait_for
 from .._batching import progress_bar
 from .._devices import placement
+from .._kept import kept_jit
 
 __all__ = ["PoolState", "run_pool", "run_pools", "prepare_pools", "NOT_DONE"]
 
@@ -89,7 +90,7 @@ class _Options(NamedTuple):
     capture: float | None  # None: "auto"
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2, 3))
+@kept_jit(static_argnames=("n", "L", "dim", "M"))
 def _init(n: int, L: int, dim: int, M: int, X, Xrow, att_pts, att_k, n_att) -> PoolState:
     H = 2 * M + 1
     take = min(L, n)
@@ -319,7 +320,7 @@ def _compact(s: PoolState) -> PoolState:
     return s._replace(cell=cell, n_active=jnp.minimum(s.n_active, c).astype(jnp.int32))
 
 
-@functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "n", "L_min"), donate_argnums=0)
+@kept_jit(static_argnames=("system", "integrator", "o", "n", "L_min"), donate_argnums=(0,))
 def _run(s: PoolState, system, params, integrator, o: _Options, X, Xrow, n: int, L_min: int, rounds):
     """At most ``rounds`` rounds (a traced int: the host sizes its calls by their duration),
     fewer when every state is decided, an attractor table overflows or the pool can shrink."""
@@ -631,10 +632,10 @@ def _compile_pool(system, params, integrator, o: _Options, n: int, size: int, L:
     if sharding is not None:
         params = jax.device_put(params, sharding)
     if size == L:
-        _init.lower(n, L, dim, o.M, X, Xrow, *att).compile()
+        _init.prepare(n, L, dim, o.M, X, Xrow, *att)
     s = jax.eval_shape(functools.partial(_init, n, size, dim, o.M), X, Xrow, *att)
     s = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype, **where), s)
-    _run.lower(s, system, params, integrator, o, X, Xrow, n, _next_pool(size), np.int32(1)).compile()
+    _run.prepare(s, system, params, integrator, o, X, Xrow, n, _next_pool(size), np.int32(1))
 
 
 def _ready(system, integrator, o: _Options, n: int, L: int, att_shape, device=None) -> None:

@@ -109,6 +109,9 @@ def console() -> None:
     exception leaves the normal way, with its traceback.
     """
     gc.freeze()  # the objects of the modules imported so far live to the end: collections skip them
+    from .. import _kept
+
+    _kept.enable()  # this process runs one command: its compiled pools are kept for the next
     code = main()
     from .._ahead import wait_all
 
