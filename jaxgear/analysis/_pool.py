@@ -177,16 +177,15 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     live = busy & ~esc
     label = jnp.full(L, -1, jnp.int32)
     i = jnp.arange(M, dtype=jnp.int32)
-    radius = _lanes(s.radius, s.row)  # (L,) or (1,)
-
-    def against(a, label):
-        """Lanes captured by (or recurring onto) the attractor in slot ``a`` of their row's
-        table: a P-k cycle ``P (M, dim)`` (per lane ``P (M, dim, L)``, ``k (L,)``)."""
-        P = _lanes(s.att_pts[:, a], s.row)  # (M, dim, L) or (M, dim, 1)
-        k = _lanes(s.att_k[:, a], s.row)
-        valid = i[:, None] < k[None]  # (M, L) or (M, 1)
-        dn = jnp.sqrt(_sqdist(Y[None], P))  # (M, L)
-        dn = jnp.where(valid, dn, jnp.inf)
+    def against(v, a, label):
+        """Lanes captured by (or recurring onto) the attractor in slot ``a`` of row ``v``'s
+        table, a P-k cycle ``P (M, dim)``: every quantity of the attractor is a scalar or
+        broadcast over the lanes (no per-lane gather of tables or of the ring)."""
+        P = s.att_pts[v, a]  # (M, dim)
+        k = s.att_k[v, a]
+        valid = i < k  # (M,)
+        dn = jnp.sqrt(_sqdist(Y[None], P[:, :, None]))  # (M, L)
+        dn = jnp.where(valid[:, None], dn, jnp.inf)
         m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
         dmin = jnp.min(dn, axis=0)
         kk = jnp.maximum(k, 1)
@@ -196,30 +195,32 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
             it) to the cycle point it should be near, ``P[m - j]``: one slice of the ring
             per step, so no ``(M, dim, L)`` copy of the ring or of the cycle is made."""
             d_now, d_bef = dists
-            b = jnp.mod(m - j, kk)  # (L,)
-            if V == 1:
-                q = jnp.take(P[:, :, 0], b, axis=0).T  # (dim, L)
-                w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k[0], axis=0, keepdims=False)
-            else:
-                q = jnp.take_along_axis(P, jnp.broadcast_to(b[None, None], (1, dim, L)), axis=0)[0]
-                slot = g % H + H - j - k  # (L,): the point j + k periods back
-                w_bef = jnp.take_along_axis(s.hist, jnp.broadcast_to(slot[None, None], (1, dim, L)), axis=0)[0]
+            q = jnp.take(P, jnp.mod(m - j, kk), axis=0).T  # (dim, L)
             w_now = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j, axis=0, keepdims=False)
-            inside = j < k
-            d_now = jnp.where(inside, jnp.maximum(d_now, _sqdist(w_now, q)), d_now)
-            d_bef = jnp.where(inside, jnp.maximum(d_bef, _sqdist(w_bef, q)), d_bef)
-            return d_now, d_bef
+            w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k, axis=0, keepdims=False)
+            return jnp.maximum(d_now, _sqdist(w_now, q)), jnp.maximum(d_bef, _sqdist(w_bef, q))
 
         zero = jnp.zeros(L)
-        d_now, d_bef = jax.lax.fori_loop(0, jnp.max(k), point, (zero, zero))
+        d_now, d_bef = jax.lax.fori_loop(0, k, point, (zero, zero))
         d_now = jnp.where(s.age >= k, jnp.sqrt(d_now), jnp.inf)
         d_bef = jnp.where(s.age >= 2 * k, jnp.sqrt(d_bef), jnp.inf)
-        cap = live & (k > 0) & (d_now <= radius) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
-        scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0), axis=(0, 1))
+        cap = live & (k > 0) & (d_now <= s.radius[v]) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
+        scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0))
         same = rec & (k > 0) & (per == k) & (dmin <= o.merge_tol * scale)
-        return jnp.where((label < 0) & (cap | same), a, label).astype(jnp.int32)
+        hit = cap | same
+        if V > 1:
+            hit = hit & (s.row == v)  # the lanes of row v; a lane's label is a slot of its row's table
+        return jnp.where((label < 0) & hit, a, label).astype(jnp.int32)
 
-    label = jax.lax.fori_loop(0, jnp.max(s.n_att), against, label)
+    def against_row(v, label):
+        return jax.lax.fori_loop(0, s.n_att[v], lambda a, label: against(v, a, label), label)
+
+    if V == 1:
+        label = against_row(0, label)
+    else:  # the queue runs value after value: the busy lanes hold a short range of rows
+        lo = jnp.min(jnp.where(busy, s.row, V))
+        hi = jnp.max(jnp.where(busy, s.row, -1))
+        label = jax.lax.fori_loop(lo, hi + 1, against_row, label)
 
     # a recurring lane on no known attractor of its row registers a new one (one per row and round)
     new = rec & (label < 0)
