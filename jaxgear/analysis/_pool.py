@@ -224,31 +224,42 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
 
     # a recurring lane on no known attractor of its row registers a new one (one per row and round)
     new = rec & (label < 0)
-    vs = jnp.arange(V, dtype=jnp.int32)
-    new_v = new[None] & (s.row[None] == vs[:, None])  # (V, L)
-    has_new = jnp.any(new_v, axis=1)
-    room = s.n_att < A
-    l0 = jnp.argmax(new_v, axis=1)  # (V,)
-    k0 = per[l0]
-    last = jnp.moveaxis(_back(s.hist[:, :, l0], g, 0, M), 2, 0)  # (V, M, dim), newest first
-    pts0 = jax.vmap(lambda p, k: p[jnp.clip(k - 1 - i, 0, M - 1)])(last, k0)  # oldest of the last k0 first
-    valid0 = i[None] < k0[:, None]  # (V, M)
-    pts0 = jnp.where(valid0[..., None], pts0, jnp.nan)
-    add = has_new & room
-    slot = jnp.minimum(s.n_att, A - 1)
-    att_pts = jnp.where(add[:, None, None, None], s.att_pts.at[vs, slot].set(pts0), s.att_pts)
-    att_k = jnp.where(add[:, None], s.att_k.at[vs, slot].set(k0), s.att_k)
-    n_att = s.n_att + add.astype(jnp.int32)
-    # the other recurring lanes of the row whose newest point lies on its new attractor join it
-    P0 = att_pts[vs, slot]  # (V, M, dim)
-    scale0 = 1.0 + jnp.max(jnp.where(valid0[..., None], jnp.abs(P0), 0.0), axis=(1, 2))
-    P0l, k0l = _lanes(P0, s.row), _lanes(k0, s.row)
-    d0 = jnp.where(i[:, None] < k0l[None], _sqdist(Y[None], P0l), jnp.inf)  # (M, L)
-    joins = (_lanes(add, s.row) & new & (per == k0l)
-             & (jnp.min(d0, axis=0) <= (o.merge_tol * _lanes(scale0, s.row)) ** 2))
-    label = jnp.where(joins, _lanes(slot, s.row), label).astype(jnp.int32)
-    radius = jax.vmap(lambda p, k: _capture_radius(p, k, o.capture))(att_pts, att_k)
-    overflow = s.overflow | jnp.any(has_new & ~room)
+    # the capture radius follows its row's table: computed for every row in the pool's first
+    # round (it starts at 0), then only for a row whose table grew
+    radius = jax.lax.cond(s.rounds == 0, lambda: jax.vmap(lambda p, k: _capture_radius(p, k, o.capture))(
+        s.att_pts, s.att_k), lambda: s.radius)
+
+    def register(v, c):
+        att_pts, att_k, n_att, radius, label, overflow = c
+        new_v = new if V == 1 else new & (s.row == v)
+        has_new = jnp.any(new_v)
+        room = n_att[v] < A
+        l0 = jnp.argmax(new_v)
+        k0 = per[l0]
+        last = _back(s.hist[:, :, l0], g, 0, M)  # (M, dim), newest first
+        valid0 = i < k0
+        pts0 = jnp.where(valid0[:, None], last[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)  # oldest of the last k0 first
+
+        def add(c):
+            att_pts, att_k, n_att, radius, label = c
+            slot = n_att[v]
+            att_pts, att_k = att_pts.at[v, slot].set(pts0), att_k.at[v, slot].set(k0)
+            # the other recurring lanes of the row whose newest point lies on the new attractor join it
+            scale0 = 1.0 + jnp.max(jnp.where(valid0[:, None], jnp.abs(pts0), 0.0))
+            d0 = jnp.where(valid0[:, None], _sqdist(Y[None], pts0[:, :, None]), jnp.inf)  # (M, L)
+            joins = new_v & (per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
+            return (att_pts, att_k, n_att.at[v].add(1), radius.at[v].set(_capture_radius(att_pts[v], att_k[v], o.capture)),
+                    jnp.where(joins, slot, label).astype(jnp.int32))
+
+        c = jax.lax.cond(has_new & room, add, lambda c: c, (att_pts, att_k, n_att, radius, label))
+        return (*c, overflow | (has_new & ~room))
+
+    c = (s.att_pts, s.att_k, s.n_att, radius, label, s.overflow)
+    if V == 1:
+        c = register(0, c)
+    else:  # the rows of the busy lanes
+        c = jax.lax.fori_loop(lo, hi + 1, register, c)
+    att_pts, att_k, n_att, radius, label, overflow = c
 
     unres = live & (label < 0) & (s.age >= o.max_periods)
     decided = esc | (label >= 0) | unres
