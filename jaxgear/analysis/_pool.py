@@ -31,7 +31,10 @@ cell carries its value's row, a lane integrates with its row's parameters
 (``integrator.advance_rows``; the compiled kernel reads per-lane rows) and decides
 against its row's own attractor table (one table, capture radius and new attractor per
 row and round), so every value is labelled as it would be alone, while the pool stays
-full from one value to the next.
+full from one value to the next. The queue runs value after value, so the busy lanes hold
+a short range of rows at a time: a round's decisions loop over the (row, slot) pairs of
+that range only, each with the slot's cycle, period and radius as scalars broadcast over
+the lanes (masked to the row's lanes), as a one-value pool does for its one row.
 """
 
 from __future__ import annotations
@@ -154,13 +157,6 @@ def _capture_radius(att_pts, att_k, capture):
     return jnp.minimum(0.01 * scale, 0.25 * gap)
 
 
-def _lanes(tbl, row):
-    """Each lane's entry of a per-row table ``tbl (V, ...)``, lanes last: ``(..., L)``
-    (``(..., 1)``, broadcast over the lanes, when there is one row)."""
-    x = tbl[:1] if tbl.shape[0] == 1 else tbl[row]
-    return jnp.moveaxis(x, 0, -1)
-
-
 def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     H2, dim, L = s.hist.shape
     H = H2 // 2
@@ -177,6 +173,7 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     live = busy & ~esc
     label = jnp.full(L, -1, jnp.int32)
     i = jnp.arange(M, dtype=jnp.int32)
+
     def against(v, a, label):
         """Lanes captured by (or recurring onto) the attractor in slot ``a`` of row ``v``'s
         table, a P-k cycle ``P (M, dim)``: every quantity of the attractor is a scalar or
@@ -248,8 +245,8 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
             scale0 = 1.0 + jnp.max(jnp.where(valid0[:, None], jnp.abs(pts0), 0.0))
             d0 = jnp.where(valid0[:, None], _sqdist(Y[None], pts0[:, :, None]), jnp.inf)  # (M, L)
             joins = new_v & (per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
-            return (att_pts, att_k, n_att.at[v].add(1), radius.at[v].set(_capture_radius(att_pts[v], att_k[v], o.capture)),
-                    jnp.where(joins, slot, label).astype(jnp.int32))
+            radius = radius.at[v].set(_capture_radius(att_pts[v], att_k[v], o.capture))
+            return att_pts, att_k, n_att.at[v].add(1), radius, jnp.where(joins, slot, label).astype(jnp.int32)
 
         c = jax.lax.cond(has_new & room, add, lambda c: c, (att_pts, att_k, n_att, radius, label))
         return (*c, overflow | (has_new & ~room))
