@@ -354,6 +354,35 @@ def test_basin_sweep_in_one_pool_pure_jax():
     _assert_sweep_is_separate_analyses(s, jg.DUFFING, p, "omega", values, grid, method)
 
 
+
+def test_one_pool_rows_decide_against_their_own_tables():
+    """Lanes of several values share the pool's rounds (a pool smaller than a value's
+    cells) while the values' tables differ: the same Duffing attractors seeded in two
+    orders, and a third value (one attractor fewer) seeded with none. Each value gets the
+    labels and attractor periods of its own pool, so the second value's labels are the first's
+    with the two slots swapped."""
+    from jaxgear.analysis._pool import run_pool, run_pools
+
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
+    X = np.asarray(grid.centres(), np.float64)
+    m = jg.Direct(integrator=jg.RK4(64), max_period=4)
+    kw = dict(chunk=64, R=m.round_periods, max_periods=m.max_periods, max_period=m.max_period, tol=m.period_tol,
+              capture=m.capture_radius, bound=m.escape_bound, merge_tol=m.merge_tol, progress=False, pilot=0)
+    p13, p10 = jg.DuffingParams(**DUFF, omega=1.3), jg.DuffingParams(**DUFF, omega=1.0)
+    _, atts, _ = run_pool(jg.DUFFING, p13, X, m.integrator, **kw)
+    assert len(atts) == 2
+    rows = [(p13, atts), (p13, atts[::-1]), (p10, ())]
+    alone = [run_pool(jg.DUFFING, p, X, m.integrator, attractors=a, **kw) for p, a in rows]
+    pooled = run_pools(jg.DUFFING, [p for p, _ in rows], [X] * 3, m.integrator, attractors=[a for _, a in rows], **kw)
+    assert len(alone[2][1]) != 2  # the third value's table differs in length
+    for (lab, att, _), (lab1, att1, _) in zip(pooled, alone):
+        np.testing.assert_array_equal(lab, lab1)
+        assert [k for _, k in att] == [k for _, k in att1]  # the points: of the lane that found it first
+    swap = np.array([1, 0])
+    np.testing.assert_array_equal(pooled[1][0], np.where(pooled[0][0] >= 0, swap[np.clip(pooled[0][0], 0, 1)],
+                                                         pooled[0][0]))
+
+
 # ----------------------------------------------------------------- parameter map
 def test_parameter_map_period_follows_the_mathieu_tongue():
     """Period reached from a small start on an (Omega, eps) grid: P-2 inside the tongue,

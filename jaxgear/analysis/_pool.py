@@ -31,7 +31,10 @@ cell carries its value's row, a lane integrates with its row's parameters
 (``integrator.advance_rows``; the compiled kernel reads per-lane rows) and decides
 against its row's own attractor table (one table, capture radius and new attractor per
 row and round), so every value is labelled as it would be alone, while the pool stays
-full from one value to the next.
+full from one value to the next. The queue runs value after value, so the busy lanes hold
+a short range of rows at a time: a round's decisions loop over the (row, slot) pairs of
+that range only, each with the slot's cycle, period and radius as scalars broadcast over
+the lanes (masked to the row's lanes), as a one-value pool does for its one row.
 """
 
 from __future__ import annotations
@@ -155,13 +158,6 @@ def _capture_radius(att_pts, att_k, capture):
     return jnp.minimum(0.01 * scale, 0.25 * gap)
 
 
-def _lanes(tbl, row):
-    """Each lane's entry of a per-row table ``tbl (V, ...)``, lanes last: ``(..., L)``
-    (``(..., 1)``, broadcast over the lanes, when there is one row)."""
-    x = tbl[:1] if tbl.shape[0] == 1 else tbl[row]
-    return jnp.moveaxis(x, 0, -1)
-
-
 def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     H2, dim, L = s.hist.shape
     H = H2 // 2
@@ -178,16 +174,16 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     live = busy & ~esc
     label = jnp.full(L, -1, jnp.int32)
     i = jnp.arange(M, dtype=jnp.int32)
-    radius = _lanes(s.radius, s.row)  # (L,) or (1,)
 
-    def against(a, label):
-        """Lanes captured by (or recurring onto) the attractor in slot ``a`` of their row's
-        table: a P-k cycle ``P (M, dim)`` (per lane ``P (M, dim, L)``, ``k (L,)``)."""
-        P = _lanes(s.att_pts[:, a], s.row)  # (M, dim, L) or (M, dim, 1)
-        k = _lanes(s.att_k[:, a], s.row)
-        valid = i[:, None] < k[None]  # (M, L) or (M, 1)
-        dn = jnp.sqrt(_sqdist(Y[None], P))  # (M, L)
-        dn = jnp.where(valid, dn, jnp.inf)
+    def against(v, a, label):
+        """Lanes captured by (or recurring onto) the attractor in slot ``a`` of row ``v``'s
+        table, a P-k cycle ``P (M, dim)``: every quantity of the attractor is a scalar or
+        broadcast over the lanes (no per-lane gather of tables or of the ring)."""
+        P = s.att_pts[v, a]  # (M, dim)
+        k = s.att_k[v, a]
+        valid = i < k  # (M,)
+        dn = jnp.sqrt(_sqdist(Y[None], P[:, :, None]))  # (M, L)
+        dn = jnp.where(valid[:, None], dn, jnp.inf)
         m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
         dmin = jnp.min(dn, axis=0)
         kk = jnp.maximum(k, 1)
@@ -197,58 +193,71 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
             it) to the cycle point it should be near, ``P[m - j]``: one slice of the ring
             per step, so no ``(M, dim, L)`` copy of the ring or of the cycle is made."""
             d_now, d_bef = dists
-            b = jnp.mod(m - j, kk)  # (L,)
-            if V == 1:
-                q = jnp.take(P[:, :, 0], b, axis=0).T  # (dim, L)
-                w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k[0], axis=0, keepdims=False)
-            else:
-                q = jnp.take_along_axis(P, jnp.broadcast_to(b[None, None], (1, dim, L)), axis=0)[0]
-                slot = g % H + H - j - k  # (L,): the point j + k periods back
-                w_bef = jnp.take_along_axis(s.hist, jnp.broadcast_to(slot[None, None], (1, dim, L)), axis=0)[0]
+            q = jnp.take(P, jnp.mod(m - j, kk), axis=0).T  # (dim, L)
             w_now = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j, axis=0, keepdims=False)
-            inside = j < k
-            d_now = jnp.where(inside, jnp.maximum(d_now, _sqdist(w_now, q)), d_now)
-            d_bef = jnp.where(inside, jnp.maximum(d_bef, _sqdist(w_bef, q)), d_bef)
-            return d_now, d_bef
+            w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k, axis=0, keepdims=False)
+            return jnp.maximum(d_now, _sqdist(w_now, q)), jnp.maximum(d_bef, _sqdist(w_bef, q))
 
         zero = jnp.zeros(L)
-        d_now, d_bef = jax.lax.fori_loop(0, jnp.max(k), point, (zero, zero))
+        d_now, d_bef = jax.lax.fori_loop(0, k, point, (zero, zero))
         d_now = jnp.where(s.age >= k, jnp.sqrt(d_now), jnp.inf)
         d_bef = jnp.where(s.age >= 2 * k, jnp.sqrt(d_bef), jnp.inf)
-        cap = live & (k > 0) & (d_now <= radius) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
-        scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0), axis=(0, 1))
+        cap = live & (k > 0) & (d_now <= s.radius[v]) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
+        scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0))
         same = rec & (k > 0) & (per == k) & (dmin <= o.merge_tol * scale)
-        return jnp.where((label < 0) & (cap | same), a, label).astype(jnp.int32)
+        hit = cap | same
+        if V > 1:
+            hit = hit & (s.row == v)  # the lanes of row v; a lane's label is a slot of its row's table
+        return jnp.where((label < 0) & hit, a, label).astype(jnp.int32)
 
-    label = jax.lax.fori_loop(0, jnp.max(s.n_att), against, label)
+    def against_row(v, label):
+        return jax.lax.fori_loop(0, s.n_att[v], lambda a, label: against(v, a, label), label)
+
+    if V == 1:
+        label = against_row(0, label)
+    else:  # the queue runs value after value: the busy lanes hold a short range of rows
+        lo = jnp.min(jnp.where(busy, s.row, V))
+        hi = jnp.max(jnp.where(busy, s.row, -1))
+        label = jax.lax.fori_loop(lo, hi + 1, against_row, label)
 
     # a recurring lane on no known attractor of its row registers a new one (one per row and round)
     new = rec & (label < 0)
-    vs = jnp.arange(V, dtype=jnp.int32)
-    new_v = new[None] & (s.row[None] == vs[:, None])  # (V, L)
-    has_new = jnp.any(new_v, axis=1)
-    room = s.n_att < A
-    l0 = jnp.argmax(new_v, axis=1)  # (V,)
-    k0 = per[l0]
-    last = jnp.moveaxis(_back(s.hist[:, :, l0], g, 0, M), 2, 0)  # (V, M, dim), newest first
-    pts0 = jax.vmap(lambda p, k: p[jnp.clip(k - 1 - i, 0, M - 1)])(last, k0)  # oldest of the last k0 first
-    valid0 = i[None] < k0[:, None]  # (V, M)
-    pts0 = jnp.where(valid0[..., None], pts0, jnp.nan)
-    add = has_new & room
-    slot = jnp.minimum(s.n_att, A - 1)
-    att_pts = jnp.where(add[:, None, None, None], s.att_pts.at[vs, slot].set(pts0), s.att_pts)
-    att_k = jnp.where(add[:, None], s.att_k.at[vs, slot].set(k0), s.att_k)
-    n_att = s.n_att + add.astype(jnp.int32)
-    # the other recurring lanes of the row whose newest point lies on its new attractor join it
-    P0 = att_pts[vs, slot]  # (V, M, dim)
-    scale0 = 1.0 + jnp.max(jnp.where(valid0[..., None], jnp.abs(P0), 0.0), axis=(1, 2))
-    P0l, k0l = _lanes(P0, s.row), _lanes(k0, s.row)
-    d0 = jnp.where(i[:, None] < k0l[None], _sqdist(Y[None], P0l), jnp.inf)  # (M, L)
-    joins = (_lanes(add, s.row) & new & (per == k0l)
-             & (jnp.min(d0, axis=0) <= (o.merge_tol * _lanes(scale0, s.row)) ** 2))
-    label = jnp.where(joins, _lanes(slot, s.row), label).astype(jnp.int32)
-    radius = jax.vmap(lambda p, k: _capture_radius(p, k, o.capture))(att_pts, att_k)
-    overflow = s.overflow | jnp.any(has_new & ~room)
+    # the capture radius follows its row's table: computed for every row in the pool's first
+    # round (it starts at 0), then only for a row whose table grew
+    radius = jax.lax.cond(s.rounds == 0, lambda: jax.vmap(lambda p, k: _capture_radius(p, k, o.capture))(
+        s.att_pts, s.att_k), lambda: s.radius)
+
+    def register(v, c):
+        att_pts, att_k, n_att, radius, label, overflow = c
+        new_v = new if V == 1 else new & (s.row == v)
+        has_new = jnp.any(new_v)
+        room = n_att[v] < A
+        l0 = jnp.argmax(new_v)
+        k0 = per[l0]
+        last = _back(s.hist[:, :, l0], g, 0, M)  # (M, dim), newest first
+        valid0 = i < k0
+        pts0 = jnp.where(valid0[:, None], last[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)  # oldest of the last k0 first
+
+        def add(c):
+            att_pts, att_k, n_att, radius, label = c
+            slot = n_att[v]
+            att_pts, att_k = att_pts.at[v, slot].set(pts0), att_k.at[v, slot].set(k0)
+            # the other recurring lanes of the row whose newest point lies on the new attractor join it
+            scale0 = 1.0 + jnp.max(jnp.where(valid0[:, None], jnp.abs(pts0), 0.0))
+            d0 = jnp.where(valid0[:, None], _sqdist(Y[None], pts0[:, :, None]), jnp.inf)  # (M, L)
+            joins = new_v & (per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
+            radius = radius.at[v].set(_capture_radius(att_pts[v], att_k[v], o.capture))
+            return att_pts, att_k, n_att.at[v].add(1), radius, jnp.where(joins, slot, label).astype(jnp.int32)
+
+        c = jax.lax.cond(has_new & room, add, lambda c: c, (att_pts, att_k, n_att, radius, label))
+        return (*c, overflow | (has_new & ~room))
+
+    c = (s.att_pts, s.att_k, s.n_att, radius, label, s.overflow)
+    if V == 1:
+        c = register(0, c)
+    else:  # the rows of the busy lanes
+        c = jax.lax.fori_loop(lo, hi + 1, register, c)
+    att_pts, att_k, n_att, radius, label, overflow = c
 
     unres = live & (label < 0) & (s.age >= o.max_periods)
     decided = esc | (label >= 0) | unres

@@ -654,13 +654,17 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     std::vector<Coef> coefs(rows);
     std::vector<Table> tables(rows);
     const double t0 = t0s[tbatch == 1 ? 0 : bi];
+    const int32_t* rowp = lr + (rbatch == 1 ? 0 : bi) * n;
+    const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
+    // only the rows of active lanes are tabulated (a pool of many rows holds few at a time)
+    std::vector<unsigned char> used(rows, 0);
+    for (int64_t j = 0; j < n_act; ++j)
+      if (rowp[j] >= 0 && rowp[j] < rows) used[rowp[j]] = 1;
     for (int64_t r = 0; r < rows; ++r) {
       models[r] = make_model(pb + r * NPARAM, static_cast<int>(shape));
       coefs[r] = coef(models[r]);
-      tables[r] = tabulate(models[r], t0, models[r].T / steps, static_cast<int>(steps));
+      if (used[r]) tables[r] = tabulate(models[r], t0, models[r].T / steps, static_cast<int>(steps));
     }
-    const int32_t* rowp = lr + (rbatch == 1 ? 0 : bi) * n;
-    const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
     const double* yb = y + (ybatch == 1 ? 0 : bi) * 4 * n;
     double* ob = o + bi * 4 * n;
     for (int64_t i = 0; i < 4; ++i)
