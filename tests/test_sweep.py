@@ -354,7 +354,6 @@ def test_basin_sweep_in_one_pool_pure_jax():
     _assert_sweep_is_separate_analyses(s, jg.DUFFING, p, "omega", values, grid, method)
 
 
-
 def test_one_pool_rows_decide_against_their_own_tables():
     """Lanes of several values share the pool's rounds (a pool smaller than a value's
     cells) while the values' tables differ: the same Duffing attractors seeded in two
