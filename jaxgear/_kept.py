@@ -9,7 +9,8 @@ is on (:func:`enable`), exports each of its computations (:mod:`jax.export`: the
 module, serialised) into ``<cache root>/kept`` under a key of what determines it:
 
 - jaxgear's own source files (every ``.py`` and the CPU kernel's source), the versions
-  of jax and jaxlib, the numeric configuration (float64, dtype promotion);
+  of jax, jaxlib and equinox, whether the compiled CPU kernel is in use, the numeric
+  configuration (float64, dtype promotion);
 - the platform and kind of the devices, the function, its static arguments, and the
   tree, shapes and dtypes of its array arguments.
 
@@ -84,6 +85,7 @@ def _environment() -> bytes:
     """What every kept computation depends on besides its function and arguments (with
     whether the compiled CPU kernel is in use: it is built and registered here, as the
     loaded modules call it)."""
+    import equinox
     import jaxlib
 
     from .integrate._native import native_available
@@ -92,8 +94,8 @@ def _environment() -> bytes:
     pkg = Path(__file__).resolve().parent
     for path in sorted(p for p in pkg.rglob("*") if p.suffix in (".py", ".cc", ".h") and p.is_file()):
         h.update(str(path.relative_to(pkg)).encode() + b"\0" + path.read_bytes())
-    for part in (jax.__version__, jaxlib.__version__, native_available(), jax.config.jax_enable_x64,
-                 jax.config.jax_numpy_dtype_promotion, jax.config.jax_default_matmul_precision):
+    for part in (jax.__version__, jaxlib.__version__, equinox.__version__, native_available(),
+                 jax.config.jax_enable_x64, jax.config.jax_numpy_dtype_promotion, jax.config.jax_default_matmul_precision):
         h.update(b"\0" + str(part).encode())
     return h.digest()
 
