@@ -57,3 +57,21 @@ def test_library_cli_and_readme_share_the_default_method_and_integrator():
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     assert f"jaxgear analyze: {lib.name}, 90000 cells" in readme
     assert f"`jaxgear.{type(lib.integrator).__name__}({lib.integrator.steps_per_period})`" in readme
+
+
+def test_sweep_in_one_pool_writes_the_sweep_of_separate_analyses(tmp_path, monkeypatch):
+    """``jaxgear sweep --kind basins --one-pool`` (all values in one lane pool) writes the
+    labels and shares of the sweep that analyses the values one after another."""
+    from jaxgear.sweep import _basins
+
+    pooled, real = [], _basins._analyze_values
+    monkeypatch.setattr(_basins, "_analyze_values", lambda *a, **k: pooled.append(a[-1]) or real(*a, **k))
+    base = ["sweep", "--kind", "basins", "--param", "b", "--values", "4:6:2", "--grid", "6,4,6", "--no-figures",
+            "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "separate")]) == 0
+    assert main([*base, "--one-pool", "--out", str(tmp_path / "pool")]) == 0
+    assert pooled == [False, True]
+    a, b = jg.load(tmp_path / "separate" / "basins.nc"), jg.load(tmp_path / "pool" / "basins.nc")
+    assert not np.allclose(a.shares[0], a.shares[-1])  # the two values differ
+    np.testing.assert_array_equal(a.labels, b.labels)
+    np.testing.assert_array_equal(a.shares, b.shares)

@@ -111,6 +111,9 @@ def add_parser(sub) -> None:
     p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (also holds the resume parts)")
     p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
+    p.add_argument("--one-pool", action="store_true",
+                   help="basins, direct method: run the values in one lane pool over (value, cell) pairs instead of "
+                   "one analysis after another (the same result; a killed sweep loses the values of the pool)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--distributed", action="store_true",
@@ -188,7 +191,7 @@ def run(args) -> int:
 
             if args.kind == "basins":
                 basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=False,
-                            out=Path(args.out), restart=args.restart, save=False)
+                            out=Path(args.out), restart=args.restart, save=False, batched=args.one_pool)
             else:
                 bifurcation_diagram(REDUCED, params, args.param, values, _starts(args), transient=args.transient,
                                     record=args.record, direction=args.direction, integrator=integ,
@@ -255,7 +258,7 @@ def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, 
     else:  # basins
         print(head + f", {args.method} on {grid.n_cells} cells per value")
         result = basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=not args.quiet,
-                             out=out, restart=args.restart, save=False)
+                             out=out, restart=args.restart, save=False, batched=args.one_pool)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         print(result.shares_table())
         print()

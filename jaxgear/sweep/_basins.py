@@ -237,9 +237,11 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
         batched: run the values of a block in one lane pool over (value, cell) pairs
             (:func:`~jaxgear.analysis.analyze_global_values`, identical results) instead
             of one analysis after another. Off by default: on the 2-core CPU of the
-            benchmarks it is 0.77x as fast (``benchmarks/sweep_scale.py``; integration
-            dominates there and the per-value bookkeeping costs more); it saves the
-            draining tail of each analysis, which matters more on a GPU.
+            benchmarks it is about as fast (1.05x, ``benchmarks/sweep_scale.py``: the
+            cells' integration dominates, and what one pool saves, the pilot's and the
+            tail's draining, is a small part of each analysis), while a sweep value by
+            value saves and reports each value as it ends; one pool saves more on a GPU,
+            whose pools drain with most lanes idle.
 
     Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
     as several JAX processes (:func:`jaxgear._devices.initialize`, e.g. one per host
