@@ -1,7 +1,7 @@
 """Scaling past one device and one process: plain script, figures printed, nothing asserted.
 
-    python benchmarks/devices.py           # 20 x 12 x 24 cells on devices, the paper grid on processes
-    python benchmarks/devices.py --counts 10 6 12 --process-counts 10 6 12 --repeat 1
+    python benchmarks/devices.py           # the paper grid on devices and on processes, then the sweep
+    python benchmarks/devices.py --counts 10 6 12 --process-counts 10 6 12 --repeat 1 --only devices
 
 Measures in one run on this machine (the reduced gear model, paper preset, the default
 method :class:`jaxgear.Direct`):
@@ -17,9 +17,12 @@ method :class:`jaxgear.Direct`):
    included), with a warm compilation cache (a first run of each fills it); whether both
    write the same labels and shares; and, as the floor two processes can reach, one
    process on half the cells (each of the two pays the start, the loading of the
-   compiled computations, the pilot and the draining tail in full).
+   compiled computations, the pilot and the draining tail in full);
+3. *sweep*: ``benchmarks/sweep_scale.py`` in a fresh process, the basin sweep of 8
+   backlash values in one lane pool against 8 separate analyses.
 
-Each section's last line is its ratio (one / two: above 1 is faster on two).
+Each section's last line is its ratio (sections 1 and 2: one / two, above 1 is faster on
+two; section 3: separate / one pool, above 1 is faster in one pool).
 """
 
 from __future__ import annotations
@@ -141,19 +144,31 @@ def processes(counts, repeat: int, tmp: Path) -> None:
     print(f"   processes ratio (1 process / 2 processes): {walls['1 process'] / walls['2 processes']:.2f}x")
 
 
+def sweep(repeat: int) -> None:
+    """Section 3: ``benchmarks/sweep_scale.py`` (its defaults) in a fresh process."""
+    print(f"3. basin sweep of 8 backlash values on [20, 12, 24] cells: one pool vs separate analyses "
+          f"(benchmarks/sweep_scale.py, min of {repeat} after a warm-up)")
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sweep_scale.py"), "--repeat", str(repeat)],
+                       env=env(), capture_output=True, text=True, check=True)
+    for line in r.stdout.strip().splitlines()[1:]:
+        print(f"   {line}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--counts", type=int, nargs=3, default=(20, 12, 24), help="cells of section 1")
+    ap.add_argument("--counts", type=int, nargs=3, default=(50, 30, 60), help="cells of section 1")
     ap.add_argument("--process-counts", type=int, nargs=3, default=(50, 30, 60),
                     help="cells of section 2 (default the paper grid)")
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--only", choices=("devices", "processes"), default=None)
+    ap.add_argument("--only", choices=("devices", "processes", "sweep"), default=None)
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        if a.only != "processes":
+        if a.only in (None, "devices"):
             devices(list(a.counts), a.repeat, Path(tmp))
-        if a.only != "devices":
+        if a.only in (None, "processes"):
             processes(list(a.process_counts), a.repeat, Path(tmp))
+        if a.only in (None, "sweep"):
+            sweep(a.repeat)
 
 
 if __name__ == "__main__":
