@@ -7,7 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -112,4 +111,3 @@ def test_a_broken_kept_file_is_replaced_not_used(tmp_path):
         assert again._runners  # the call went through the kept computation
     finally:
         _kept.disable()
-    assert jax.config.jax_enable_x64
