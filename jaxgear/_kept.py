@@ -285,7 +285,7 @@ class KeptFunction:
         flat.__name__ = flat.__qualname__ = self._fun.__name__  # what JAX's logs and profiles name
 
         try:
-            exported = jax.export.export(jax.jit(flat), platforms=[jax.default_backend()],
+            exported = jax.export.export(jax.jit(flat),  # for the default backend's platform
                                          disabled_checks=[jax.export.DisabledSafetyCheck.custom_call(TARGET)])(*avals)
         except Exception:  # noqa: BLE001  (not exportable: traced and compiled as usual)
             return None
