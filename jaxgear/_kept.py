@@ -39,6 +39,7 @@ import os
 import pickle
 import tempfile
 import types
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 
@@ -152,13 +153,27 @@ def _device(leaf):
     return next(iter(devices))
 
 
+_COMMITTED: dict[int, tuple] = {}
+"""Committed aliases of the uncommitted arrays passed to loaded computations, by ``id`` of
+the array (a pool passes the same cells and parameters at every call), each entry dropped
+when its array is."""
+
+
 def _committed(leaf, device):
-    """``leaf`` committed to ``device`` (no copy when it is there already): a loaded
-    computation returns committed arrays, so its calls always pass committed ones and
-    find the one compilation made ahead."""
-    if isinstance(leaf, jax.Array) and leaf.committed:
-        return leaf
-    return jax.device_put(leaf, jax.sharding.SingleDeviceSharding(device))
+    """``leaf`` committed to ``device`` (an alias, no copy, made once per array): a loaded
+    computation returns committed arrays, so its calls always pass committed ones and find
+    the one compilation made ahead."""
+    if isinstance(leaf, jax.Array):
+        if leaf.committed:
+            return leaf
+        found = _COMMITTED.get(id(leaf))
+        if found is not None and found[0]() is leaf and found[1].sharding.device_set == {device}:
+            return found[1]
+    out = jax.device_put(leaf, jax.sharding.SingleDeviceSharding(device))
+    if isinstance(leaf, jax.Array):
+        key = id(leaf)
+        _COMMITTED[key] = (weakref.ref(leaf, lambda _, key=key: _COMMITTED.pop(key, None)), out)
+    return out
 
 
 class KeptFunction:
