@@ -178,9 +178,8 @@ def _committed(leaf, device):
 
 class KeptFunction:
     """``jax.jit`` of ``fun`` whose computations are kept across processes once keeping is
-    on (see the module). Called like the jitted function; :meth:`prepare` makes a
-    computation ready ahead (loaded, or exported, or compiled), :meth:`lower` is the
-    jitted function's."""
+    on (see the module). Called like the jitted function (``jitted``); :meth:`prepare`
+    makes a computation ready ahead (loaded, or exported and kept, or compiled)."""
 
     def __init__(self, fun: Callable, static_argnames: tuple[str, ...], donate_argnums: tuple[int, ...]):
         self._fun = fun
@@ -190,9 +189,6 @@ class KeptFunction:
         self.jitted = jax.jit(fun, static_argnames=self._static, donate_argnums=self._donate)
         self._runners: dict[tuple, tuple[Callable, object]] = {}
         functools.update_wrapper(self, fun)
-
-    def lower(self, *args, **kwargs):
-        return self.jitted.lower(*args, **kwargs)
 
     def _split(self, args, kwargs):
         """``(static (name, value) pairs, dynamic arguments, which of them are donated)``."""
