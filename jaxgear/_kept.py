@@ -205,24 +205,25 @@ class KeptFunction:
 
     def _key(self, static, dynamic):
         """The in-process key of a computation (static values, argument tree, each leaf's
-        shape, dtype and device), the leaves and their devices."""
+        shape, dtype and device), the tree, the leaves and their devices; ``None`` for the
+        key when called inside another trace (the jitted function is traced there)."""
         leaves, tree = jax.tree.flatten(dynamic)
+        if any(isinstance(x, jax.core.Tracer) for x in leaves):
+            return None, tree, leaves, None
         devices = [_device(x) for x in leaves]
-        return (static, tree, tuple((_aval(x), d.id) for x, d in zip(leaves, devices))), leaves, devices
+        return (static, tree, tuple((_aval(x), d.id) for x, d in zip(leaves, devices))), tree, leaves, devices
 
     def __call__(self, *args, **kwargs):
         if self._runners:
             static, dynamic, _ = self._split(args, kwargs)
-            leaves = jax.tree.leaves(dynamic)
-            if not any(isinstance(x, jax.core.Tracer) for x in leaves):  # not inside another trace
-                try:
-                    key, leaves, devices = self._key(static, dynamic)
-                except Unkeepable:
-                    key = None
-                found = self._runners.get(key)
-                if found is not None:
-                    runner, out_tree = found
-                    return jax.tree.unflatten(out_tree, runner(*map(_committed, leaves, devices)))
+            try:
+                key, _, leaves, devices = self._key(static, dynamic)
+            except Unkeepable:
+                key = None
+            found = self._runners.get(key)
+            if found is not None:
+                runner, out_tree = found
+                return jax.tree.unflatten(out_tree, runner(*map(_committed, leaves, devices)))
         return self.jitted(*args, **kwargs)
 
     def prepare(self, *args, **kwargs) -> None:
@@ -231,11 +232,11 @@ class KeptFunction:
         kept, or (not keepable) lowered and compiled by ``jax.jit``."""
         static, dynamic, donated = self._split(args, kwargs)
         try:
-            key, leaves, devices = self._key(static, dynamic)
-            kept = None if key in self._runners else self._kept(static, dynamic, leaves)
+            key, tree, leaves, devices = self._key(static, dynamic)
+            kept = None if key is None or key in self._runners else self._kept(static, tree, leaves)
         except Unkeepable:
             key, kept = None, None
-        if key in self._runners:
+        if key is not None and key in self._runners:
             return
         if kept is None:
             self.jitted.lower(*args, **kwargs).compile()
@@ -249,13 +250,13 @@ class KeptFunction:
                        for a, d in zip(map(_aval, leaves), devices))).compile()
         self._runners[key] = (runner, out_tree)
 
-    def _kept(self, static, dynamic, leaves):
-        """``(exported, output tree)`` of the computation from the folder, or exported now
-        and written there; ``None`` when keeping is off or the computation cannot be kept."""
+    def _kept(self, static, tree, leaves):
+        """``(exported, output tree)`` of the computation of the arguments ``tree`` (with
+        ``leaves``) from the folder, or exported now and written there; ``None`` when keeping
+        is off or the computation cannot be kept."""
         folder = _STATE["dir"]
         if folder is None:
             return None
-        _, tree = jax.tree.flatten(dynamic)
         avals = [_aval(x) for x in leaves]
         try:
             text = str(tree)
