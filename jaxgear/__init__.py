@@ -116,9 +116,11 @@ try:
     from .sweep import (  # noqa: E402
         bifurcation_diagram as bifurcation_diagram,
         basin_sweep as basin_sweep,
+        basin_map as basin_map,
         parameter_map as parameter_map,
         BifurcationDiagram as BifurcationDiagram,
         BasinSweep as BasinSweep,
+        BasinMap as BasinMap,
         ParameterMap as ParameterMap,
     )
     from .design import (  # noqa: E402

@@ -2,7 +2,8 @@
 
 ``--kind bifurcation`` (default): stroboscopic points of several starts per value,
 classified by period, swept up and down (hysteresis); ``--kind basins``: the global
-analysis at every value with attractors matched across values (basin shares);
+analysis at every value with attractors matched across values (basin shares), or, with
+``--param2``/``--values2``, at every point of a grid of two parameters (a basin map);
 ``--kind continuation``: one periodic orbit followed by pseudo-arclength continuation
 with its Floquet multipliers. Writes the result file, ``summary.json`` and PNG figures
 into ``--out``; an interrupted bifurcation or basin sweep started again with the same
@@ -29,8 +30,8 @@ from .common import (
 
 KINDS = ("bifurcation", "basins", "continuation")
 
-OWNED = ("bifurcation.nc", "basins.nc", "branch.nc", "summary.json", "bifurcation.png", "bifurcation_x3.png",
-         "shares.png", "branch.png")
+OWNED = ("bifurcation.nc", "basins.nc", "basin_map.nc", "branch.nc", "summary.json", "bifurcation.png",
+         "bifurcation_x3.png", "shares.png", "basin_map.png", "basin_map_shares.png", "branch.png")
 """Files ``jaxgear sweep`` writes into ``--out`` (replaced as a whole by the next run; the
 resume state ``parts/`` and ``manifest.json`` is kept)."""
 
@@ -43,27 +44,28 @@ SECTION_COUNTS = (20, 12, 24)
 STROBOSCOPIC_COUNTS = (10, 6, 12, 6)
 
 
-def _values(text: str):
-    """``START:STOP:COUNT`` -> ``COUNT`` evenly spaced values (``ValueError`` with the reason)."""
+def _values(text: str, flag: str = "--values"):
+    """``START:STOP:COUNT`` -> ``COUNT`` evenly spaced values (``ValueError`` with the reason,
+    naming the option ``flag``)."""
     import numpy as np
 
     parts = text.split(":")
     if len(parts) != 3:
-        raise ValueError(f"--values expects START:STOP:COUNT (e.g. 3:7:41), got {text!r}.")
+        raise ValueError(f"{flag} expects START:STOP:COUNT (e.g. 3:7:41), got {text!r}.")
     try:
         start, stop = float(parts[0]), float(parts[1])
     except ValueError:
-        raise ValueError(f"--values expects numbers in START:STOP:COUNT, got {text!r}.") from None
+        raise ValueError(f"{flag} expects numbers in START:STOP:COUNT, got {text!r}.") from None
     try:
         count = int(parts[2])
     except ValueError:
-        raise ValueError(f"--values: COUNT must be an integer, got {parts[2]!r} in {text!r}.") from None
+        raise ValueError(f"{flag}: COUNT must be an integer, got {parts[2]!r} in {text!r}.") from None
     if not (np.isfinite(start) and np.isfinite(stop)):
-        raise ValueError(f"--values: START and STOP must be finite, got {text!r}.")
+        raise ValueError(f"{flag}: START and STOP must be finite, got {text!r}.")
     if count < 2:
-        raise ValueError(f"--values: COUNT must be >= 2 (got {count}); a sweep needs at least two values.")
+        raise ValueError(f"{flag}: COUNT must be >= 2 (got {count}); a sweep needs at least two values.")
     if start == stop:
-        raise ValueError(f"--values: the range {start:g}:{stop:g} is empty (START = STOP).")
+        raise ValueError(f"{flag}: the range {start:g}:{stop:g} is empty (START = STOP).")
     return start, stop, count, np.linspace(start, stop, count)
 
 
@@ -75,13 +77,18 @@ def add_parser(sub) -> None:
         "sweep", help="parameter sweeps: bifurcation diagrams, basin shares, orbit continuation",
         description="Sweep one parameter of the reduced gear model (any canonical name: b_sp, kappa_sp_amp, "
         "Omega, c_sp, f_D, e_sp_amp, ...; or b = b_sp and b_rp, kappa_amp = both stiffness amplitudes, "
-        "e_amp = both error amplitudes). Writes the result (bifurcation.nc, basins.nc or branch.nc), "
+        "e_amp = both error amplitudes), or, with --kind basins and --param2, two (a basin map). Writes the "
+        "result (bifurcation.nc, basins.nc, basin_map.nc or branch.nc), "
         "summary.json and figures into --out. Run the same command again after an interruption to resume.",
     )
     add_param_options(p)
     p.add_argument("--param", required=True, metavar="NAME", help="the parameter to sweep")
     p.add_argument("--values", required=True, metavar="START:STOP:COUNT",
                    help="COUNT evenly spaced values from START to STOP (COUNT >= 2)")
+    p.add_argument("--param2", default=None, metavar="NAME",
+                   help="basins: a second parameter; the global analysis then runs at every point of the grid "
+                   "--values2 x --values (a basin map, basin_map.nc)")
+    p.add_argument("--values2", default=None, metavar="START:STOP:COUNT", help="the values of --param2")
     p.add_argument("--kind", default="bifurcation", choices=KINDS, help="what to compute (default bifurcation)")
     p.add_argument("--direction", default="all", choices=("independent", "up", "down", "both", "all"),
                    help="bifurcation: independent (every value from the starts: all coexisting attractors the "
@@ -148,6 +155,16 @@ def run(args) -> int:
     if args.kind != "continuation" and start > stop:
         raise ValueError(f"--values={args.values}: START must be < STOP for --kind {args.kind} (the values are "
                          "swept up and down by --direction); only --kind continuation runs from START to STOP.")
+    values2 = None
+    if (args.param2 is None) != (args.values2 is None):
+        raise ValueError("--param2 NAME and --values2 START:STOP:COUNT go together (a basin map over two "
+                         "parameters).")
+    if args.param2 is not None:
+        if args.kind != "basins":
+            raise ValueError(f"--param2 makes a basin map: it needs --kind basins (got --kind {args.kind}).")
+        start2, stop2, _, values2 = _values(args.values2, "--values2")
+        if start2 > stop2:
+            raise ValueError(f"--values2={args.values2}: START must be < STOP.")
     for pt in args.points or ():
         check_point(pt, "--from", REDUCED.dim)
     xyz = REDUCED.state_names[:3]
@@ -180,18 +197,25 @@ def run(args) -> int:
         check_counts(counts, f"--grid {where}", len(names), names)
         grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
         method.check(REDUCED, grid)
-        check_values(REDUCED, params, (args.param,), values[:, None])
-    head = (f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values), "
-            f"preset {args.preset}, {REDUCED.name} model")
+        if values2 is None:
+            check_values(REDUCED, params, (args.param,), values[:, None])
+        else:
+            if set(param_targets(params, args.param)) & set(param_targets(params, args.param2)):
+                raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
+            check_values(REDUCED, params, (args.param, args.param2),
+                         np.stack(np.meshgrid(values, values2), axis=-1).reshape(-1, 2))
+    head = f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values)"
+    if values2 is not None:
+        head += f" x {args.param2} = {values2[0]:g} .. {values2[-1]:g} ({len(values2)} values)"
+    head += f", preset {args.preset}, {REDUCED.name} model"
     if args.distributed:
         from .._devices import process_index
 
         if process_index() != 0:  # its share of the values (exchanged, or parts in --out); process 0 writes
-            from ..sweep import basin_sweep, bifurcation_diagram
+            from ..sweep import bifurcation_diagram
 
             if args.kind == "basins":
-                basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=False,
-                            out=Path(args.out), restart=args.restart, save=False, batched=args.one_pool)
+                _basins(args, params, values, values2, grid, method, progress=False)
             else:
                 bifurcation_diagram(REDUCED, params, args.param, values, _starts(args), transient=args.transient,
                                     record=args.record, direction=args.direction, integrator=integ,
@@ -205,7 +229,7 @@ def run(args) -> int:
             files = _continuation(args, params, start, stop, count, integ, work, head)
         else:
             files = _sweep(args, params, values, integ, work, head, t0, grid if args.kind == "basins" else None,
-                           method if args.kind == "basins" else None)
+                           method if args.kind == "basins" else None, values2)
     print(f"\nwrote {', '.join(files)} to {args.out}/")
     return 0
 
@@ -227,11 +251,24 @@ def _starts(args):
     return X0
 
 
-def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, method) -> list[str]:
-    """A bifurcation or basin sweep: resume parts in ``--out``, its files into ``work``."""
+def _basins(args, params, values, values2, grid, method, progress: bool):
+    """The basin sweep over ``--param`` (``values2`` None) or the basin map over ``--param``
+    x ``--param2``, resumable in ``--out`` (the result file is written by the caller)."""
+    from .._model import REDUCED
+    from ..sweep import basin_map, basin_sweep
+
+    kw = dict(method=method, progress=progress, out=Path(args.out), restart=args.restart, save=False,
+              batched=args.one_pool)
+    if values2 is None:
+        return basin_sweep(REDUCED, params, args.param, values, grid, **kw)
+    return basin_map(REDUCED, params, args.param, values, args.param2, values2, grid, **kw)
+
+
+def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, method, values2=None) -> list[str]:
+    """A bifurcation or basin sweep (or map): resume parts in ``--out``, its files into ``work``."""
 
     from .._model import REDUCED
-    from ..sweep import basin_sweep, bifurcation_diagram
+    from ..sweep import bifurcation_diagram
 
     out = Path(args.out)
     if args.kind == "bifurcation":
@@ -257,19 +294,27 @@ def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, 
                     "bifurcation_x3.png": plot_bifurcation(result, "x3")}
     else:  # basins
         print(head + f", {args.method} on {grid.n_cells} cells per value")
-        result = basin_sweep(REDUCED, params, args.param, values, grid, method=method, progress=not args.quiet,
-                             out=out, restart=args.restart, save=False, batched=args.one_pool)
+        result = _basins(args, params, values, values2, grid, method, progress=not args.quiet)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
-        print(result.shares_table())
-        print()
-        print(result.table())
-        result.save(work / "basins.nc")
-        files = ["basins.nc", "summary.json"]
         figs = {}
-        if not args.no_figures:
-            from ..plotting import plot_basin_shares
+        if values2 is None:
+            print(result.shares_table())
+            print()
+            print(result.table())
+            name = "basins.nc"
+            if not args.no_figures:
+                from ..plotting import plot_basin_shares
 
-            figs = {"shares.png": plot_basin_shares(result)}
+                figs = {"shares.png": plot_basin_shares(result)}
+        else:
+            print(result.table())
+            name = "basin_map.nc"
+            if not args.no_figures:
+                from ..plotting import plot_basin_map
+
+                figs = {"basin_map.png": plot_basin_map(result), "basin_map_shares.png": plot_basin_map(result, "all")}
+        result.save(work / name)
+        files = [name, "summary.json"]
     summary = result.summary()
     summary["runtime_s"] = time.perf_counter() - t0  # in summary.json only, never in the result file
     write_json(summary, work / "summary.json", indent=1)

@@ -25,6 +25,9 @@ from ._sweep import (
     period_color as period_color,
 )
 from ._sweep import (
+    plot_basin_map as plot_basin_map,
+)
+from ._sweep import (
     plot_basin_shares as plot_basin_shares,
 )
 from ._sweep import (

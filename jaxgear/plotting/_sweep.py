@@ -165,7 +165,7 @@ def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None =
     start, one colour per period (:func:`period_color`) with a legend;
     ``"n_attractors"``: the number of distinct attractors reached from the starts.
     """
-    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.colors import ListedColormap
 
     quantity = quantity or pmap.quantity
     if quantity not in ("period", "n_attractors"):
@@ -184,16 +184,80 @@ def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None =
         ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small",
                   title="from start 0")
     else:
-        data = np.asarray(pmap.n_attractors)
-        top = max(int(data.max()), 1)
-        base = ["#f7f7f7"] + [_PALETTE[i % len(_PALETTE)] for i in range(top)]
-        cmap = ListedColormap(base[: top + 1])
-        norm = BoundaryNorm(np.arange(-0.5, top + 1.5), cmap.N)
-        m = ax.pcolormesh(X, Y, data, cmap=cmap, norm=norm, shading="flat")
-        cb = fig.colorbar(m, ax=ax, ticks=np.arange(0, top + 1))
-        cb.set_label(f"distinct attractors from {len(pmap.starts)} starts")
+        _count_panel(fig, ax, X, Y, np.asarray(pmap.n_attractors), f"distinct attractors from {len(pmap.starts)} starts")
     ax.set_xlabel(pmap.param_x)
     ax.set_ylabel(pmap.param_y)
     ax.set_title(title or ("Period of the attractor reached" if quantity == "period"
                            else "Number of coexisting attractors"))
+    return fig
+
+
+def _count_panel(fig, ax, X, Y, data: np.ndarray, label: str) -> None:
+    """A map of counts (0, 1, 2, ...) on the cell edges ``X, Y``: one colour per count
+    (0 light), a colour bar with integer ticks labelled ``label``."""
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+
+    top = max(int(data.max()), 1)
+    cmap = ListedColormap((["#f7f7f7"] + [_PALETTE[i % len(_PALETTE)] for i in range(top)])[: top + 1])
+    m = ax.pcolormesh(X, Y, data, cmap=cmap, norm=BoundaryNorm(np.arange(-0.5, top + 1.5), cmap.N), shading="flat")
+    fig.colorbar(m, ax=ax, ticks=np.arange(0, top + 1)).set_label(label)
+
+
+def plot_basin_map(bmap, attractor: int | str | None = None, *, title: str | None = None):
+    """Basin shares over two parameters (a :class:`~jaxgear.BasinMap`) as images.
+
+    ``attractor=None`` (default): two panels, the attractor with the largest share at
+    each parameter point (``attractor_color(id)``, the sink light grey; its share in
+    percent written in each box of maps up to 12 x 12) and the number of coexisting
+    attractors. ``attractor=g``: the share of global attractor ``g`` (percent; white
+    where it does not exist). ``attractor="all"``: one such panel per attractor.
+    """
+    from matplotlib.colors import ListedColormap
+
+    X, Y = _edges(bmap.values_x), _edges(bmap.values_y)
+    G = bmap.n_attractors
+    if attractor is None:
+        fig = new_figure(figsize=(12.0, 4.8), layout="constrained")
+        ax, ax2 = fig.subplots(1, 2)
+        dom = np.asarray(bmap.dominant)
+        cmap = ListedColormap([SINK_COLOR] + [attractor_color(g) for g in range(G)])
+        ax.pcolormesh(X, Y, dom + 1, cmap=cmap, vmin=-0.5, vmax=G + 0.5, shading="flat")
+        ny, nx = dom.shape
+        if nx * ny <= 144:
+            share = np.where(dom >= 0, np.take_along_axis(bmap.shares, np.maximum(dom, 0)[..., None], -1)[..., 0],
+                             bmap.sink_share)
+            for iy in range(ny):
+                for ix in range(nx):
+                    ax.text(bmap.values_x[ix], bmap.values_y[iy], f"{100 * share[iy, ix]:.0f}", ha="center",
+                            va="center", fontsize="x-small", color="w" if dom[iy, ix] >= 0 else "k")
+        shown = sorted(set(dom.ravel().tolist()))
+        handles = [Patch(color=attractor_color(g) if g >= 0 else SINK_COLOR,
+                         label=f"{g}: {bmap.attractor_label(g)}" if g >= 0 else "sink") for g in shown]
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
+                  title="largest basin")
+        ax.set_title("Attractor with the largest basin" + (" (its share, %)" if nx * ny <= 144 else ""))
+        _count_panel(fig, ax2, X, Y, np.asarray(bmap.coexisting), "coexisting attractors")
+        ax2.set_title("Number of coexisting attractors")
+        axes = [ax, ax2]
+    else:
+        gs = list(range(G)) if attractor == "all" else [int(attractor)]
+        if not gs or not all(0 <= g < G for g in gs):
+            raise ValueError(f"attractor must be None, 'all' or a global id in 0..{G - 1}, got {attractor!r}.")
+        cols = min(len(gs), 3)
+        rows = -(-len(gs) // cols)
+        fig = new_figure(figsize=(4.2 * cols + 1.0, 3.6 * rows), layout="constrained")
+        axes = np.atleast_1d(fig.subplots(rows, cols)).ravel().tolist()
+        for ax in axes[len(gs):]:
+            ax.set_visible(False)
+        for ax, g in zip(axes, gs):
+            data = np.where(bmap.present[..., g], 100 * bmap.shares[..., g], np.nan)
+            m = ax.pcolormesh(X, Y, data, cmap="viridis", vmin=0, vmax=100, shading="flat")
+            ax.set_title(f"{g}: {bmap.attractor_label(g)}", color=attractor_color(g))
+        fig.colorbar(m, ax=axes[: len(gs)]).set_label("share of the cell grid [%] (white: absent)")
+        axes = axes[: len(gs)]
+    for ax in axes:
+        ax.set_xlabel(bmap.param_x)
+        ax.set_ylabel(bmap.param_y)
+    fig.suptitle(title or f"Basin shares over {bmap.param_x} x {bmap.param_y} ({bmap.method}, "
+                 f"{bmap.grid.n_cells} cells per point)")
     return fig

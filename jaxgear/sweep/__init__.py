@@ -1,7 +1,8 @@
-"""Parameter sweeps: bifurcation diagrams, basin shares across a parameter, 2-parameter maps.
+"""Parameter sweeps: bifurcation diagrams, basin shares across one or two parameters, 2-parameter maps.
 
 - :mod:`._bifurcation` — :func:`bifurcation_diagram` (stroboscopic points against a parameter);
 - :mod:`._basins` — :func:`basin_sweep` (global analysis per value, attractors matched);
+- :mod:`._basin_map` — :func:`basin_map` (global analysis over a grid of two parameters);
 - :mod:`._parameter_map` — :func:`parameter_map` (a grid of two parameters);
 - :mod:`._kernels` — the batched (values x starts) kernels;
 - :mod:`._classify` — period codes and distinct attractors of recorded sequences;
@@ -9,12 +10,13 @@
 - :mod:`._checkpoint` — kill-and-resume of long sweeps.
 """
 
+from ._basin_map import BasinMap, basin_map, match_on_grid
 from ._basins import BasinSweep, basin_sweep, match_across_values
 from ._bifurcation import DIRECTIONS, BifurcationDiagram, bifurcation_diagram
 from ._classify import APERIODIC, ESCAPED, period_label
 from ._parameter_map import ParameterMap, parameter_map
 from ._values import check_values
 
-__all__ = ["BifurcationDiagram", "BasinSweep", "ParameterMap", "bifurcation_diagram", "basin_sweep",
-           "parameter_map", "ESCAPED", "APERIODIC", "DIRECTIONS", "period_label", "match_across_values",
+__all__ = ["BifurcationDiagram", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram", "basin_sweep",
+           "basin_map", "parameter_map", "match_on_grid", "ESCAPED", "APERIODIC", "DIRECTIONS", "period_label", "match_across_values",
            "check_values"]

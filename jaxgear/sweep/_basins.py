@@ -253,7 +253,34 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     Returns:
         :class:`BasinSweep`.
     """
-    from .._io import load
+    system, params, method, grid, match_tol = resolve_basin_options(system, params, method, grid, match_tol)
+    param_targets(params, param)
+    vals = sorted_values(values, param)
+    check_values(system, params, (param,), vals[:, None])
+    check_bool(progress, "progress")
+    check_bool(restart, "restart")
+    check_bool(save, "save")
+    settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
+                    params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
+                    match_tol=float(match_tol), version=__version__)
+    me = process_index()
+    results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, out, "basins",
+                          settings, restart, batched, progress, f"basins {param}")
+    sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
+                             float(match_tol), system, params_to_dict(params),
+                             {k: v for k, v in settings.items()
+                              if k not in ("values", "params", "system", "param", "grid", "match_tol")},
+                             __version__)
+    if out is not None and save and me == 0:  # one process writes
+        sweep.save(Path(out) / "basins.nc")
+    return sweep
+
+
+def resolve_basin_options(system, params, method, grid, match_tol):
+    """The defaults and checks shared by :func:`basin_sweep` and
+    :func:`~jaxgear.basin_map`: ``(system, params, method, grid, match_tol)`` (the reduced
+    model and the paper's parameters, the default method and its grid, and 5 % of the
+    grid's diagonal when not given)."""
     from .._model import REDUCED
     from .._presets import paper_params
 
@@ -275,27 +302,33 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     if grid.dim != system.dim:
         raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
     method.check(system, grid)
-    param_targets(params, param)
-    vals = sorted_values(values, param)
-    check_values(system, params, (param,), vals[:, None])
     if match_tol is None:
         match_tol = 0.05 * float(np.linalg.norm(np.asarray(grid.upper) - np.asarray(grid.lower)))
     check_number(match_tol, "match_tol", 0, strict_min=True)
-    check_bool(progress, "progress")
-    check_bool(restart, "restart")
-    check_bool(save, "save")
-    settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
-                    params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
-                    match_tol=float(match_tol), version=__version__)
+    return system, params, method, grid, float(match_tol)
+
+
+def analyses_at(system, params_list, grid, method, out, kind: str, settings: dict, restart: bool, batched: bool,
+                progress: bool, label: str) -> list:
+    """The global analysis at every parameter set of ``params_list``, resumable: each
+    result is saved to ``out/parts/value_NNNNN.nc`` (``NNNNN`` its index) as its block
+    of at most :data:`BLOCK_CELLS` cells ends, and a rerun loads the saved ones. With
+    several JAX processes, process ``p`` of ``P`` computes the indices ``i % P == p``
+    (``out`` required) and reads the others' parts. A progress bar (``label``) counts
+    the finished ones."""
+    from .._io import load
+
+    n = len(params_list)
     n_proc, me = process_count(), process_index()
     if n_proc > 1 and out is None:
-        raise ValueError(f"a basin sweep over {n_proc} processes needs out= (a folder every process can read): "
-                         "each process saves its values there and process 0 assembles them.")
-    ck = open_shared_checkpoint(out, "basins", settings, restart)
-    results: list = [None] * len(vals)
-    bar = progress_bar(len(vals), f"basins {param}", progress, unit="value")
+        raise ValueError(f"a basin {'map' if kind == 'basin_map' else 'sweep'} over {n_proc} processes needs out= "
+                         "(a folder every process can read): each process saves its values there and process 0 "
+                         "assembles them.")
+    ck = open_shared_checkpoint(out, kind, settings, restart)
+    results: list = [None] * n
+    bar = progress_bar(n, label, progress, unit="value")
     todo = []
-    for i in range(len(vals)):
+    for i in range(n):
         part = f"value_{i:05d}.nc"
         results[i] = ck.load_result(part, load) if ck.has(part) else None
         if results[i] is None:
@@ -307,7 +340,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     for b in range(0, len(todo), per_block):
         block = todo[b:b + per_block]
         with values_over_processes():  # this process's values: each analysis on this process's devices
-            done = _analyze_values(system, [with_param(params, param, vals[i]) for i in block], grid, method, batched)
+            done = _analyze_values(system, [params_list[i] for i in block], grid, method, batched)
         for i, r in zip(block, done):
             if ck.dir is not None:
                 r.save(ck.path(f"value_{i:05d}.nc"))
@@ -315,49 +348,44 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
         bar.update(len(block))
     bar.close()
     if n_proc > 1:  # the other processes' values, from their parts
-        missing = [i for i in range(len(vals)) if results[i] is None]
+        missing = [i for i in range(n) if results[i] is None]
         wait_for_parts([ck.path(f"value_{i:05d}.nc") for i in missing])
         for i in missing:
             results[i] = ck.load_result(f"value_{i:05d}.nc", load)
             if results[i] is None:
                 raise RuntimeError(f"the part of value {i} written by another process is unreadable; rerun.")
-    sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
-                             float(match_tol), system, params_to_dict(params),
-                             {k: v for k, v in settings.items()
-                              if k not in ("values", "params", "system", "param", "grid", "match_tol")},
-                             __version__)
-    if out is not None and save and me == 0:  # one process writes
-        sweep.save(Path(out) / "basins.nc")
-    return sweep
+    return results
 
 
-def _assemble_basins(results, param, fields, vals, grid, method, match_tol, system, params_dict, settings, version):
-    gids = match_across_values(results, match_tol)
+def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarray]:
+    """The per-result arrays of a sweep or map from the analyses ``results`` and the global
+    ids of their attractors ``gids`` (:func:`match_across_values`): ``shares``, ``period``
+    (-1 where absent), ``points`` (NaN padded), ``n_points`` (each ``(n, G, ...)``),
+    ``labels`` ``(n, *grid.counts)`` int16 (global ids, -1 sink, -2 unresolved),
+    ``sink_share`` and ``unresolved_share`` ``(n,)``."""
+    n = len(results)
     G = int(max([g.max(initial=-1) for g in gids] + [-1])) + 1
-    V = len(vals)
     K = max([len(a.points) for r in results for a in r.attractors] + [1])
-    dim = system.dim
-    shares = np.zeros((V, G))
-    period = np.full((V, G), -1, dtype=np.int64)
-    points = np.full((V, G, K, dim), np.nan)
-    n_points = np.zeros((V, G), dtype=np.int64)
-    labels = np.empty((V, *grid.counts), dtype=np.int16)
-    sink = np.empty(V)
-    unres = np.empty(V)
+    out = dict(shares=np.zeros((n, G)), period=np.full((n, G), -1, dtype=np.int64),
+               points=np.full((n, G, K, dim), np.nan), n_points=np.zeros((n, G), dtype=np.int64),
+               labels=np.empty((n, *grid.counts), dtype=np.int16), sink_share=np.empty(n),
+               unresolved_share=np.empty(n))
     for i, (r, g) in enumerate(zip(results, gids)):
         lut = np.full(len(r.attractors) + 2, -1, dtype=np.int64)  # index local id + 2
         lut[0], lut[1] = -2, -1
         for a, gg in zip(r.attractors, g):
-            shares[i, gg] = a.share
-            period[i, gg] = a.period
             pts = np.asarray(a.points)
-            points[i, gg, : len(pts)] = pts
-            n_points[i, gg] = len(pts)
+            out["shares"][i, gg], out["period"][i, gg], out["n_points"][i, gg] = a.share, a.period, len(pts)
+            out["points"][i, gg, : len(pts)] = pts
             lut[a.id + 2] = gg
-        labels[i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
-        sink[i] = r.n_sink / r.n_cells
-        unres[i] = r.n_unresolved / r.n_cells
-    return BasinSweep(param=param, fields=tuple(fields), values=vals, shares=shares, sink_share=sink,
-                      unresolved_share=unres, period=period, points=points, n_points=n_points, labels=labels,
-                      grid=grid, method=method, match_tol=match_tol, system=system.name,
-                      state_names=tuple(system.state_names), params=params_dict, settings=settings, version=version)
+        out["labels"][i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
+        out["sink_share"][i] = r.n_sink / r.n_cells
+        out["unresolved_share"][i] = r.n_unresolved / r.n_cells
+    return out
+
+
+def _assemble_basins(results, param, fields, vals, grid, method, match_tol, system, params_dict, settings, version):
+    arrays = global_arrays(results, match_across_values(results, match_tol), grid, system.dim)
+    return BasinSweep(param=param, fields=tuple(fields), values=vals, **arrays, grid=grid, method=method,
+                      match_tol=match_tol, system=system.name, state_names=tuple(system.state_names),
+                      params=params_dict, settings=settings, version=version)

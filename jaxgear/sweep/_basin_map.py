@@ -1,0 +1,264 @@
+"""Basin shares over two parameters: the global analysis at every point of a parameter grid.
+
+The map over ``values_y x values_x`` runs :func:`~jaxgear.analyze_global` at every grid
+point (resumable and split over processes as in :func:`~jaxgear.basin_sweep`, whose
+machinery it shares), then gives the attractors global identities across the map: the
+attractors of a point are matched (:func:`jaxgear._matching.match_attractors`, Hausdorff
+distance of the stroboscopic point sets, cyclic-shift invariant) to those of its left
+neighbour ``(iy, ix - 1)`` and its lower neighbour ``(iy - 1, ix)``, the same global
+continuation of attractors as along one parameter, carried over a grid in rows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._cells import CellGrid
+from .._checks import check_bool
+from .._codec import array_field, result_type
+from .._devices import process_index
+from .._format import format_table
+from .._matching import match_attractors
+from .._params import param_targets, params_to_dict
+from .._system import ForcedSystem
+from .._version import __version__
+from ..analysis import AbstractGlobalMethod
+from ._basins import analyses_at, global_arrays, resolve_basin_options
+from ._bifurcation import read_only
+from ._classify import period_label
+from ._values import apply_values, check_values, coord_name, sorted_values
+
+__all__ = ["BasinMap", "basin_map", "match_on_grid"]
+
+
+@result_type
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class BasinMap:
+    """Result of :func:`basin_map`: basin shares of globally identified attractors over a
+    grid of two parameters (``y`` rows, ``x`` columns).
+
+    Attributes:
+        param_x, fields_x, values_x ``(nx,)``; param_y, fields_y, values_y ``(ny,)``.
+        shares: ``(ny, nx, G)`` share of the cell grid in the domain of global attractor
+            g at each parameter point (0 where it does not exist); sink_share,
+            unresolved_share: ``(ny, nx)``.
+        period: ``(ny, nx, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
+        points: ``(ny, nx, G, K, dim)`` its stroboscopic points (NaN padded), n_points
+            ``(ny, nx, G)``.
+        labels: ``(ny, nx, *grid.counts)`` int16: global attractor id of every cell, -1
+            sink, -2 unresolved.
+        grid, method, match_tol, system, state_names, params (base), settings, version.
+    """
+
+    param_x: str
+    fields_x: tuple[str, ...]
+    values_x: np.ndarray = array_field(lambda m: (m.coords_xy[0],))
+    param_y: str = ""
+    fields_y: tuple[str, ...] = ()
+    values_y: np.ndarray = array_field(lambda m: (m.coords_xy[1],))
+    shares: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
+    sink_share: np.ndarray = array_field(lambda m: m.coords_xy[::-1])
+    unresolved_share: np.ndarray = array_field(lambda m: m.coords_xy[::-1])
+    period: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
+    points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor", "point", "state"))
+    n_points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
+    labels: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], *m.grid.axis_names))
+    grid: CellGrid = None  # type: ignore[assignment]
+    method: str = ""
+    match_tol: float = 0.0
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+
+    def __post_init__(self):
+        for f in ("values_x", "values_y", "shares", "sink_share", "unresolved_share", "period", "points",
+                  "n_points", "labels"):
+            object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def n_attractors(self) -> int:
+        """Number of global attractors."""
+        return int(self.shares.shape[-1])
+
+    @property
+    def present(self) -> np.ndarray:
+        """``(ny, nx, G)`` bool: the attractor exists at the parameter point."""
+        return self.period >= 0
+
+    @property
+    def coexisting(self) -> np.ndarray:
+        """``(ny, nx)``: how many attractors coexist at each parameter point."""
+        return self.present.sum(axis=-1)
+
+    @property
+    def dominant(self) -> np.ndarray:
+        """``(ny, nx)``: the global attractor with the largest share at each point, -1
+        where the sink holds more cells than any attractor."""
+        top = np.argmax(self.shares, axis=-1) if self.n_attractors else np.zeros(self.sink_share.shape, int)
+        best = np.take_along_axis(self.shares, top[..., None], -1)[..., 0] if self.n_attractors else 0.0
+        return np.where(best > self.sink_share, top, -1)
+
+    def attractor_label(self, g: int) -> str:
+        """``"P-4"``, or ``"P-4/P-8"`` when its period differs across the map."""
+        ks = sorted(k for k in np.unique(self.period[..., g]).tolist() if k >= 0)
+        return "/".join(period_label(k) for k in ks) or "-"
+
+    def table(self) -> str:
+        """Printable table: per global attractor its period(s), where it exists and its shares."""
+        n = self.sink_share.size
+        rows = []
+        for g in range(self.n_attractors):
+            here = self.present[..., g]
+            s = self.shares[..., g][here]
+            rows.append((g, self.attractor_label(g), f"{int(here.sum())}/{n}", f"{int((self.dominant == g).sum())}",
+                         f"{100 * s.min():.1f}", f"{100 * s.mean():.1f}", f"{100 * s.max():.1f}"))
+        rows.append(("sink", "-", f"{int((self.sink_share > 0).sum())}/{n}", f"{int((self.dominant < 0).sum())}",
+                     f"{100 * self.sink_share.min():.1f}", f"{100 * self.sink_share.mean():.1f}",
+                     f"{100 * self.sink_share.max():.1f}"))
+        return format_table(rows, ("attractor", "label", "present at", "largest at", "min %", "mean %", "max %"))
+
+    def summary(self) -> dict[str, Any]:
+        return dict(kind="basin_map", param_x=self.param_x, fields_x=list(self.fields_x),
+                    values_x=self.values_x.tolist(), param_y=self.param_y, fields_y=list(self.fields_y),
+                    values_y=self.values_y.tolist(), method=self.method, grid=self.grid.to_dict(),
+                    match_tol=self.match_tol, system=self.system, params=self.params, settings=self.settings,
+                    version=self.version,
+                    attractors=[dict(id=g, label=self.attractor_label(g), present_at=int(self.present[..., g].sum()),
+                                     max_share=float(self.shares[..., g].max())) for g in range(self.n_attractors)],
+                    coexisting_counts={str(m): int((self.coexisting == m).sum())
+                                       for m in np.unique(self.coexisting).tolist()},
+                    shares=self.shares.tolist(), sink_share=self.sink_share.tolist(),
+                    unresolved_share=self.unresolved_share.tolist())
+
+    @property
+    def coords_xy(self) -> tuple[str, str]:
+        """Names of the two parameter coordinates in the saved file."""
+        taken = list(self.state_names) + list(self.grid.axis_names) + ["attractor", "point", "state"]
+        cx = coord_name(self.param_x, taken)
+        cy = coord_name(self.param_y, taken + [cx])
+        return cx, (f"{cy}_y" if cy == cx else cy)
+
+    def _coords(self) -> dict:
+        g = self.grid
+        cx, cy = self.coords_xy
+        coords = {cx: (cx, np.asarray(self.values_x), {"long_name": self.param_x, "sets": ",".join(self.fields_x)}),
+                  cy: (cy, np.asarray(self.values_y), {"long_name": self.param_y, "sets": ",".join(self.fields_y)}),
+                  "attractor": ("attractor", np.arange(self.n_attractors)),
+                  "state": ("state", list(self.state_names))}
+        for j, name in enumerate(g.axis_names):
+            coords[name] = (name, g.axis_centres(j), {"long_name": f"cell centre {name}"})
+        return coords
+
+    def _attrs(self) -> dict:
+        return dict(title="jaxgear basin shares over two parameters",
+                    labels_meaning="global attractor id of each cell; -1 sink, -2 unresolved")
+
+    def save(self, path):
+        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
+        return save_result(self, path)
+
+
+def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarray]:
+    """Global id of every attractor at every point of a ``ny x nx`` parameter grid:
+    ``[(A_i,) int array]`` for the results listed row by row (``i = iy * nx + ix``).
+
+    Point by point in that order, the attractors are matched
+    (:func:`jaxgear._matching.match_attractors`, pairs farther than ``match_tol`` not
+    matched) to those of the left neighbour and of the lower neighbour together (each
+    global id once); an unmatched attractor gets a new global id (numbered in order of
+    first appearance).
+    """
+    out: list = [None] * (ny * nx)
+    nxt = 0
+    for i in range(ny * nx):
+        iy, ix = divmod(i, nx)
+        prev, seen = [], set()
+        for j in ([i - 1] if ix > 0 else []) + ([i - nx] if iy > 0 else []):
+            for a, g in zip(results[j].attractors, out[j]):
+                if int(g) not in seen:
+                    seen.add(int(g))
+                    prev.append((int(g), np.asarray(a.points), a.period))
+        cur = [(np.asarray(a.points), a.period) for a in results[i].attractors]
+        j = match_attractors([(p, k) for _, p, k in prev], cur, match_tol)
+        gid = np.array([prev[m][0] if m >= 0 else -1 for m in j], dtype=np.int64)
+        for a in range(len(cur)):
+            if gid[a] < 0:
+                gid[a] = nxt
+                nxt += 1
+        out[i] = gid
+    return out
+
+
+def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y,
+              grid: CellGrid | None = None, *, method: AbstractGlobalMethod | str | None = None,
+              match_tol: float | None = None, progress: bool = True, out=None, restart: bool = False,
+              save: bool = True, batched: bool = False) -> BasinMap:
+    """Basin shares over a grid of two parameters, attractors identified across the grid.
+
+    At every point of ``values_y x values_x`` :func:`~jaxgear.analyze_global` runs
+    ``method`` on ``grid`` (default: the method's grid; for the gear model the paper's
+    region D). The attractors are given global ids by :func:`match_on_grid`: matched to
+    those of the left and lower neighbours by the Hausdorff distance of their
+    stroboscopic point sets, pairs farther than ``match_tol`` not matched (default: 5 %
+    of the diagonal of the grid's box). A map of ``ny x nx`` points costs ``ny * nx``
+    global analyses: on the paper grid (90,000 cells) about 5 to 10 s each on a 2-core
+    CPU.
+
+    Args:
+        param_x, values_x, param_y, values_y: two parameters (canonical or grouped names,
+            as in :func:`~jaxgear.bifurcation_diagram`; they must set different fields)
+            and their values (sorted, distinct).
+        method: a global-analysis method object (default :class:`~jaxgear.Direct`) or
+            its name.
+        out: kill-and-resume folder: each point's :class:`~jaxgear.GlobalResult` is saved
+            to ``DIR/parts/value_NNNNN.nc`` (``NNNNN = iy * nx + ix``) when done; the final
+            ``DIR/basin_map.nc`` (``save=False``: only the parts); restart: discard a
+            folder of other settings.
+        batched: run the points of a block in one lane pool (as in
+            :func:`~jaxgear.basin_sweep`; the same result).
+
+    Run as several JAX processes (:func:`jaxgear._devices.initialize`), process ``p`` of
+    ``P`` computes the points ``i % P == p`` into ``out`` (required then), every process
+    assembles the map from the parts, and only process 0 writes ``basin_map.nc``. A
+    killed process loses the point it was computing; the same call rerun resumes.
+
+    Returns:
+        :class:`BasinMap`.
+    """
+    system, params, method, grid, match_tol = resolve_basin_options(system, params, method, grid, match_tol)
+    fields_x, fields_y = param_targets(params, param_x), param_targets(params, param_y)
+    if set(fields_x) & set(fields_y):
+        raise ValueError(f"param_x={param_x!r} and param_y={param_y!r} set the same field.")
+    vx, vy = sorted_values(values_x, param_x), sorted_values(values_y, param_y)
+    names = (param_x, param_y)
+    VV = np.stack(np.meshgrid(vx, vy, indexing="xy"), axis=-1).reshape(-1, 2)  # (ny * nx, 2), y major
+    check_values(system, params, names, VV)
+    check_bool(progress, "progress")
+    check_bool(restart, "restart")
+    check_bool(save, "save")
+    settings = dict(kind="basin_map", system=system.name, param_x=param_x, values_x=vx.tolist(), param_y=param_y,
+                    values_y=vy.tolist(), params=params_to_dict(params), grid=grid.to_dict(),
+                    method=method.to_dict(), match_tol=match_tol, version=__version__)
+    results = analyses_at(system, [apply_values(params, names, v) for v in VV], grid, method, out, "basin_map",
+                          settings, restart, batched, progress, f"basin map {param_x} x {param_y}")
+    ny, nx = len(vy), len(vx)
+    arrays = global_arrays(results, match_on_grid(results, ny, nx, match_tol), grid, system.dim)
+    bmap = BasinMap(
+        param_x=param_x, fields_x=fields_x, values_x=vx, param_y=param_y, fields_y=fields_y, values_y=vy,
+        **{k: a.reshape(ny, nx, *a.shape[1:]) for k, a in arrays.items()}, grid=grid, method=method.name,
+        match_tol=match_tol, system=system.name, state_names=tuple(system.state_names),
+        params=params_to_dict(params),
+        settings={k: v for k, v in settings.items()
+                  if k not in ("values_x", "values_y", "params", "system", "param_x", "param_y", "grid", "match_tol")},
+        version=__version__)
+    if out is not None and save and process_index() == 0:  # one process writes
+        bmap.save(Path(out) / "basin_map.nc")
+    return bmap

@@ -1,0 +1,184 @@
+"""Basin shares over two parameters (jaxgear.basin_map).
+
+References that do not come from the map's code:
+- the global analysis at each parameter point alone (analyze_global);
+- a basin sweep along one parameter (a row of the map, whose ids come from the left
+  neighbours only, is that sweep);
+- hand-built attractor sets whose global ids are known (the matching over the grid);
+- an uninterrupted run (kill-and-resume).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import jaxgear as jg
+from jaxgear import Attractor, basin_map, basin_sweep
+from jaxgear.sweep import _basins as basins_module
+from jaxgear.sweep import match_on_grid
+
+DUFF = dict(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3)
+GRID = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
+METHOD = jg.Direct(integrator=jg.RK4(64), max_period=4)
+OMEGA = [1.0, 1.3, 1.4]  # one attractor at 1.0, two (the hysteresis interval) at 1.3 and 1.4
+GAMMA = [0.25, 0.3]
+
+
+@pytest.fixture(scope="module")
+def duffing_map():
+    return basin_map(jg.DUFFING, jg.DuffingParams(**DUFF, omega=1.3), "omega", OMEGA, "gamma", GAMMA, GRID,
+                     method=METHOD, progress=False)
+
+
+def _assert_point_is(m, iy, ix, r):
+    """The map's point ``(iy, ix)`` holds the analysis ``r``: the same partition of the
+    cells (local id <-> global id one to one), shares, periods, sink and unresolved."""
+    lut = {}
+    for a, b in zip(np.asarray(r.labels).ravel(), m.labels[iy, ix].ravel()):
+        assert lut.setdefault(int(a), int(b)) == int(b)
+    assert len(set(lut.values())) == len(lut)
+    assert int(m.present[iy, ix].sum()) == len(r.attractors)
+    for a in r.attractors:
+        g = lut[a.id]
+        assert m.shares[iy, ix, g] == a.share and m.period[iy, ix, g] == a.period
+    assert m.sink_share[iy, ix] == r.n_sink / r.n_cells
+    assert m.unresolved_share[iy, ix] == r.n_unresolved / r.n_cells
+
+
+def test_every_point_is_the_analysis_there_alone(duffing_map):
+    m = duffing_map
+    assert m.shares.shape[:2] == (2, 3) and m.labels.shape == (2, 3, 10, 10)
+    np.testing.assert_allclose(m.shares.sum(-1) + m.sink_share + m.unresolved_share, 1.0)
+    assert m.coexisting.tolist() != [[m.coexisting[0, 0]] * 3] * 2  # the number of attractors varies
+    for iy, gamma in enumerate(GAMMA):
+        for ix, omega in enumerate(OMEGA):
+            r = jg.analyze_global(jg.DUFFING, jg.DuffingParams(**dict(DUFF, gamma=gamma), omega=omega), GRID,
+                                  METHOD, progress=False)
+            _assert_point_is(m, iy, ix, r)
+
+
+def test_a_row_is_a_basin_sweep(duffing_map):
+    """The first row's ids come from left neighbours only: it is the basin sweep along x,
+    ids included; the ids of the next row continue those of the first (the P-1 branches
+    of the Duffing move little between the two amplitudes)."""
+    m = duffing_map
+    s = basin_sweep(jg.DUFFING, jg.DuffingParams(**dict(DUFF, gamma=GAMMA[0]), omega=1.3), "omega", OMEGA, GRID,
+                    method=METHOD, progress=False)
+    G = s.n_attractors
+    np.testing.assert_array_equal(m.labels[0], s.labels)
+    np.testing.assert_array_equal(m.shares[0, :, :G], s.shares)
+    assert not m.present[0, :, G:].any()
+    assert m.n_attractors == G  # the second row finds no attractor the first did not
+
+
+def _results(*points):
+    """Fake analyses: one per parameter point, each a list of attractor point sets."""
+    out = []
+    for atts in points:
+        a = tuple(Attractor(id=i, period=len(p), points=np.asarray(p, float), section_points=np.zeros((0, 2)),
+                            cell_count=1, share=0.5, residual=0.0, periodic_cells=np.zeros(0, np.int64))
+                  for i, p in enumerate(atts))
+        out.append(type("R", (), {"attractors": a})())
+    return out
+
+
+def test_ids_come_from_the_left_and_the_lower_neighbour():
+    """On a 2 x 2 grid: D appears at (0, 1) and is found again at (1, 1) through the lower
+    neighbour only (the left one, (1, 0), lacks it); A, present everywhere, keeps one id
+    though both neighbours hold it; E, far from everything, gets the next id."""
+    A, D, E = [[0.0, 0.0]], [[5.0, 5.0]], [[9.0, -9.0]]
+    near = lambda p: [[x + 0.05 for x in q] for q in p]  # noqa: E731
+    res = _results([A], [A, D], [near(A)], [E, near(D), near(A)])
+    ids = match_on_grid(res, ny=2, nx=2, match_tol=0.5)
+    assert [g.tolist() for g in ids] == [[0], [0, 1], [0], [2, 1, 0]]
+    # by the left neighbour alone (one row), D at the end would be new
+    assert match_on_grid([res[2], res[3]], ny=1, nx=2, match_tol=0.5)[1].tolist() == [1, 2, 0]
+
+
+def test_kill_and_resume(tmp_path, monkeypatch):
+    class Kill(BaseException):
+        pass
+
+    p = jg.DuffingParams(**DUFF, omega=1.3)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
+    args = ("omega", [1.3, 1.4], "gamma", [0.25, 0.3], grid)
+    basin_map(jg.DUFFING, p, *args, out=tmp_path / "full", **kw)
+    real, calls, kill = basins_module._analyze_values, [], [True]
+
+    def analyze(system, params_list, *a, **k):
+        calls.append([(float(q.omega), float(q.gamma)) for q in params_list])
+        if kill[0] and len(calls) == 2:
+            raise Kill()
+        return real(system, params_list, *a, **k)
+
+    monkeypatch.setattr(basins_module, "_analyze_values", analyze)
+    monkeypatch.setattr(basins_module, "BLOCK_CELLS", 2 * grid.n_cells)  # blocks of two points: a row
+    with pytest.raises(Kill):
+        basin_map(jg.DUFFING, p, *args, out=tmp_path / "run", **kw)
+    assert calls == [[(1.3, 0.25), (1.4, 0.25)], [(1.3, 0.3), (1.4, 0.3)]]
+    calls.clear()
+    kill[0] = False
+    basin_map(jg.DUFFING, p, *args, out=tmp_path / "run", **kw)
+    assert calls == [[(1.3, 0.3), (1.4, 0.3)]]  # the killed block only
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "full" / "basin_map.nc", engine="h5netcdf") as a, \
+            xr.open_dataset(tmp_path / "run" / "basin_map.nc", engine="h5netcdf") as b:
+        assert a.identical(b)
+    loaded = jg.load(tmp_path / "run" / "basin_map.nc", expected="BasinMap")
+    assert loaded.coords_xy == ("omega", "gamma") and loaded.labels.shape == (2, 2, 5, 5)
+    with pytest.raises(ValueError, match="values_x|omega"):  # the same folder, other values
+        basin_map(jg.DUFFING, p, "omega", [1.3, 1.5], "gamma", [0.25, 0.3], grid, out=tmp_path / "run", **kw)
+
+
+def test_bad_input():
+    p = jg.paper_params()
+    grid = jg.CellGrid.paper((2, 2, 2))
+    with pytest.raises(ValueError, match="same field"):
+        basin_map(jg.REDUCED, p, "b", [4, 5], "b_sp", [4, 5], grid)
+    with pytest.raises(ValueError, match="empty"):
+        basin_map(jg.REDUCED, p, "b", [4, 5], "kappa_amp", [], grid)
+    with pytest.raises(ValueError, match="valid names"):
+        basin_map(jg.REDUCED, p, "b", [4, 5], "backlash", [1, 2], grid)
+    with pytest.raises(ValueError, match="b_sp"):  # a negative backlash, named
+        basin_map(jg.REDUCED, p, "b", [-1, 5], "kappa_amp", [0.3, 0.4], grid)
+
+
+def test_figures(duffing_map):
+    from jaxgear import plotting
+
+    m = duffing_map
+    fig = plotting.plot_basin_map(m)
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == [f"{g}: {m.attractor_label(g)}" for g in sorted(set(m.dominant.ravel().tolist()))]
+    assert len(ax.texts) == m.dominant.size  # the share written in every box
+    fig = plotting.plot_basin_map(m, "all")
+    assert [a.get_title() for a in fig.axes if a.get_visible() and a.get_title()] == [
+        f"{g}: {m.attractor_label(g)}" for g in range(m.n_attractors)]
+    with pytest.raises(ValueError, match="global id"):
+        plotting.plot_basin_map(m, m.n_attractors)
+
+
+def test_cli(tmp_path, capsys):
+    from jaxgear.cli import main
+
+    out = tmp_path / "map"
+    rc = main(["sweep", "--param", "kappa_amp", "--values", "0.36:0.37:2", "--param2", "b", "--values2", "4:5:2",
+               "--kind", "basins", "--grid", "3,2,3", "--steps-per-period", "50", "--max-period", "8",
+               "--out", str(out), "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "largest at" in text and "basin_map.nc" in text
+    m = jg.load(out / "basin_map.nc", expected="BasinMap")
+    assert m.labels.shape == (2, 2, 3, 2, 3) and m.fields_x == ("kappa_sp_amp", "kappa_rp_amp")
+    assert m.fields_y == ("b_sp", "b_rp")
+    assert (out / "basin_map.png").is_file() and (out / "basin_map_shares.png").is_file()
+    assert main(["sweep", "--param", "b", "--values", "4:5:2", "--param2", "b_sp", "--values2", "4:5:2",
+                 "--kind", "basins", "--out", str(tmp_path / "x")]) == 2
+    assert "same field" in capsys.readouterr().err
+    assert main(["sweep", "--param", "b", "--values", "4:5:2", "--param2", "kappa_amp", "--out",
+                 str(tmp_path / "y")]) == 2
+    assert "--values2" in capsys.readouterr().err
