@@ -228,6 +228,35 @@ def test_direct_shortcuts_do_not_change_labels():
     assert fast.mean_periods < slow.mean_periods  # capture decides cells before a full recurrence test
 
 
+def test_direct_never_reports_an_unstable_cycle():
+    """Just past the P-8 -> P-16 period doubling of the gear preset (kappa_amp = 0.33,
+    b = 6), states started 1e-5 from the unstable P-8 parent shadow it for hundreds of
+    periods, long enough to recur on it within the period tolerance. The direct method
+    must not call it an attractor: every attractor it returns has its Floquet multipliers
+    (jax.jacfwd, the shooting module: another code path than the method's central
+    differences) inside the unit circle, and every state gets the attractor that 4,000
+    periods of plain integration reach."""
+    p = jg.with_param(jg.with_param(jg.paper_params(), "kappa_amp", 0.33), "b", 6.0)
+    near = [[6.353, -0.096, 10.21, -0.792]]  # a point near the P-8 cycle (from the P-16 attractor)
+    p8 = jg.periodic_orbit(jg.REDUCED, p, near, period=8)
+    assert int(p8.status[0]) == int(jg.Status.CONVERGED) and int(p8.min_period[0]) == 8
+    assert np.abs(np.asarray(p8.multipliers[0])).max() > 1.05  # the premise: the P-8 is unstable
+    X = np.asarray(p8.point[0]) + 1e-5 * np.random.default_rng(1).standard_normal((6, 4))
+    labels, atts, _ = jg.Direct().label_states(jg.REDUCED, p, X)
+    assert len(atts) >= 1 and np.all(labels >= 0)
+    for pts, k, _ in atts:
+        mu = np.asarray(jg.floquet_multipliers(jg.REDUCED, p, np.asarray(pts)[0], period=k))
+        assert np.abs(mu).max() < 1.0, (k, np.abs(mu).max())
+    x = X
+    for _ in range(8):  # 4,000 periods
+        x = np.asarray(jg.stroboscopic_orbit(jg.REDUCED, p, x, n_points=500))[:, -1]
+    tail = np.asarray(jg.stroboscopic_orbit(jg.REDUCED, p, x, n_points=32))  # (6, 32, 4)
+    dist = np.array([[np.linalg.norm(t[:, None] - np.asarray(pts)[None], axis=-1).min(axis=1).max()
+                      for pts, _, _ in atts] for t in tail])  # (states, attractors)
+    assert dist.min(axis=1).max() < 1e-4  # every state ends on a reported attractor
+    np.testing.assert_array_equal(labels, dist.argmin(axis=1))
+
+
 def test_capture_radius_stays_below_attractor_separation():
     from jaxgear.analysis._direct import capture_radius as _capture_radius
 

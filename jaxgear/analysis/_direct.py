@@ -5,6 +5,14 @@ integrated on the stroboscopic map until it escapes (the sink), recurs with a pe
 ``<= max_period`` (a new or known attractor) or shadows a known attractor's cycle
 (capture), or until ``max_periods`` periods have passed (unresolved). The reference for
 the cell methods, and the default method.
+
+A cycle recognised by recurrence is an attractor only when it is stable: near a
+period-doubling a trajectory can shadow the unstable parent cycle (multiplier just
+beyond -1) for hundreds of periods, long enough to recur on it within ``period_tol``.
+Every cycle found is therefore checked by its largest Floquet multiplier
+(:func:`~jaxgear.analysis._orbits.largest_multipliers`); the cells of an unstable one are
+integrated again from their centres with that cycle as a repeller (lanes that shadow it
+integrate on) until they reach a stable attractor.
 """
 
 from __future__ import annotations
@@ -17,10 +25,20 @@ import numpy as np
 from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._method import AbstractGlobalMethod, Classification, register_method
-from ._orbits import refine_orbits
-from ._pool import DEFAULT_PILOT, prepare_pools, run_pools
+from ._orbits import largest_multipliers, refine_orbits
+from ._pool import DEFAULT_PILOT, prepare_pools, run_pool, run_pools
+from ._result import UNRESOLVED
 
-__all__ = ["Direct"]
+__all__ = ["Direct", "STABLE_BELOW"]
+
+STABLE_BELOW = 1.0 + 1e-3
+"""A cycle is an attractor when its largest Floquet multiplier modulus is below this
+(the margin covers the central differences' error; a cycle this close to |lambda| = 1 is
+at a bifurcation, where either answer is within the model's resolution)."""
+
+REPELLER_PASSES = 3
+"""Times the cells of unstable cycles are integrated again (a pass can find another
+unstable cycle); cells still on one after the last pass are unresolved."""
 
 
 @register_method
@@ -33,7 +51,9 @@ class Direct(AbstractGlobalMethod):
     its last k stroboscopic points follow the whole cycle of a known P-k attractor within
     ``capture_radius`` without moving away from it, when it recurs with a period
     ``<= max_period``, or after ``max_periods`` periods (unresolved); freed lanes take the
-    next cells.
+    next cells. A recurring cycle whose largest Floquet multiplier is not below
+    :data:`STABLE_BELOW` is not an attractor: its cells run again with it as a repeller
+    (see the module).
 
     Attributes:
         round_periods: periods per round between checks (>= 1).
@@ -103,11 +123,53 @@ class Direct(AbstractGlobalMethod):
                            merge_tol=self.merge_tol, progress=progress, label=label)
         out = []
         for params, (labels, atts, used) in zip(params_list, pooled):
-            refined = refine_orbits(system, params, [(pts[-1], k) for pts, k in atts], self.integrator, settle=200,
-                                    max_period=self.max_period)
-            res = [(pts, k, r) for (pts, r), (_, k) in zip(refined, atts)]
+            res = self._refined(system, params, atts)
+            labels, res, used = self._stable_only(system, params, np.asarray(X), labels, res, used, progress)
             out.append((labels, res, float(used.mean()) if len(used) else 0.0))
         return out
+
+    def _refined(self, system, params, atts) -> list:
+        """``[(points, k, residual)]`` of the pool's cycles ``[(points, k)]`` (200 periods on)."""
+        refined = refine_orbits(system, params, [(pts[-1], k) for pts, k in atts], self.integrator, settle=200,
+                                max_period=self.max_period)
+        return [(pts, k, r) for (pts, r), (_, k) in zip(refined, atts)]
+
+    def _stable_only(self, system, params, X, labels, res, used, progress: bool):
+        """Drop the unstable cycles of ``res`` (largest multiplier not below
+        :data:`STABLE_BELOW`): their cells are labelled again from their states in ``X``,
+        in a pool holding the stable attractors first and every unstable cycle met so far
+        as a repeller; cycles found there are checked the same way (at most
+        :data:`REPELLER_PASSES` passes; then the cells left on an unstable cycle are
+        unresolved). Returns ``(labels, res, used)`` with the attractors renumbered in
+        their order, the new ones last, and the periods of both passes in ``used``."""
+        repellers = []
+        for passes in range(REPELLER_PASSES + 1):
+            mu = largest_multipliers(system, params, [(p, k) for p, k, _ in res], self.integrator, self.max_period)
+            bad = np.flatnonzero(~(mu < STABLE_BELOW))
+            if not len(bad):
+                break
+            keep = np.flatnonzero(mu < STABLE_BELOW)
+            lut = np.full(len(res), -1, np.int64)
+            lut[keep] = np.arange(len(keep))
+            cells = np.flatnonzero(np.isin(labels, bad))
+            labels = np.where(labels >= 0, lut[np.maximum(labels, 0)], labels)
+            repellers += [(res[i][0], -res[i][1]) for i in bad]
+            res = [res[i] for i in keep]
+            if passes == REPELLER_PASSES:  # still on unstable cycles: not decided
+                labels[cells] = UNRESOLVED
+                break
+            seeds = [(p, k) for p, k, _ in res] + repellers
+            lab, atts, use = run_pool(system, params, X[cells], self.integrator, chunk=self.chunk_size,
+                                      R=self.round_periods, max_periods=self.max_periods,
+                                      max_period=self.max_period, tol=self.period_tol,
+                                      capture=self.capture_radius, bound=self.escape_bound, merge_tol=self.merge_tol,
+                                      progress=progress, pilot=0, attractors=seeds, label="direct (off repellers)")
+            found = atts[len(seeds):]  # slots after the seeds: cycles met on the way
+            labels[cells] = np.where(lab >= len(seeds), lab - len(seeds) + len(res), lab)
+            used = used.copy()
+            used[cells] += use
+            res = res + self._refined(system, params, found)
+        return labels, res, used
 
 
 def capture_radius(attractors: list, capture) -> float:

@@ -12,8 +12,8 @@ from .._kept import kept_jit
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
-__all__ = ["detect_period", "follow", "refine_orbits", "section_points", "section_points_of",
-           "advance_states"]
+__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "section_points",
+           "section_points_of", "advance_states"]
 
 
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
@@ -100,6 +100,39 @@ def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_perio
         res = float(np.linalg.norm(orb[i, 2 * k - 1] - orb[i, k - 1]))
         start = int(np.argmin(pts[:, 0]))
         out.append((np.roll(pts, -start, axis=0), res))
+    return out
+
+
+FD_STEP = 1e-6
+"""Relative step of the central differences of :func:`largest_multipliers` (times
+``1 + max |x|``)."""
+
+
+def largest_multipliers(system, params, cycles, integrator, max_period: int | None = None) -> np.ndarray:
+    """The largest modulus of the Floquet multipliers of each cycle ``(points (k, dim), k)``
+    (paper §4.1: asymptotically stable when it is below 1): the eigenvalues of the
+    monodromy matrix of the k-fold stroboscopic map at the cycle's first point, by
+    central differences (step :data:`FD_STEP` ``(1 + max |x|)`` per coordinate). All
+    cycles run in one batch of ``2 dim`` states each, ``2 max_period`` periods long, as
+    in :func:`refine_orbits` (``max_period`` bounds the periods, default the largest
+    ``k``). A cycle whose perturbed states blow up gets ``inf``. Returns ``(n,)``."""
+    if not cycles:
+        return np.zeros(0)
+    ks = [int(k) for _, k in cycles]
+    x0 = np.stack([np.asarray(p, np.float64).reshape(k, -1)[0] for (p, _), k in zip(cycles, ks)])
+    n, dim = x0.shape
+    h = FD_STEP * (1.0 + np.abs(x0).max(axis=1))  # (n,)
+    E = np.eye(dim)[None] * h[:, None, None]  # (n, dim, dim): row j perturbs coordinate j
+    X = np.concatenate([x0[:, None] + E, x0[:, None] - E], axis=1).reshape(-1, dim)  # (n 2 dim, dim)
+    K = max(ks) if max_period is None else int(max_period)
+    orb = np.asarray(stroboscopic_orbit(system, params, jax.device_put(_pad_rows(X)), n_points=2 * K,
+                                        integrator=integrator))
+    out = np.full(n, np.inf)
+    for i, k in enumerate(ks):
+        end = orb[2 * dim * i: 2 * dim * (i + 1), k - 1]  # P^k of x0 + h e_j, then of x0 - h e_j
+        J = (end[:dim] - end[dim:]).T / (2.0 * h[i])  # column j: d P^k / d x_j
+        if np.all(np.isfinite(J)):
+            out[i] = float(np.abs(np.linalg.eigvals(J)).max())
     return out
 
 

@@ -57,6 +57,9 @@ __all__ = ["PoolState", "run_pool", "run_pools", "prepare_pools", "NOT_DONE"]
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
 _SINK, _UNRESOLVED = -1, -2
+_ON_REPELLER = -4
+"""A round's mark of a lane that shadows a repeller (never a label): it is neither
+decided nor registers a new attractor, and integrates on."""
 
 
 class PoolState(NamedTuple):
@@ -75,7 +78,7 @@ class PoolState(NamedTuple):
     n_done: jax.Array  # () int32
     clock: jax.Array  # () int32
     att_pts: jax.Array  # (V, A, M, dim) attractor points in cycle order (NaN padded), per parameter row
-    att_k: jax.Array  # (V, A) int32 periods (0: empty slot)
+    att_k: jax.Array  # (V, A) int32 periods (0: empty slot; -k: a repeller, an unstable P-k cycle)
     n_att: jax.Array  # (V,) int32
     radius: jax.Array  # (V,) capture radius
     n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
@@ -178,9 +181,12 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
     def against(v, a, label):
         """Lanes captured by (or recurring onto) the attractor in slot ``a`` of row ``v``'s
         table, a P-k cycle ``P (M, dim)``: every quantity of the attractor is a scalar or
-        broadcast over the lanes (no per-lane gather of tables or of the ring)."""
+        broadcast over the lanes (no per-lane gather of tables or of the ring). A
+        repeller's slot (period ``-k``) marks its lanes ``_ON_REPELLER`` instead: they
+        integrate on (an attractor's slot still takes them)."""
         P = s.att_pts[v, a]  # (M, dim)
-        k = s.att_k[v, a]
+        repeller = s.att_k[v, a] < 0
+        k = jnp.abs(s.att_k[v, a])
         valid = i < k  # (M,)
         dn = jnp.sqrt(_sqdist(Y[None], P[:, :, None]))  # (M, L)
         dn = jnp.where(valid[:, None], dn, jnp.inf)
@@ -208,7 +214,7 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
         hit = cap | same
         if V > 1:
             hit = hit & (s.row == v)  # the lanes of row v; a lane's label is a slot of its row's table
-        return jnp.where((label < 0) & hit, a, label).astype(jnp.int32)
+        return jnp.where((label < 0) & hit, jnp.where(repeller, _ON_REPELLER, a), label).astype(jnp.int32)
 
     def against_row(v, label):
         return jax.lax.fori_loop(0, s.n_att[v], lambda a, label: against(v, a, label), label)
@@ -220,8 +226,8 @@ def _decide(o: _Options, s: PoolState, X, Xrow, n: int) -> PoolState:
         hi = jnp.max(jnp.where(busy, s.row, -1))
         label = jax.lax.fori_loop(lo, hi + 1, against_row, label)
 
-    # a recurring lane on no known attractor of its row registers a new one (one per row and round)
-    new = rec & (label < 0)
+    # a recurring lane on no known attractor or repeller of its row registers a new one (one per row and round)
+    new = rec & (label == -1)
     # the capture radius follows its row's table: computed for every row in the pool's first
     # round (it starts at 0), then only for a row whose table grew
     radius = jax.lax.cond(s.rounds == 0, lambda: jax.vmap(lambda p, k: _capture_radius(p, k, o.capture))(
@@ -387,7 +393,9 @@ def run_pool(system, params, X: np.ndarray, integrator, *, chunk: int, R: int, m
     until each of its states is decided, so the common attractors are known (and capture
     decides the bulk early) when the other states start with the pilot's attractors.
     ``attractors``: known ``(points, k)`` cycles (``k <= max_period``) that take the first
-    slots, in that order.
+    slots, in that order; a period ``-k`` makes the cycle a repeller (an unstable P-k
+    cycle: lanes that shadow it are not decided there and integrate on), listed in the
+    returned cycles with its period ``-k``.
     """
     return run_pools(system, [params], [X], integrator, chunk=chunk, R=R, max_periods=max_periods,
                      max_period=max_period, tol=tol, capture=capture, bound=bound, merge_tol=merge_tol,
@@ -458,7 +466,7 @@ def run_pools(system, params_list, X_list, integrator, *, chunk: int, R: int, ma
     att_pts, att_k, n_att = (np.asarray(a) for a in jax.device_get(att))
     out = []
     for v in range(V):
-        atts = [(att_pts[v, a, : int(att_k[v, a])], int(att_k[v, a])) for a in range(int(n_att[v]))]
+        atts = [(att_pts[v, a, : abs(int(att_k[v, a]))], int(att_k[v, a])) for a in range(int(n_att[v]))]
         out.append((labels[v], atts, used[v]))
     return out
 
@@ -483,10 +491,11 @@ def _stack(params_list):
 def _seed_attractors(attractors, M: int, dim: int):
     """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,))`` of ``V``
     values holding each value's known cycles first (``A``: 8 slots, or the next power of
-    two that holds them)."""
+    two that holds them); a cycle of period ``-k`` is a repeller (an unstable P-k cycle
+    whose lanes integrate on)."""
     known = [[(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in att] for att in attractors]
-    if any(not 0 < k <= M for kn in known for _, k in kn):
-        raise ValueError(f"known attractors must have periods 1..{M}")
+    if any(not 0 < abs(k) <= M for kn in known for _, k in kn):
+        raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M})")
     most = max(len(kn) for kn in known)
     A = max(8, 1 << max(0, most - 1).bit_length())
     V = len(known)
@@ -494,7 +503,7 @@ def _seed_attractors(attractors, M: int, dim: int):
     ks = np.zeros((V, A), np.int32)
     for v, kn in enumerate(known):
         for a, (p, k) in enumerate(kn):
-            pts[v, a, :k] = p[:k]
+            pts[v, a, :abs(k)] = p[:abs(k)]
             ks[v, a] = k
     return jax.device_put((pts, ks, np.array([len(kn) for kn in known], np.int32)))
 

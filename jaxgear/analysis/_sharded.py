@@ -244,7 +244,8 @@ def _merge(n0, blocks, merge_tol: float):
             offset += len(lab)
         for _, b, a in sorted(cands):
             pts, k = blocks[b][1][2][v, a], int(blocks[b][1][3][v, a])
-            same = [g for g, (p, kk) in enumerate(reps) if same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
+            same = [g for g, (p, kk) in enumerate(reps)  # (a repeller, kk < 0, is never the same)
+                    if kk > 0 and same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
             if same:
                 luts[b][v, a] = same[0]
             else:
