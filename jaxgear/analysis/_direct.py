@@ -159,11 +159,16 @@ class Direct(AbstractGlobalMethod):
                 labels[cells] = UNRESOLVED
                 break
             seeds = [(p, k) for p, k, _ in res] + repellers
-            lab, atts, use = run_pool(system, params, X[cells], self.integrator, chunk=self.chunk_size,
+            # the queue padded to a power of two with copies of its last state, so that the
+            # pools of such passes share a few compiled shapes (across the values of a sweep)
+            size = max(64, 1 << (len(cells) - 1).bit_length())
+            queue = np.concatenate([cells, np.repeat(cells[-1:], size - len(cells))])
+            lab, atts, use = run_pool(system, params, X[queue], self.integrator, chunk=self.chunk_size,
                                       R=self.round_periods, max_periods=self.max_periods,
                                       max_period=self.max_period, tol=self.period_tol,
                                       capture=self.capture_radius, bound=self.escape_bound, merge_tol=self.merge_tol,
                                       progress=progress, pilot=0, attractors=seeds, label="direct (off repellers)")
+            lab, use = lab[: len(cells)], use[: len(cells)]
             found = atts[len(seeds):]  # slots after the seeds: cycles met on the way
             labels[cells] = np.where(lab >= len(seeds), lab - len(seeds) + len(res), lab)
             used = used.copy()
