@@ -351,13 +351,15 @@ def test_two_processes_analyze_the_cells_of_one(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("command", [["analyze", "--grid", "6,4,8"],
                                      ["sweep", "--kind", "basins", "--param", "b", "--values", "4:5:2", "--grid", "3,2,3"],
+                                     ["sweep", "--kind", "basins", "--param", "kappa_amp", "--values", "0.36:0.37:2",
+                                      "--param2", "b", "--values2", "4:5:3", "--grid", "3,2,3"],
                                      ["sweep", "--kind", "bifurcation", "--param", "b", "--values", "4:6:5",
                                       "--starts", "3", "--transient", "20", "--record", "40",
                                       "--direction", "all"]])
 def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
-    """`jaxgear analyze|sweep --distributed` (basins, bifurcation) as two processes
-    (coordinator from the JAX_* variables): process 0 writes the result file of one
-    process."""
+    """`jaxgear analyze|sweep --distributed` (basins, a basin map, bifurcation) as two
+    processes (coordinator from the JAX_* variables): process 0 writes the result file of
+    one process."""
     import jaxgear as jg
 
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
@@ -369,10 +371,10 @@ def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
     _finish([subprocess.Popen(base + ["--out", str(tmp_path / "two"), "--distributed"], cwd=ROOT,
                               env=dict(env, JAX_PROCESS_ID=str(i)), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
              for i in range(2)])
-    if command[0] == "sweep":  # basins.nc, bifurcation.nc: the whole file
+    if command[0] == "sweep":  # basins.nc, basin_map.nc, bifurcation.nc: the whole file
         from test_sweep import _assert_same_file
 
-        name = f"{command[2]}.nc"
+        name = "basin_map.nc" if "--param2" in command else f"{command[2]}.nc"
         _assert_same_file(tmp_path / "one" / name, tmp_path / "two" / name)
     else:
         one, two = jg.load(tmp_path / "one" / "result.nc"), jg.load(tmp_path / "two" / "result.nc")

@@ -142,7 +142,8 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
                           progress: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> list[GlobalResult]:
     """:func:`analyze_global` at several parameter sets of one system on one grid (the
     arguments already checked): one :class:`~jaxgear.GlobalResult` per set, each the
-    result :func:`analyze_global` gives at that set alone.
+    result :func:`analyze_global` gives at that set alone (the labels: whenever the
+    set's pilot sample finds all of its attractors; see :func:`~jaxgear.basin_sweep`).
 
     A method with ``classify_values`` (:class:`~jaxgear.Direct`) runs every value in one
     lane pool, and the label uncertainties in one pool each; other methods run value

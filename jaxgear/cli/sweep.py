@@ -120,7 +120,8 @@ def add_parser(sub) -> None:
     p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
     p.add_argument("--one-pool", action="store_true",
                    help="basins, direct method: run the values in one lane pool over (value, cell) pairs instead of "
-                   "one analysis after another (the same result; a killed sweep loses the values of the pool)")
+                   "one analysis after another (the same attractors and, but for the odd boundary cell, labels; a killed sweep "
+                   "loses the values of the pool)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--distributed", action="store_true",

@@ -223,7 +223,7 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
             ``DIR/basin_map.nc`` (``save=False``: only the parts); restart: discard a
             folder of other settings.
         batched: run the points of a block in one lane pool (as in
-            :func:`~jaxgear.basin_sweep`; the same result).
+            :func:`~jaxgear.basin_sweep`).
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), process ``p`` of
     ``P`` computes the points ``i % P == p`` into ``out`` (required then), every process

@@ -218,7 +218,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
     the method's grid; for the gear model the paper's region D), values in blocks of at
     most :data:`BLOCK_CELLS` cells (``batched``: each block in one lane pool,
-    :func:`~jaxgear.analysis.analyze_global_values`, the same result per value). The attractors of
+    :func:`~jaxgear.analysis.analyze_global_values`). The attractors of
     neighbouring values are matched by the Hausdorff distance of their stroboscopic
     point sets (cyclic-shift invariant, the idea of global continuation of attractors):
     greedily, closest pairs first, pairs farther than ``match_tol`` not matched (default:
@@ -235,8 +235,12 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             (``save=False``: only the parts; the command line writes the result with its
             summary and figures as one set); restart: discard a folder of other settings.
         batched: run the values of a block in one lane pool over (value, cell) pairs
-            (:func:`~jaxgear.analysis.analyze_global_values`, identical results) instead
-            of one analysis after another. Off by default: on the 2-core CPU of the
+            (:func:`~jaxgear.analysis.analyze_global_values`) instead of one analysis
+            after another: the same attractors, and the same labels whenever a value's
+            pilot finds all of its attractors (otherwise the capture radius changes at
+            another moment of the pool, and the odd cell near a basin boundary can be
+            captured differently: 1 of 5,760 cells at one point of a benchmark map).
+            Off by default: on the 2-core CPU of the
             benchmarks it is about as fast (1.05x, ``benchmarks/sweep_scale.py``: the
             cells' integration dominates, and what one pool saves, the pilot's and the
             tail's draining, is a small part of each analysis), while a sweep value by
