@@ -158,6 +158,8 @@ class Direct(AbstractGlobalMethod):
             if passes == REPELLER_PASSES:  # still on unstable cycles: not decided
                 labels[cells] = UNRESOLVED
                 break
+            if not len(cells):  # (a cycle no cell ended on: nothing to label again)
+                continue
             seeds = [(p, k) for p, k, _ in res] + repellers
             # the queue padded to a power of two with copies of its last state, so that the
             # pools of such passes share a few compiled shapes (across the values of a sweep)
