@@ -239,6 +239,28 @@ plotting.plot_parameter_map(pmap, "period")
 plotting.plot_parameter_map(pmap, "n_attractors")
 
 # %% [markdown]
+# ### Both parameters: basin shares
+#
+# `jg.basin_map` runs the global analysis at every (kappa_amp, b) point of a grid and
+# matches the attractors to those of the left and lower neighbours, so each keeps one id
+# across the map. The figure shows the attractor with the largest basin (its share in
+# percent) and how many attractors coexist at each point; `plot_basin_map(bmap, "all")`
+# draws every attractor's share.
+#
+# ```
+# jaxgear sweep --param kappa_amp --values 0.34:0.37:4 --param2 b --values2 4:6:3 --kind basins --grid 6,4,8 --out map
+# ```
+
+# %%
+t = time.perf_counter()
+bmap = jg.basin_map(jg.REDUCED, p, "kappa_amp", np.linspace(0.34, 0.37, 7 if FULL else 4), "b",
+                    np.linspace(4, 6, 5 if FULL else 3), grid, progress=False)
+print(f"{bmap.sink_share.size} points x {grid.n_cells} cells in {time.perf_counter() - t:.1f} s\n")
+print(bmap.table())
+np.testing.assert_allclose(bmap.shares.sum(-1) + bmap.sink_share + bmap.unresolved_share, 1.0)
+plotting.plot_basin_map(bmap)
+
+# %% [markdown]
 # ## 6. Interrupted sweeps resume
 #
 # With `out=DIR` (the CLI's `--out`) a sweep writes every finished block of values to
