@@ -346,6 +346,8 @@ def _decode_items(r: _Reader, cls, path: str) -> tuple:
     cols = {}
     for name, hint, _meta in _record_fields(cls):
         p = f"{path}__{name}"
+        if p not in r.ds.variables and p not in r.schema:  # a field added after the file was written: its default
+            continue
         if _is_array_hint(hint):
             stacked = r.array(p)
             shapes = r.ds[f"{p}__shape"].values

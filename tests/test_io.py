@@ -127,6 +127,36 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
 
 
+def test_attractor_multipliers_are_those_of_shooting(duffing_results, paper_result):
+    """Each attractor's recorded multiplier (central differences of the k-fold map) is the
+    largest |multiplier| that jax.jacfwd gives through the shooting module, whatever the
+    method; the attractors found are stable."""
+    cases = [(r, jg.DUFFING, DOUBLE_WELL) for r in duffing_results.values()]
+    cases.append((paper_result, jg.REDUCED, jg.paper_params()))
+    for r, system, params in cases:
+        for a in r.attractors:
+            mu = np.asarray(jg.floquet_multipliers(system, params, np.asarray(a.points)[0], period=a.period))
+            assert a.multiplier == pytest.approx(np.abs(mu).max(), abs=1e-4), (r.method, a.id)
+            assert a.multiplier < 1
+    assert "max |mu|" in paper_result.table()
+
+
+def test_a_file_written_before_a_field_existed_loads_with_its_default(duffing_results, tmp_path):
+    """A result file without the attractors' multiplier (as written before it was recorded)
+    loads, the multiplier NaN and everything else as saved."""
+    r = duffing_results["direct"]
+    path = r.save(tmp_path / "r.nc")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        gone = [v for v in ds.variables if str(v).endswith("__multiplier")]
+        assert gone
+        old = ds.drop_vars(gone).load()
+    old.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
+    q = jg.load(tmp_path / "old.nc")
+    assert all(np.isnan(a.multiplier) for a in q.attractors)
+    assert [a.share for a in q.attractors] == [a.share for a in r.attractors]
+    np.testing.assert_array_equal(q.labels, r.labels)
+
+
 def test_orbit_search_round_trip_exact(duffing_search, tmp_path):
     s = duffing_search
     assert [o.period for o in s.orbits] == [1, 1, 1] and [o.stable for o in s.orbits].count(False) == 1

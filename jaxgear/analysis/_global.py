@@ -23,7 +23,7 @@ from .._version import __version__
 from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import prepare_section_points, section_points_of
+from ._orbits import largest_multipliers, prepare_section_points, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty, prepare_label_uncertainties
 
@@ -217,13 +217,17 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     attractors = []
     secs = section_points_of(system, params, [raw[old][0] if raw[old][1] > 0 else np.zeros((0, system.dim))
                                               for old in order], method.integrator, sec_idx, method.direction)
+    periodic = [old for old in order if raw[old][1] > 0]
+    mus = dict(zip(periodic, largest_multipliers(system, params, [(raw[old][0], raw[old][1]) for old in periodic],
+                                                 method.integrator, max(method.max_period, 1))))
     for new, old in enumerate(order):
         pts, per, res = raw[old]
         sec = secs[new]
         attractors.append(Attractor(id=new, period=int(per), points=np.asarray(pts, dtype=float),
                                     section_points=np.asarray(sec, dtype=float), cell_count=int(counts[old]),
                                     share=float(counts[old]) / n, residual=float(res),
-                                    periodic_cells=np.asarray(cycles[old], dtype=np.int64)))
+                                    periodic_cells=np.asarray(cycles[old], dtype=np.int64),
+                                    multiplier=float(mus.get(old, np.nan))))
     return GlobalResult(
         labels=out_labels.reshape(grid.counts).astype(np.int64), attractors=tuple(attractors), grid=grid,
         method=method.name, settings=method.to_dict(), params=params_to_dict(params), system=system.name,

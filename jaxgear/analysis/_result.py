@@ -39,6 +39,10 @@ class Attractor:
         share: ``cell_count / n_cells``.
         residual: ``max_i |P^k(p_i) - p_i|`` of the reported points (integration-level).
         periodic_cells: indices of the cells of its periodic group(s) (cell methods).
+        multiplier: the largest modulus of its Floquet multipliers (paper §4.1: the
+            cycle is asymptotically stable when it is below 1), from central differences
+            of the k-fold stroboscopic map at its first point; NaN for period 0 (and in
+            files written before it was recorded).
     """
 
     id: int
@@ -49,6 +53,7 @@ class Attractor:
     share: float = 0.0
     residual: float = float("nan")
     periodic_cells: np.ndarray = array_field(("cycle_cell",), default_factory=lambda: np.zeros(0, np.int64))
+    multiplier: float = float("nan")
 
     @property
     def label(self) -> str:
@@ -58,7 +63,8 @@ class Attractor:
     def summary(self) -> dict[str, Any]:
         """JSON-able description (points as lists)."""
         return dict(id=self.id, period=self.period, label=self.label, cell_count=self.cell_count,
-                    share=self.share, residual=self.residual, points=np.asarray(self.points).tolist(),
+                    share=self.share, residual=self.residual, multiplier=self.multiplier,
+                    points=np.asarray(self.points).tolist(),
                     section_points=np.asarray(self.section_points).tolist(),
                     n_periodic_cells=int(len(self.periodic_cells)))
 
@@ -140,14 +146,15 @@ class GlobalResult:
         for a in self.attractors:
             p = np.asarray(a.points)[0] if len(a.points) else np.full(len(self.state_names), np.nan)
             rows.append((a.id, a.label, a.cell_count, f"{100 * a.share:.2f} %",
-                         "[" + ", ".join(f"{v:.4f}" for v in p) + "]", f"{a.residual:.1e}"))
+                         "[" + ", ".join(f"{v:.4f}" for v in p) + "]", f"{a.residual:.1e}",
+                         "-" if np.isnan(a.multiplier) else f"{a.multiplier:.4f}"))
         rows.append(("sink", "-", self.n_sink, f"{100 * self.n_sink / self.n_cells:.2f} %",
-                     "left the region/blew up", ""))
+                     "left the region/blew up", "", ""))
         if self.n_unresolved:
             rows.append(("unresolved", "-", self.n_unresolved, f"{100 * self.n_unresolved / self.n_cells:.2f} %",
-                         "fate not decided", ""))
+                         "fate not decided", "", ""))
         head = ("id", "period", "cells", "share", "stroboscopic point (" + ", ".join(self.state_names) + ")",
-                "residual")
+                "residual", "max |mu|")
         note = describe_uncertainty(self.uncertainty)
         return format_table(rows, head) + ("\n" + note if note else "")
 
