@@ -158,8 +158,9 @@ def test_figures(duffing_map):
     fig = plotting.plot_basin_map(m, "all")
     assert [a.get_title() for a in fig.axes if a.get_visible() and a.get_title()] == [
         f"{g}: {m.attractor_label(g)}" for g in range(m.n_attractors)]
-    with pytest.raises(ValueError, match="global id"):
-        plotting.plot_basin_map(m, m.n_attractors)
+    for bad in (m.n_attractors, -1, "dominant", True, 1.0):
+        with pytest.raises(ValueError, match="global id"):
+            plotting.plot_basin_map(m, bad)
 
 
 def test_cli(tmp_path, capsys):

@@ -240,9 +240,12 @@ def plot_basin_map(bmap, attractor: int | str | None = None, *, title: str | Non
         ax2.set_title("Number of coexisting attractors")
         axes = [ax, ax2]
     else:
+        ok = attractor == "all" or (isinstance(attractor, (int, np.integer)) and not isinstance(attractor, bool)
+                                    and 0 <= attractor < G)
+        if not ok or G == 0:
+            raise ValueError(f"attractor must be None, 'all' or a global id in 0..{G - 1}, got {attractor!r}."
+                             if G else "the map has no attractor (every cell in the sink or unresolved).")
         gs = list(range(G)) if attractor == "all" else [int(attractor)]
-        if not gs or not all(0 <= g < G for g in gs):
-            raise ValueError(f"attractor must be None, 'all' or a global id in 0..{G - 1}, got {attractor!r}.")
         cols = min(len(gs), 3)
         rows = -(-len(gs) // cols)
         fig = new_figure(figsize=(4.2 * cols + 1.0, 3.6 * rows), layout="constrained")
