@@ -27,7 +27,7 @@ from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod
-from ._basins import analyses_at, global_arrays, resolve_basin_options
+from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_options
 from ._bifurcation import read_only
 from ._classify import period_label
 from ._values import apply_values, check_values, coord_name, sorted_values
@@ -37,7 +37,7 @@ __all__ = ["BasinMap", "basin_map", "match_on_grid"]
 
 @result_type
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class BasinMap:
+class BasinMap(GlobalShares):
     """Result of :func:`basin_map`: basin shares of globally identified attractors over a
     grid of two parameters (``y`` rows, ``x`` columns).
 
@@ -80,16 +80,6 @@ class BasinMap:
         for f in ("values_x", "values_y", "shares", "sink_share", "unresolved_share", "period", "points",
                   "n_points", "labels"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
-
-    @property
-    def n_attractors(self) -> int:
-        """Number of global attractors."""
-        return int(self.shares.shape[-1])
-
-    @property
-    def present(self) -> np.ndarray:
-        """``(ny, nx, G)`` bool: the attractor exists at the parameter point."""
-        return self.period >= 0
 
     @property
     def coexisting(self) -> np.ndarray:
@@ -145,25 +135,14 @@ class BasinMap:
         return cx, (f"{cy}_y" if cy == cx else cy)
 
     def _coords(self) -> dict:
-        g = self.grid
         cx, cy = self.coords_xy
-        coords = {cx: (cx, np.asarray(self.values_x), {"long_name": self.param_x, "sets": ",".join(self.fields_x)}),
-                  cy: (cy, np.asarray(self.values_y), {"long_name": self.param_y, "sets": ",".join(self.fields_y)}),
-                  "attractor": ("attractor", np.arange(self.n_attractors)),
-                  "state": ("state", list(self.state_names))}
-        for j, name in enumerate(g.axis_names):
-            coords[name] = (name, g.axis_centres(j), {"long_name": f"cell centre {name}"})
-        return coords
+        return self._cell_coords({
+            cx: (cx, np.asarray(self.values_x), {"long_name": self.param_x, "sets": ",".join(self.fields_x)}),
+            cy: (cy, np.asarray(self.values_y), {"long_name": self.param_y, "sets": ",".join(self.fields_y)})})
 
     def _attrs(self) -> dict:
         return dict(title="jaxgear basin shares over two parameters",
                     labels_meaning="global attractor id of each cell; -1 sink, -2 unresolved")
-
-    def save(self, path):
-        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
-        return save_result(self, path)
 
 
 def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarray]:

@@ -33,7 +33,7 @@ from ._checkpoint import open_shared_checkpoint
 from ._classify import period_label
 from ._values import check_values, coord_name, sorted_values
 
-__all__ = ["BasinSweep", "basin_sweep", "match_across_values"]
+__all__ = ["BasinSweep", "GlobalShares", "basin_sweep", "match_across_values"]
 
 
 def match_across_values(results, match_tol: float) -> list[np.ndarray]:
@@ -58,9 +58,37 @@ def match_across_values(results, match_tol: float) -> list[np.ndarray]:
     return out
 
 
+class GlobalShares:
+    """What a basin sweep and a basin map share: shares ``(..., G)`` and periods of global
+    attractors (-1 where absent) over parameter values, and the cell grid's coordinates."""
+
+    @property
+    def n_attractors(self) -> int:
+        """Number of global attractors."""
+        return int(self.shares.shape[-1])
+
+    @property
+    def present(self) -> np.ndarray:
+        """``(..., G)`` bool: the attractor exists at the parameter value."""
+        return self.period >= 0
+
+    def _cell_coords(self, coords: dict) -> dict:
+        """``coords`` (the parameters') with the attractor, state and cell-centre coordinates."""
+        coords.update(attractor=("attractor", np.arange(self.n_attractors)), state=("state", list(self.state_names)))
+        for j, name in enumerate(self.grid.axis_names):
+            coords[name] = (name, self.grid.axis_centres(j), {"long_name": f"cell centre {name}"})
+        return coords
+
+    def save(self, path):
+        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
+        return save_result(self, path)
+
+
 @result_type
 @dataclasses.dataclass(frozen=True, kw_only=True)
-class BasinSweep:
+class BasinSweep(GlobalShares):
     """Result of :func:`basin_sweep`: basin shares of globally identified attractors.
 
     Attributes:
@@ -96,16 +124,6 @@ class BasinSweep:
     def __post_init__(self):
         for f in ("values", "shares", "sink_share", "unresolved_share", "period", "points", "n_points", "labels"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
-
-    @property
-    def n_attractors(self) -> int:
-        """Number of global attractors."""
-        return int(self.shares.shape[1])
-
-    @property
-    def present(self) -> np.ndarray:
-        """``(V, G)`` bool: the attractor exists at the value."""
-        return self.period >= 0
 
     def attractor_label(self, g: int) -> str:
         """``"P-4"`` or ``"P-4/P-8"`` when its period changes along the sweep."""
@@ -176,24 +194,13 @@ class BasinSweep:
                           + ["attractor", "point", "state"])
 
     def _coords(self) -> dict:
-        g = self.grid
         c = self.param_coord
-        coords = {c: (c, np.asarray(self.values), {"long_name": self.param, "sets": ",".join(self.fields)}),
-                  "attractor": ("attractor", np.arange(self.n_attractors)),
-                  "state": ("state", list(self.state_names))}
-        for j, name in enumerate(g.axis_names):
-            coords[name] = (name, g.axis_centres(j), {"long_name": f"cell centre {name}"})
-        return coords
+        return self._cell_coords({c: (c, np.asarray(self.values), {"long_name": self.param,
+                                                                    "sets": ",".join(self.fields)})})
 
     def _attrs(self) -> dict:
         return dict(title="jaxgear basin shares across a parameter",
                     labels_meaning="global attractor id of each cell; -1 sink, -2 unresolved")
-
-    def save(self, path):
-        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
-        return save_result(self, path)
 
 
 BLOCK_CELLS = 1 << 20
