@@ -64,6 +64,12 @@ def items_field(dim: str, **kw):
     return dataclasses.field(metadata={"item_dim": dim}, **kw)
 
 
+def later_field(default, **kw):
+    """A scalar field added to a result type after files of it were first written: a file
+    without it loads with ``default`` (every other field a file lacks is an error)."""
+    return dataclasses.field(default=default, metadata={"later": True}, **kw)
+
+
 def custom_field(encode: Callable[[Any], Any], decode: Callable[[Any], Any], **kw):
     """A field stored as JSON through ``encode(value) -> JSON-able`` and ``decode(json) -> value``."""
     return dataclasses.field(metadata={"encode": encode, "decode": decode}, **kw)
@@ -305,10 +311,26 @@ def _native(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _stored(r: _Reader, path: str) -> bool:
+    """Whether the file holds the field at ``path`` (itself, its schema entry, or parts
+    ``path__...``)."""
+    if path in r.ds.variables or path in r.ds.attrs or path in r.schema:
+        return True
+    pre = f"{path}__"
+    return any(str(k).startswith(pre) for k in (*r.ds.variables, *r.ds.attrs))
+
+
+def _missing(r: _Reader, meta: dict, path: str) -> bool:
+    """A :func:`later_field` that the file does not hold (written before the field was
+    added): it takes its default. Any other field must be there."""
+    return bool(meta.get("later")) and not _stored(r, path)
+
+
 def _decode_record(r: _Reader, cls, path: str):
     values = {}
     for name, hint, meta in _record_fields(cls):
-        values[name] = _decode_value(r, hint, meta, f"{path}{name}")
+        if not _missing(r, meta, f"{path}{name}"):
+            values[name] = _decode_value(r, hint, meta, f"{path}{name}")
     return cls(**values)
 
 
@@ -346,7 +368,7 @@ def _decode_items(r: _Reader, cls, path: str) -> tuple:
     cols = {}
     for name, hint, _meta in _record_fields(cls):
         p = f"{path}__{name}"
-        if p not in r.ds.variables and p not in r.schema:  # a field added after the file was written: its default
+        if _missing(r, _meta, p):
             continue
         if _is_array_hint(hint):
             stacked = r.array(p)

@@ -142,19 +142,26 @@ def test_attractor_multipliers_are_those_of_shooting(duffing_results, paper_resu
 
 
 def test_a_file_written_before_a_field_existed_loads_with_its_default(duffing_results, tmp_path):
-    """A result file without the attractors' multiplier (as written before it was recorded)
-    loads, the multiplier NaN and everything else as saved."""
+    """A result file without the attractors' multiplier (as written before it was recorded,
+    a later field) loads, the multiplier NaN and everything else as saved; any other field
+    a file lacks (here the result's mean periods) is an error, not a silent default."""
     r = duffing_results["direct"]
     path = r.save(tmp_path / "r.nc")
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         gone = [v for v in ds.variables if str(v).endswith("__multiplier")]
-        assert gone
+        assert gone and "mean_periods" in ds.attrs
         old = ds.drop_vars(gone).load()
+        broken = ds.load().copy()
+        del broken.attrs["mean_periods"]
     old.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
     q = jg.load(tmp_path / "old.nc")
     assert all(np.isnan(a.multiplier) for a in q.attractors)
+    assert not any(np.isnan(a.multiplier) for a in r.attractors) and q.mean_periods == r.mean_periods
     assert [a.share for a in q.attractors] == [a.share for a in r.attractors]
     np.testing.assert_array_equal(q.labels, r.labels)
+    broken.to_netcdf(tmp_path / "broken.nc", engine="h5netcdf")
+    with pytest.raises(ValueError):
+        jg.load(tmp_path / "broken.nc")
 
 
 def test_orbit_search_round_trip_exact(duffing_search, tmp_path):

@@ -219,7 +219,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
                                               for old in order], method.integrator, sec_idx, method.direction)
     periodic = [old for old in order if raw[old][1] > 0]
     mus = dict(zip(periodic, largest_multipliers(system, params, [(raw[old][0], raw[old][1]) for old in periodic],
-                                                 method.integrator, max(method.max_period, 1))))
+                                                 method.integrator, method.max_period)))
     for new, old in enumerate(order):
         pts, per, res = raw[old]
         sec = secs[new]

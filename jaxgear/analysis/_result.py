@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from .._cells import CellGrid
-from .._codec import array_field, items_field, result_type
+from .._codec import array_field, items_field, later_field, result_type
 from .._format import format_table
 
 __all__ = ["Attractor", "GlobalResult", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
@@ -53,7 +53,7 @@ class Attractor:
     share: float = 0.0
     residual: float = float("nan")
     periodic_cells: np.ndarray = array_field(("cycle_cell",), default_factory=lambda: np.zeros(0, np.int64))
-    multiplier: float = float("nan")
+    multiplier: float = later_field(float("nan"))
 
     @property
     def label(self) -> str:
