@@ -7,6 +7,7 @@ models of :mod:`jaxgear._model` are two such systems.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -139,11 +140,11 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
     if x.ndim > 1:
         x = x.reshape(-1, system.dim)[0]
     try:
-        dx = jax.eval_shape(lambda xx: system.vector_field(0.0, xx, params), x)
+        dx = _field_at_time_zero(system, x, params)
     except Exception as e:
         raise ValueError(f"{name}: vector_field(t, x, params) failed for a state of shape ({system.dim},): "
                          f"{type(e).__name__}: {e}") from e
-    if not isinstance(dx, jax.ShapeDtypeStruct):
+    if not isinstance(dx, jax.Array):
         raise ValueError(f"{name}: the vector field must return one array of shape ({system.dim},) "
                          f"(use jnp.stack([...])); it returned {type(dx).__name__}.")
     if dx.shape != (system.dim,):
@@ -151,12 +152,20 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
             f"{name}: the vector field must return shape ({system.dim},) for a state "
             f"of shape ({system.dim},) ({', '.join(system.state_names)}); it returned {dx.shape}."
         )
-    val = np.asarray(jax.jit(lambda xx, pp: system.vector_field(0.0, xx, pp))(x, params))
+    val = np.asarray(dx)
     if not np.all(np.isfinite(val)):
         raise ValueError(
             f"{name}: the vector field is not finite at t=0, x={np.asarray(x).tolist()}: "
             f"{val.tolist()}. Check the parameters."
         )
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _field_at_time_zero(system: ForcedSystem, x, params):
+    """``system.vector_field(0, x, params)``, compiled once per system and parameter
+    structure: :func:`check_system` runs before every analysis (of a sweep's every value),
+    and a fresh ``jit`` of a closure would trace and compile each time (0.1 s)."""
+    return system.vector_field(0.0, x, params)
 
 
 def check_state_shape(system: ForcedSystem, x: Any) -> None:
