@@ -13,8 +13,11 @@ preset, default method :class:`jaxgear.Direct` with its label uncertainty) over
    ``basin_sweep`` does by default);
 
 each as ``min`` over ``--repeat`` calls after one warm-up call (compilation apart), and
-checks that both give the same shares and labels at every value. The LAST line is the
-headline: separate / batched.
+checks that both give the same shares and labels at every value. Then the ceiling of any
+pooling: the separate analyses without the label uncertainty against integrating their
+cell-periods (cells x mean periods per cell) alone, all states in one batch with the
+method's integrator, no decisions, pilot or draining; no way of pooling the values can be
+cheaper than that integration. The LAST line is the headline: separate / batched.
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ import argparse
 import time
 import warnings
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 import jaxgear as jg
@@ -36,6 +41,24 @@ def best(fn, repeat: int):
         out = fn()
         times.append(time.perf_counter() - t)
     return min(times), out
+
+
+def integration_alone(params, grid, results, repeat: int):
+    """Wall time of integrating every cell centre of every value for the results' mean
+    periods per cell, in one batch, one compiled period at a time (the method's integrator,
+    parameters of the first value: the cost of a period does not depend on them)."""
+    integrator = jg.Direct().integrator
+    periods = int(round(float(np.mean([r.mean_periods for r in results]))))
+    one = jax.jit(lambda Y: integrator.advance(jg.REDUCED, params, Y, jnp.asarray(0.0), 1))
+    Y0 = jnp.asarray(np.tile(grid.centres(), (len(results), 1)).T)
+
+    def run():
+        Y = Y0
+        for _ in range(periods):
+            Y = one(Y)
+        return Y.block_until_ready()
+
+    return best(run, repeat)[0], periods
 
 
 def main():
@@ -66,6 +89,13 @@ def main():
     print(f"separate analyses: {t_sep:8.2f} s")
     print(f"batched pool:      {t_bat:8.2f} s")
     print(f"same labels at every value: {same}")
+    t_cls, classified = best(lambda: [jg.analyze_global(jg.REDUCED, jg.with_param(params, "b", v), grid,
+                                                        progress=False, uncertainty=0) for v in values], a.repeat)
+    t_int, periods = integration_alone(params, grid, classified, a.repeat)
+    print(f"separate analyses without the label uncertainty: {t_cls:8.2f} s")
+    print(f"integration alone of their {len(values) * grid.n_cells} cells x {periods} periods (one batch): "
+          f"{t_int:8.2f} s")
+    print(f"ceiling of any pooling (separate without uncertainty / integration alone): {t_cls / t_int:.2f}x")
     print(f"basin sweep, batched pool vs separate analyses: {t_sep / t_bat:.2f}x")
 
 
