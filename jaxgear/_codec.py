@@ -53,10 +53,12 @@ def result_type(cls):
     return cls
 
 
-def array_field(dims=None, **kw):
+def array_field(dims=None, *, later: bool = False, **kw):
     """A dataclass field holding an array; ``dims``: a tuple of dimension names or a
-    callable ``obj -> tuple`` (default names ``<field>_0, <field>_1, ...``)."""
-    return dataclasses.field(metadata={"dims": dims}, **kw)
+    callable ``obj -> tuple`` (default names ``<field>_0, <field>_1, ...``). ``later``:
+    the field was added after files of its type were first written (see
+    :func:`later_field`; its default, typically ``None``, is what such a file loads with)."""
+    return dataclasses.field(metadata={"dims": dims, "later": later}, **kw)
 
 
 def items_field(dim: str, **kw):
@@ -66,7 +68,8 @@ def items_field(dim: str, **kw):
 
 def later_field(default, **kw):
     """A scalar field added to a result type after files of it were first written: a file
-    without it loads with ``default`` (every other field a file lacks is an error)."""
+    without it loads with ``default`` (every other field a file lacks is an error; an
+    array field added later is declared with ``array_field(..., later=True)``)."""
     return dataclasses.field(default=default, metadata={"later": True}, **kw)
 
 

@@ -10,6 +10,8 @@ References that do not come from the map's code:
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -44,6 +46,8 @@ def _assert_point_is(m, iy, ix, r):
         assert m.shares[iy, ix, g] == a.share and m.period[iy, ix, g] == a.period
     assert m.sink_share[iy, ix] == r.n_sink / r.n_cells
     assert m.unresolved_share[iy, ix] == r.n_unresolved / r.n_cells
+    assert m.uncertainty_step[iy, ix] == r.uncertainty["step"]
+    assert m.uncertainty_start[iy, ix] == r.uncertainty["start"]
 
 
 def test_every_point_is_the_analysis_there_alone(duffing_map):
@@ -161,6 +165,32 @@ def test_figures(duffing_map):
     for bad in (m.n_attractors, -1, "dominant", True, 1.0):
         with pytest.raises(ValueError, match="global id"):
             plotting.plot_basin_map(m, bad)
+
+
+def test_where_the_sink_or_unresolved_cells_hold_most(duffing_map):
+    """``dominant`` is -1 where the sink holds more cells than any attractor, -2 where the
+    unresolved cells (a chaotic motion, say) hold more than the sink and every attractor;
+    the table and the overview figure name them."""
+    from jaxgear import plotting
+
+    m = duffing_map
+    assert m.n_attractors >= 2
+    shares = np.zeros_like(m.shares[..., :2])  # two attractors
+    sink, unres = np.zeros_like(m.sink_share), np.zeros_like(m.unresolved_share)
+    unres[0, 0] = 1.0  # all unresolved
+    shares[0, 1, 0], sink[0, 1], unres[0, 1] = 0.3, 0.4, 0.3  # the sink ahead
+    shares[0, 2, 0], unres[0, 2] = 0.55, 0.45  # an attractor ahead
+    shares[1, :, 1] = 1.0
+    period = np.where(shares > 0, 1, -1)
+    fake = dataclasses.replace(m, shares=shares, sink_share=sink, unresolved_share=unres, period=period,
+                               points=m.points[:, :, :2], n_points=m.n_points[..., :2])
+    assert fake.dominant.tolist() == [[-2, -1, 0], [1, 1, 1]]
+    rows = {line.split()[0]: line.split() for line in fake.table().splitlines()[2:]}
+    assert rows["unresolved"][3] == "1" and rows["sink"][3] == "1"  # "largest at" one point each
+    ax = plotting.plot_basin_map(fake).axes[0]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["unresolved", "sink", f"0: {fake.attractor_label(0)}",
+                                                                   f"1: {fake.attractor_label(1)}"]
+    assert ax.texts[0].get_text() == "100" and ax.texts[1].get_text() == "40"  # their shares, in their boxes
 
 
 def test_cli(tmp_path, capsys):

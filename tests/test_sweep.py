@@ -12,6 +12,7 @@ References that do not come from jaxgear's sweep code:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -328,6 +329,7 @@ def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method
             g = lut[a.id]
             assert s.shares[i, g] == a.share and s.period[i, g] == a.period
         assert s.sink_share[i] == r.n_sink / r.n_cells and s.unresolved_share[i] == r.n_unresolved / r.n_cells
+        assert s.uncertainty_step[i] == r.uncertainty["step"] and s.uncertainty_start[i] == r.uncertainty["start"]
 
 
 def test_basin_sweep_in_one_pool_is_each_value_alone():
@@ -340,6 +342,35 @@ def test_basin_sweep_in_one_pool_is_each_value_alone():
     s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False, batched=True)
     assert not np.allclose(s.shares[0], s.shares[-1])  # the values differ
     _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct())
+
+
+def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
+    """``uncertainty=0`` skips the label uncertainty (NaN) and changes nothing else; a file
+    written before the sweep recorded it loads with NaN and every other field as saved."""
+    import xarray as xr
+
+    p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (6, 6), names=("x", "v"))
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
+    with_u = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=16, **kw)
+    without = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=0, **kw)
+    assert np.isfinite(with_u.uncertainty_step).all() and np.isfinite(with_u.uncertainty_start).all()
+    assert np.isnan(without.uncertainty_step).all() and np.isnan(without.uncertainty_start).all()
+    np.testing.assert_array_equal(with_u.labels, without.labels)
+    np.testing.assert_array_equal(with_u.shares, without.shares)
+    assert "unc. step" in with_u.shares_table() and "unc. step" not in without.shares_table()
+    assert with_u.uncertainty_note() and not without.uncertainty_note()
+    path = with_u.save(tmp_path / "new.nc")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        ds.load().drop_vars(["uncertainty_step", "uncertainty_start"]).to_netcdf(tmp_path / "old.nc",
+                                                                                 engine="h5netcdf")
+    old = load_basin_sweep(tmp_path / "old.nc")
+    assert np.isnan(old.uncertainty_step).all() and old.uncertainty_step.shape == (2,)
+    _assert_equal_results(dataclasses.replace(old, uncertainty_step=with_u.uncertainty_step,
+                                              uncertainty_start=with_u.uncertainty_start), with_u)
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="uncertainty"):
+            basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=bad, **kw)
 
 
 def test_basin_sweep_in_one_pool_pure_jax():
@@ -537,12 +568,18 @@ def test_cli_basins(tmp_path, capsys):
     out = tmp_path / "bs"
     rc = main(["sweep", "--param", "kappa_amp", "--values", "0.36:0.37:2", "--kind", "basins", "--grid", "3,2,3",
                "--steps-per-period", "50", "--max-period", "8", "--out", str(out), "--quiet",
-               "--no-figures"])
+               "--no-figures", "--uncertainty-samples", "8"])
     assert rc == 0
     text = capsys.readouterr().out
-    assert "sink" in text and "present" in text
+    assert "sink" in text and "present" in text and "unc. step" in text and "label uncertainty" in text
     s = load_basin_sweep(out / "basins.nc")
     assert s.labels.shape == (2, 3, 2, 3) and s.fields == ("kappa_sp_amp", "kappa_rp_amp")
+    assert np.isfinite(s.uncertainty_step).all() and s.settings["uncertainty"] == 8
+    base = ["sweep", "--param", "b", "--values", "4:5:2", "--out", str(tmp_path / "x"), "--quiet"]
+    assert main(base + ["--kind", "basins", "--uncertainty-samples", "-1"]) == 2
+    assert "--uncertainty-samples" in capsys.readouterr().err
+    assert main(base + ["--uncertainty-samples", "8"]) == 2  # --kind bifurcation
+    assert "--kind basins" in capsys.readouterr().err
 
 
 @pytest.mark.slow

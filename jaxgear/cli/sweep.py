@@ -38,7 +38,7 @@ resume state ``parts/`` and ``manifest.json`` is kept)."""
 OPTIONS = (("starts", "--starts", int, 1), ("seed", "--seed", int, 0), ("period", "--period", int, 1),
            ("max_steps", "--max-steps", int, 1), ("transient", "--transient", int, 0),
            ("record", "--record", int, 2), ("steps_per_period", "--steps-per-period", int, 1),
-           ("max_period", "--max-period", int, 1))
+           ("max_period", "--max-period", int, 1), ("uncertainty_samples", "--uncertainty-samples", int, 0))
 
 SECTION_COUNTS = (20, 12, 24)
 STROBOSCOPIC_COUNTS = (10, 6, 12, 6)
@@ -118,6 +118,10 @@ def add_parser(sub) -> None:
     p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (also holds the resume parts)")
     p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
+    p.add_argument("--uncertainty-samples", type=int, default=None, metavar="N",
+                   help="basins: cells sampled at each value for its label uncertainty (default 1024; 0 skips it, "
+                   "which on a small grid saves much of the time): the share whose label changes with a refined "
+                   "step, and with the start moved by 1e-3 cell")
     p.add_argument("--one-pool", action="store_true",
                    help="basins, direct method: run the values in one lane pool over (value, cell) pairs instead of "
                    "one analysis after another (the same attractors and, but for the odd boundary cell, labels; a killed sweep "
@@ -166,6 +170,9 @@ def run(args) -> int:
         start2, stop2, _, values2 = _values(args.values2, "--values2")
         if start2 > stop2:
             raise ValueError(f"--values2={args.values2}: START must be < STOP.")
+    if args.uncertainty_samples is not None and args.kind != "basins":
+        raise ValueError(f"--uncertainty-samples measures the label uncertainty of a basin sweep: it needs --kind "
+                         f"basins (got --kind {args.kind}).")
     for pt in args.points or ():
         check_point(pt, "--from", REDUCED.dim)
     xyz = REDUCED.state_names[:3]
@@ -260,6 +267,8 @@ def _basins(args, params, values, values2, grid, method, progress: bool):
 
     kw = dict(method=method, progress=progress, out=Path(args.out), restart=args.restart, save=False,
               batched=args.one_pool)
+    if args.uncertainty_samples is not None:
+        kw["uncertainty"] = args.uncertainty_samples
     if values2 is None:
         return basin_sweep(REDUCED, params, args.param, values, grid, **kw)
     return basin_map(REDUCED, params, args.param, values, args.param2, values2, grid, **kw)
@@ -302,6 +311,8 @@ def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, 
             print(result.shares_table())
             print()
             print(result.table())
+            if result.uncertainty_note():
+                print(result.uncertainty_note())
             name = "basins.nc"
             if not args.no_figures:
                 from ..plotting import plot_basin_shares

@@ -207,8 +207,9 @@ def plot_basin_map(bmap, attractor: int | str | None = None, *, title: str | Non
     """Basin shares over two parameters (a :class:`~jaxgear.BasinMap`) as images.
 
     ``attractor=None`` (default): two panels, the attractor with the largest share at
-    each parameter point (``attractor_color(id)``, the sink light grey; its share in
-    percent written in each box of maps up to 12 x 12) and the number of coexisting
+    each parameter point (``attractor_color(id)``, the sink light grey, black where
+    unresolved cells hold most; its share in percent written in each box of maps up to
+    12 x 12) and the number of coexisting
     attractors. ``attractor=g``: the share of global attractor ``g`` (percent; white
     where it does not exist). ``attractor="all"``: one such panel per attractor.
     """
@@ -220,19 +221,20 @@ def plot_basin_map(bmap, attractor: int | str | None = None, *, title: str | Non
         fig = new_figure(figsize=(12.0, 4.8), layout="constrained")
         ax, ax2 = fig.subplots(1, 2)
         dom = np.asarray(bmap.dominant)
-        cmap = ListedColormap([SINK_COLOR] + [attractor_color(g) for g in range(G)])
-        ax.pcolormesh(X, Y, dom + 1, cmap=cmap, vmin=-0.5, vmax=G + 0.5, shading="flat")
+        cmap = ListedColormap([UNRESOLVED_COLOR, SINK_COLOR] + [attractor_color(g) for g in range(G)])
+        ax.pcolormesh(X, Y, dom + 2, cmap=cmap, vmin=-0.5, vmax=G + 1.5, shading="flat")
         ny, nx = dom.shape
         if nx * ny <= 144:
             share = np.where(dom >= 0, np.take_along_axis(bmap.shares, np.maximum(dom, 0)[..., None], -1)[..., 0],
-                             bmap.sink_share)
+                             np.where(dom == -1, bmap.sink_share, bmap.unresolved_share))
             for iy in range(ny):
                 for ix in range(nx):
                     ax.text(bmap.values_x[ix], bmap.values_y[iy], f"{100 * share[iy, ix]:.0f}", ha="center",
-                            va="center", fontsize="x-small", color="w" if dom[iy, ix] >= 0 else "k")
+                            va="center", fontsize="x-small", color="k" if dom[iy, ix] == -1 else "w")
         shown = sorted(set(dom.ravel().tolist()))
-        handles = [Patch(color=attractor_color(g) if g >= 0 else SINK_COLOR,
-                         label=f"{g}: {bmap.attractor_label(g)}" if g >= 0 else "sink") for g in shown]
+        other = {-1: (SINK_COLOR, "sink"), -2: (UNRESOLVED_COLOR, "unresolved")}
+        handles = [Patch(color=attractor_color(g) if g >= 0 else other[g][0],
+                         label=f"{g}: {bmap.attractor_label(g)}" if g >= 0 else other[g][1]) for g in shown]
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
                   title="largest basin")
         ax.set_title("Attractor with the largest basin" + (" (its share, %)" if nx * ny <= 144 else ""))

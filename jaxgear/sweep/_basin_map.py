@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .._cells import CellGrid
-from .._checks import check_bool
+from .._checks import check_bool, check_int
 from .._codec import array_field, result_type
 from .._devices import process_index
 from .._format import format_table
@@ -27,6 +27,7 @@ from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod
+from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_options
 from ._bifurcation import read_only
 from ._classify import period_label
@@ -51,6 +52,9 @@ class BasinMap(GlobalShares):
             ``(ny, nx, G)``.
         labels: ``(ny, nx, *grid.counts)`` int16: global attractor id of every cell, -1
             sink, -2 unresolved.
+        uncertainty_step, uncertainty_start: ``(ny, nx)`` the label uncertainty of each
+            point's analysis (as in :class:`~jaxgear.sweep.BasinSweep`); NaN where not
+            measured.
         grid, method, match_tol, system, state_names, params (base), settings, version.
     """
 
@@ -67,6 +71,8 @@ class BasinMap(GlobalShares):
     points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor", "point", "state"))
     n_points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
     labels: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], *m.grid.axis_names))
+    uncertainty_step: np.ndarray | None = array_field(lambda m: m.coords_xy[::-1], later=True, default=None)
+    uncertainty_start: np.ndarray | None = array_field(lambda m: m.coords_xy[::-1], later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
     method: str = ""
     match_tol: float = 0.0
@@ -77,8 +83,9 @@ class BasinMap(GlobalShares):
     version: str = ""
 
     def __post_init__(self):
+        self._unmeasured_as_nan()
         for f in ("values_x", "values_y", "shares", "sink_share", "unresolved_share", "period", "points",
-                  "n_points", "labels"):
+                  "n_points", "labels", "uncertainty_step", "uncertainty_start"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
@@ -88,11 +95,14 @@ class BasinMap(GlobalShares):
 
     @property
     def dominant(self) -> np.ndarray:
-        """``(ny, nx)``: the global attractor with the largest share at each point, -1
-        where the sink holds more cells than any attractor."""
+        """``(ny, nx)``: the global attractor with the largest share at each point; -1
+        where the sink holds more cells than any attractor, -2 where the unresolved cells
+        (no period found: a chaotic or long-period motion, or slow transients) hold more
+        than the sink and any attractor."""
         top = np.argmax(self.shares, axis=-1) if self.n_attractors else np.zeros(self.sink_share.shape, int)
         best = np.take_along_axis(self.shares, top[..., None], -1)[..., 0] if self.n_attractors else 0.0
-        return np.where(best > self.sink_share, top, -1)
+        other = np.where(self.unresolved_share > self.sink_share, -2, -1)
+        return np.where(best > np.maximum(self.sink_share, self.unresolved_share), top, other)
 
     def attractor_label(self, g: int) -> str:
         """``"P-4"``, or ``"P-4/P-8"`` when its period differs across the map."""
@@ -108,10 +118,13 @@ class BasinMap(GlobalShares):
             s = self.shares[..., g][here]
             rows.append((g, self.attractor_label(g), f"{int(here.sum())}/{n}", f"{int((self.dominant == g).sum())}",
                          f"{100 * s.min():.1f}", f"{100 * s.mean():.1f}", f"{100 * s.max():.1f}"))
-        rows.append(("sink", "-", f"{int((self.sink_share > 0).sum())}/{n}", f"{int((self.dominant < 0).sum())}",
-                     f"{100 * self.sink_share.min():.1f}", f"{100 * self.sink_share.mean():.1f}",
-                     f"{100 * self.sink_share.max():.1f}"))
-        return format_table(rows, ("attractor", "label", "present at", "largest at", "min %", "mean %", "max %"))
+        for name, share, code in (("sink", self.sink_share, -1), ("unresolved", self.unresolved_share, -2)):
+            if code == -1 or np.any(share > 0):
+                rows.append((name, "-", f"{int((share > 0).sum())}/{n}", f"{int((self.dominant == code).sum())}",
+                             f"{100 * share.min():.1f}", f"{100 * share.mean():.1f}", f"{100 * share.max():.1f}"))
+        note = self.uncertainty_note().replace(" values measured", " points measured")
+        return format_table(rows, ("attractor", "label", "present at", "largest at", "min %", "mean %", "max %")) + (
+            "\n" + note if note else "")
 
     def summary(self) -> dict[str, Any]:
         return dict(kind="basin_map", param_x=self.param_x, fields_x=list(self.fields_x),
@@ -124,7 +137,8 @@ class BasinMap(GlobalShares):
                     coexisting_counts={str(m): int((self.coexisting == m).sum())
                                        for m in np.unique(self.coexisting).tolist()},
                     shares=self.shares.tolist(), sink_share=self.sink_share.tolist(),
-                    unresolved_share=self.unresolved_share.tolist())
+                    unresolved_share=self.unresolved_share.tolist(),
+                    uncertainty_step=self.uncertainty_step.tolist(), uncertainty_start=self.uncertainty_start.tolist())
 
     @property
     def coords_xy(self) -> tuple[str, str]:
@@ -179,7 +193,7 @@ def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarra
 def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y,
               grid: CellGrid | None = None, *, method: AbstractGlobalMethod | str | None = None,
               match_tol: float | None = None, progress: bool = True, out=None, restart: bool = False,
-              save: bool = True, batched: bool = False) -> BasinMap:
+              save: bool = True, batched: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> BasinMap:
     """Basin shares over a grid of two parameters, attractors identified across the grid.
 
     At every point of ``values_y x values_x`` :func:`~jaxgear.analyze_global` runs
@@ -203,6 +217,8 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
             folder of other settings.
         batched: run the points of a block in one lane pool (as in
             :func:`~jaxgear.basin_sweep`).
+        uncertainty: cells sampled at each point for its label uncertainty (kept as
+            ``uncertainty_step`` and ``uncertainty_start``); 0 skips it.
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), process ``p`` of
     ``P`` computes the points ``i % P == p`` into ``out`` (required then), every process
@@ -223,11 +239,12 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     check_bool(progress, "progress")
     check_bool(restart, "restart")
     check_bool(save, "save")
+    check_int(uncertainty, "uncertainty", 0)
     settings = dict(kind="basin_map", system=system.name, param_x=param_x, values_x=vx.tolist(), param_y=param_y,
                     values_y=vy.tolist(), params=params_to_dict(params), grid=grid.to_dict(),
-                    method=method.to_dict(), match_tol=match_tol, version=__version__)
+                    method=method.to_dict(), match_tol=match_tol, uncertainty=int(uncertainty), version=__version__)
     results = analyses_at(system, [apply_values(params, names, v) for v in VV], grid, method, out, "basin_map",
-                          settings, restart, batched, progress, f"basin map {param_x} x {param_y}")
+                          settings, restart, batched, progress, f"basin map {param_x} x {param_y}", int(uncertainty))
     ny, nx = len(vy), len(vx)
     arrays = global_arrays(results, match_on_grid(results, ny, nx, match_tol), grid, system.dim)
     bmap = BasinMap(

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._batching import progress_bar
 from .._cells import CellGrid
-from .._checks import check_bool, check_number
+from .._checks import check_bool, check_int, check_number
 from .._codec import array_field, result_type
 from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
@@ -28,6 +28,7 @@ from .._params import param_targets, params_to_dict, with_param
 from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod, analyze_global, analyze_global_values, default_method, method_from_name
+from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._bifurcation import read_only
 from ._checkpoint import open_shared_checkpoint
 from ._classify import period_label
@@ -72,6 +73,23 @@ class GlobalShares:
         """``(..., G)`` bool: the attractor exists at the parameter value."""
         return self.period >= 0
 
+    def _unmeasured_as_nan(self) -> None:
+        """The label uncertainties of a file written before they were recorded: NaN."""
+        for f in ("uncertainty_step", "uncertainty_start"):
+            if getattr(self, f) is None:
+                object.__setattr__(self, f, np.full(np.shape(self.sink_share), np.nan))
+
+    def uncertainty_note(self) -> str:
+        """One line: the largest label uncertainties over the parameter values ("" when
+        none was measured)."""
+        step, start = np.asarray(self.uncertainty_step), np.asarray(self.uncertainty_start)
+        if not np.isfinite(step).any():
+            return ""
+        return (f"label uncertainty: at most {100 * np.nanmax(step):.1f} % of the sampled cells change label with "
+                f"a refined step, {100 * np.nanmax(start):.1f} % when their start moves (mean "
+                f"{100 * np.nanmean(step):.1f} % and {100 * np.nanmean(start):.1f} % over the "
+                f"{int(np.isfinite(step).sum())} values measured)")
+
     def _cell_coords(self, coords: dict) -> dict:
         """``coords`` (the parameters') with the attractor, state and cell-centre coordinates."""
         coords.update(attractor=("attractor", np.arange(self.n_attractors)), state=("state", list(self.state_names)))
@@ -99,6 +117,11 @@ class BasinSweep(GlobalShares):
         points: ``(V, G, K, dim)`` its stroboscopic points (NaN padded), n_points ``(V, G)``.
         labels: ``(V, *grid.counts)`` int16: global attractor id of every cell, -1 sink,
             -2 unresolved.
+        uncertainty_step, uncertainty_start: ``(V,)`` the label uncertainty of each value's
+            analysis (:func:`~jaxgear.analysis.label_uncertainty`: the share of the sampled
+            cells whose label changes with a refined integration step, and with the start
+            moved by 1e-3 cell); NaN where not measured (``uncertainty=0``, or a file
+            written before it was recorded).
         grid, method, match_tol, system, state_names, params (base), settings, version.
     """
 
@@ -112,6 +135,8 @@ class BasinSweep(GlobalShares):
     points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor", "point", "state"))
     n_points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
     labels: np.ndarray = array_field(lambda b: (b.param_coord,) + tuple(b.grid.axis_names))
+    uncertainty_step: np.ndarray | None = array_field(lambda b: (b.param_coord,), later=True, default=None)
+    uncertainty_start: np.ndarray | None = array_field(lambda b: (b.param_coord,), later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
     method: str = ""
     match_tol: float = 0.0
@@ -122,7 +147,9 @@ class BasinSweep(GlobalShares):
     version: str = ""
 
     def __post_init__(self):
-        for f in ("values", "shares", "sink_share", "unresolved_share", "period", "points", "n_points", "labels"):
+        self._unmeasured_as_nan()
+        for f in ("values", "shares", "sink_share", "unresolved_share", "period", "points", "n_points", "labels",
+                  "uncertainty_step", "uncertainty_start"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     def attractor_label(self, g: int) -> str:
@@ -166,13 +193,20 @@ class BasinSweep(GlobalShares):
         return format_table(rows, (self.param, "attractor", "label", "event", "detail"))
 
     def shares_table(self) -> str:
-        """Shares (percent) of every global attractor and the sink at every value."""
+        """Shares (percent) of every global attractor and the sink at every value, and the
+        label uncertainties (percent of the sampled cells) where measured."""
         unres = bool(np.any(self.unresolved_share > 0))
+        unc = bool(np.isfinite(self.uncertainty_step).any())
         head = ((self.param,) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors))
-                + ("sink",) + (("unresolved",) if unres else ()))
+                + ("sink",) + (("unresolved",) if unres else ()) + (("unc. step", "unc. start") if unc else ()))
+
+        def pct(x):
+            return "-" if np.isnan(x) else f"{100 * x:.1f}"
+
         rows = [(f"{v:.5g}",) + tuple(f"{100 * s:.1f}" if self.present[i, g] else "-"
                                       for g, s in enumerate(self.shares[i])) + (f"{100 * self.sink_share[i]:.1f}",)
                 + ((f"{100 * self.unresolved_share[i]:.1f}",) if unres else ())
+                + ((pct(self.uncertainty_step[i]), pct(self.uncertainty_start[i])) if unc else ())
                 for i, v in enumerate(self.values)]
         return format_table(rows, head)
 
@@ -185,7 +219,9 @@ class BasinSweep(GlobalShares):
                                      last=float(self.values[self.present[:, g]][-1]),
                                      max_share=float(self.shares[:, g].max())) for g in range(self.n_attractors)],
                     shares=self.shares.tolist(), sink_share=self.sink_share.tolist(),
-                    unresolved_share=self.unresolved_share.tolist(), events=self.events())
+                    unresolved_share=self.unresolved_share.tolist(),
+                    uncertainty_step=self.uncertainty_step.tolist(), uncertainty_start=self.uncertainty_start.tolist(),
+                    events=self.events())
 
     @property
     def param_coord(self) -> str:
@@ -208,18 +244,19 @@ BLOCK_CELLS = 1 << 20
 of a block run together, and the block is what a killed sweep loses."""
 
 
-def _analyze_values(system, params_list, grid, method, batched: bool = False):
-    """The global analysis at several parameter values: in one lane pool (``batched``) or
-    one analysis after another (a hook for progress and tests)."""
+def _analyze_values(system, params_list, grid, method, batched: bool = False, uncertainty: int = DEFAULT_SAMPLES):
+    """The global analysis at several parameter values, with the label uncertainty of
+    ``uncertainty`` sampled cells: in one lane pool (``batched``) or one analysis after
+    another (a hook for progress and tests)."""
     if batched:
-        return analyze_global_values(system, params_list, grid, method, progress=False)
-    return [analyze_global(system, p, grid, method, progress=False) for p in params_list]
+        return analyze_global_values(system, params_list, grid, method, progress=False, uncertainty=uncertainty)
+    return [analyze_global(system, p, grid, method, progress=False, uncertainty=uncertainty) for p in params_list]
 
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
                 method: AbstractGlobalMethod | str | None = None, match_tol: float | None = None,
                 progress: bool = True, out=None, restart: bool = False, save: bool = True,
-                batched: bool = False) -> BasinSweep:
+                batched: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> BasinSweep:
     """Basin shares across a parameter, attractors continued from value to value.
 
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
@@ -253,6 +290,10 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             tail's draining, is a small part of each analysis), while a sweep value by
             value saves and reports each value as it ends; one pool saves more on a GPU,
             whose pools drain with most lanes idle.
+        uncertainty: cells sampled at each value for its label uncertainty
+            (:func:`~jaxgear.analysis.label_uncertainty`, kept as ``uncertainty_step`` and
+            ``uncertainty_start``); 0 skips it. On a small grid it is a large part of the
+            sweep (40 % on 20 x 12 x 24 cells, about 5 % on the paper's 90,000).
 
     Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
     as several JAX processes (:func:`jaxgear._devices.initialize`, e.g. one per host
@@ -271,12 +312,13 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     check_bool(progress, "progress")
     check_bool(restart, "restart")
     check_bool(save, "save")
+    check_int(uncertainty, "uncertainty", 0)
     settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
-                    match_tol=float(match_tol), version=__version__)
+                    match_tol=float(match_tol), uncertainty=int(uncertainty), version=__version__)
     me = process_index()
     results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, out, "basins",
-                          settings, restart, batched, progress, f"basins {param}")
+                          settings, restart, batched, progress, f"basins {param}", int(uncertainty))
     sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
                              float(match_tol), system, params_to_dict(params),
                              {k: v for k, v in settings.items()
@@ -320,8 +362,9 @@ def resolve_basin_options(system, params, method, grid, match_tol):
 
 
 def analyses_at(system, params_list, grid, method, out, kind: str, settings: dict, restart: bool, batched: bool,
-                progress: bool, label: str) -> list:
-    """The global analysis at every parameter set of ``params_list``, resumable: each
+                progress: bool, label: str, uncertainty: int = DEFAULT_SAMPLES) -> list:
+    """The global analysis at every parameter set of ``params_list`` (with the label
+    uncertainty of ``uncertainty`` sampled cells), resumable: each
     result is saved to ``out/parts/value_NNNNN.nc`` (``NNNNN`` its index) as its block
     of at most :data:`BLOCK_CELLS` cells ends, and a rerun loads the saved ones. With
     several JAX processes, process ``p`` of ``P`` computes the indices ``i % P == p``
@@ -351,7 +394,7 @@ def analyses_at(system, params_list, grid, method, out, kind: str, settings: dic
     for b in range(0, len(todo), per_block):
         block = todo[b:b + per_block]
         with values_over_processes():  # this process's values: each analysis on this process's devices
-            done = _analyze_values(system, [params_list[i] for i in block], grid, method, batched)
+            done = _analyze_values(system, [params_list[i] for i in block], grid, method, batched, uncertainty)
         for i, r in zip(block, done):
             if ck.dir is not None:
                 r.save(ck.path(f"value_{i:05d}.nc"))
@@ -373,14 +416,15 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
     ids of their attractors ``gids`` (:func:`match_across_values`): ``shares``, ``period``
     (-1 where absent), ``points`` (NaN padded), ``n_points`` (each ``(n, G, ...)``),
     ``labels`` ``(n, *grid.counts)`` int16 (global ids, -1 sink, -2 unresolved),
-    ``sink_share`` and ``unresolved_share`` ``(n,)``."""
+    ``sink_share``, ``unresolved_share``, ``uncertainty_step`` and ``uncertainty_start``
+    ``(n,)`` (NaN where not measured)."""
     n = len(results)
     G = int(max([g.max(initial=-1) for g in gids] + [-1])) + 1
     K = max([len(a.points) for r in results for a in r.attractors] + [1])
     out = dict(shares=np.zeros((n, G)), period=np.full((n, G), -1, dtype=np.int64),
                points=np.full((n, G, K, dim), np.nan), n_points=np.zeros((n, G), dtype=np.int64),
                labels=np.empty((n, *grid.counts), dtype=np.int16), sink_share=np.empty(n),
-               unresolved_share=np.empty(n))
+               unresolved_share=np.empty(n), uncertainty_step=np.full(n, np.nan), uncertainty_start=np.full(n, np.nan))
     for i, (r, g) in enumerate(zip(results, gids)):
         lut = np.full(len(r.attractors) + 2, -1, dtype=np.int64)  # index local id + 2
         lut[0], lut[1] = -2, -1
@@ -392,6 +436,8 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
         out["labels"][i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
         out["sink_share"][i] = r.n_sink / r.n_cells
         out["unresolved_share"][i] = r.n_unresolved / r.n_cells
+        if r.uncertainty:
+            out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty["step"], r.uncertainty["start"]
     return out
 
 
