@@ -57,7 +57,7 @@ class ForcedSystem(eqx.Module):
 
     vector_field: Callable[[Any, Any, Any], Any] = eqx.field(static=True)
     period: Callable[[Any], Any] = eqx.field(static=True)
-    state_names: tuple[str, ...] = eqx.field(static=True)
+    state_names: tuple[str, ...] = eqx.field(static=True, converter=tuple)  # a list too (hashable: a jit key)
     section_index: int | None = eqx.field(static=True, default=None)
     name: str = eqx.field(static=True, default="system")
     switching: Callable[[Any, Any, Any], Any] | None = eqx.field(static=True, default=None)

@@ -226,6 +226,19 @@ def test_bad_user_systems_fail_clearly(what, system, match):
             call()
 
 
+def test_a_system_declared_with_lists_is_the_same_system():
+    """State names given as a list name the same system as the tuple (equal, hashable: a
+    system is a compile-time key of every kernel), and it analyses the same."""
+    listed = jg.ForcedSystem(vector_field=my_field, period=lambda p: 2 * jnp.pi / p.omega,
+                             state_names=["x", "v"], section_index=1, name="my-duffing")
+    assert listed.state_names == ("x", "v") and hash(listed) is not None
+    p = MyDuffing(delta=0.1, beta=1.0, gamma=0.3, omega=1.4)
+    grid = jg.CellGrid.box([(-2.5, 2.5), (-2.5, 2.5)], (4, 4), names=listed.state_names)
+    a, b = (jg.analyze_global(s, p, grid, method=jg.Direct(integrator=RK), progress=False, uncertainty=0)
+            for s in (listed, MY_DUFFING))
+    np.testing.assert_array_equal(a.labels, b.labels)
+
+
 def test_gear_defaults_are_not_applied_to_user_systems():
     p = MyDuffing(0.1, 1.0, 0.3, 1.4)
     with pytest.raises(ValueError, match="parameters"):
