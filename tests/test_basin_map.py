@@ -44,6 +44,7 @@ def _assert_point_is(m, iy, ix, r):
     for a in r.attractors:
         g = lut[a.id]
         assert m.shares[iy, ix, g] == a.share and m.period[iy, ix, g] == a.period
+        assert m.multiplier[iy, ix, g] == a.multiplier
     assert m.sink_share[iy, ix] == r.n_sink / r.n_cells
     assert m.unresolved_share[iy, ix] == r.n_unresolved / r.n_cells
     assert m.uncertainty_step[iy, ix] == r.uncertainty["step"]

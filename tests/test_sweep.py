@@ -328,6 +328,10 @@ def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method
         for a in r.attractors:
             g = lut[a.id]
             assert s.shares[i, g] == a.share and s.period[i, g] == a.period
+            # central differences of the k-fold map amplify the round-off of the cycle's points (refined
+            # from another lane's recurrence in the one pool) about a million times
+            assert s.multiplier[i, g] == pytest.approx(a.multiplier, rel=1e-6)
+        assert np.isnan(s.multiplier[i, ~s.present[i]]).all()
         assert s.sink_share[i] == r.n_sink / r.n_cells and s.unresolved_share[i] == r.n_unresolved / r.n_cells
         assert s.uncertainty_step[i] == r.uncertainty["step"] and s.uncertainty_start[i] == r.uncertainty["start"]
 
@@ -362,12 +366,14 @@ def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
     assert with_u.uncertainty_note() and not without.uncertainty_note()
     path = with_u.save(tmp_path / "new.nc")
     with xr.open_dataset(path, engine="h5netcdf") as ds:
-        ds.load().drop_vars(["uncertainty_step", "uncertainty_start"]).to_netcdf(tmp_path / "old.nc",
-                                                                                 engine="h5netcdf")
+        ds.load().drop_vars(["uncertainty_step", "uncertainty_start", "multiplier"]).to_netcdf(
+            tmp_path / "old.nc", engine="h5netcdf")
     old = load_basin_sweep(tmp_path / "old.nc")
     assert np.isnan(old.uncertainty_step).all() and old.uncertainty_step.shape == (2,)
+    assert np.isnan(old.multiplier).all() and old.multiplier.shape == with_u.shares.shape
     _assert_equal_results(dataclasses.replace(old, uncertainty_step=with_u.uncertainty_step,
-                                              uncertainty_start=with_u.uncertainty_start), with_u)
+                                              uncertainty_start=with_u.uncertainty_start,
+                                              multiplier=with_u.multiplier), with_u)
     for bad in (-1, 1.5, True):
         with pytest.raises(ValueError, match="uncertainty"):
             basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=bad, **kw)
@@ -525,8 +531,15 @@ def test_plots_draw_from_loaded_results(small_results):
     assert ax.get_legend() is not None and "omega" in ax.get_xlabel()
     with pytest.raises(ValueError, match="coordinate"):
         plotting.plot_bifurcation(bif, "x9")
-    fig = plotting.plot_basin_shares(load_basin_sweep(small_results["paths"]["bas"]))
+    bas = load_basin_sweep(small_results["paths"]["bas"])
+    fig = plotting.plot_basin_shares(bas)
     assert any(isinstance(c, PolyCollection) for c in fig.axes[0].collections)
+    fig = plotting.plot_basin_shares(bas, multipliers=True)  # a panel of the multipliers below
+    lines = fig.axes[1].get_lines()
+    assert len(lines) == bas.n_attractors + 1 and lines[-1].get_ydata()[0] == 1.0  # one per attractor, the limit
+    for g in range(bas.n_attractors):
+        np.testing.assert_array_equal(lines[g].get_ydata(), bas.multiplier[:, g])
+    assert np.isfinite(bas.multiplier[bas.present]).all() and (bas.multiplier[bas.present] < 1).all()
     pm = load_parameter_map(small_results["paths"]["pm"])
     for q in ("period", "n_attractors"):
         fig = plotting.plot_parameter_map(pm, q)

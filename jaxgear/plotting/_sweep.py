@@ -103,13 +103,17 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
     return fig
 
 
-def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, title: str | None = None):
+def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, multipliers: bool = False,
+                      title: str | None = None):
     """Stacked basin shares against the parameter (a :class:`~jaxgear.BasinSweep`).
 
     One band per global attractor (``attractor_color(id)``, labelled with its id and
     period(s), e.g. ``"1: P-4/P-8"`` when it doubles along the sweep), then the sink and
     unresolved cells. With ``mark_events`` a dotted line marks where an attractor
-    appears or vanishes.
+    appears or vanishes. With ``multipliers`` a second panel below draws each
+    attractor's largest Floquet multiplier modulus (``sweep.multiplier``) against the
+    parameter, with the stability limit 1: a curve that nears it marks a bifurcation
+    ahead (a period doubling where the attractor's period changes).
     """
     x = np.asarray(sweep.values)
     f = 100.0 if percent else 1.0
@@ -126,8 +130,11 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
         ys.append(f * sweep.unresolved_share)
         cols.append(UNRESOLVED_COLOR)
         labels.append("unresolved")
-    fig = new_figure(figsize=(7.5, 4.2), layout="constrained")
-    ax = fig.add_subplot()
+    fig = new_figure(figsize=(7.5, 6.4 if multipliers else 4.2), layout="constrained")
+    if multipliers:
+        ax, ax_mu = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
+    else:
+        ax = fig.add_subplot()
     if len(x) == 1:
         bottom = 0.0
         for y, c, lab in zip(ys, cols, labels):
@@ -147,6 +154,16 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     ax.set_ylabel("share of the grid [%]" if percent else "share of the grid")
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small")
     ax.set_title(title or f"Basin shares ({sweep.method}, {sweep.grid.n_cells} cells per value)")
+    if multipliers:
+        mu = np.asarray(sweep.multiplier, dtype=float)
+        for g in range(sweep.n_attractors):
+            ax_mu.plot(x, mu[:, g], "o-", color=attractor_color(g), ms=3, lw=1.2, label=f"{g}")
+        ax_mu.axhline(1.0, color="k", ls="--", lw=0.8)
+        top = np.nanmax(mu, initial=1.0)
+        ax_mu.set_ylim(0.0, max(1.05, 1.02 * top))
+        ax_mu.set_ylabel("max |Floquet multiplier|")
+        ax_mu.set_xlabel(sweep.param)
+        ax.set_xlabel("")
     return fig
 
 

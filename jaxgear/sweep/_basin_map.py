@@ -48,6 +48,8 @@ class BasinMap(GlobalShares):
             g at each parameter point (0 where it does not exist); sink_share,
             unresolved_share: ``(ny, nx)``.
         period: ``(ny, nx, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
+        multiplier: ``(ny, nx, G)`` the largest modulus of its Floquet multipliers there
+            (NaN where it does not exist or is aperiodic, and in older files).
         points: ``(ny, nx, G, K, dim)`` its stroboscopic points (NaN padded), n_points
             ``(ny, nx, G)``.
         labels: ``(ny, nx, *grid.counts)`` int16: global attractor id of every cell, -1
@@ -68,6 +70,8 @@ class BasinMap(GlobalShares):
     sink_share: np.ndarray = array_field(lambda m: m.coords_xy[::-1])
     unresolved_share: np.ndarray = array_field(lambda m: m.coords_xy[::-1])
     period: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
+    multiplier: np.ndarray | None = array_field(lambda m: (*m.coords_xy[::-1], "attractor"), later=True,
+                                                default=None)
     points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor", "point", "state"))
     n_points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
     labels: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], *m.grid.axis_names))
@@ -84,7 +88,7 @@ class BasinMap(GlobalShares):
 
     def __post_init__(self):
         self._unmeasured_as_nan()
-        for f in ("values_x", "values_y", "shares", "sink_share", "unresolved_share", "period", "points",
+        for f in ("values_x", "values_y", "shares", "sink_share", "unresolved_share", "period", "multiplier", "points",
                   "n_points", "labels", "uncertainty_step", "uncertainty_start"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
@@ -136,7 +140,7 @@ class BasinMap(GlobalShares):
                                      max_share=float(self.shares[..., g].max())) for g in range(self.n_attractors)],
                     coexisting_counts={str(m): int((self.coexisting == m).sum())
                                        for m in np.unique(self.coexisting).tolist()},
-                    shares=self.shares.tolist(), sink_share=self.sink_share.tolist(),
+                    shares=self.shares.tolist(), multiplier=self.multiplier.tolist(), sink_share=self.sink_share.tolist(),
                     unresolved_share=self.unresolved_share.tolist(),
                     uncertainty_step=self.uncertainty_step.tolist(), uncertainty_start=self.uncertainty_start.tolist())
 

@@ -74,10 +74,13 @@ class GlobalShares:
         return self.period >= 0
 
     def _unmeasured_as_nan(self) -> None:
-        """The label uncertainties of a file written before they were recorded: NaN."""
+        """The label uncertainties and multipliers of a file written before they were
+        recorded: NaN."""
         for f in ("uncertainty_step", "uncertainty_start"):
             if getattr(self, f) is None:
                 object.__setattr__(self, f, np.full(np.shape(self.sink_share), np.nan))
+        if self.multiplier is None:
+            object.__setattr__(self, "multiplier", np.full(np.shape(self.shares), np.nan))
 
     def uncertainty_note(self) -> str:
         """One line: the largest label uncertainties over the parameter values ("" when
@@ -114,6 +117,9 @@ class BasinSweep(GlobalShares):
         shares: ``(V, G)`` share of the grid in the domain of global attractor g at each
             value (0 where it does not exist); sink_share, unresolved_share: ``(V,)``.
         period: ``(V, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
+        multiplier: ``(V, G)`` the largest modulus of its Floquet multipliers there (below 1:
+            stable; it nears 1 at a bifurcation), NaN where it does not exist or is
+            aperiodic (and in files written before it was recorded).
         points: ``(V, G, K, dim)`` its stroboscopic points (NaN padded), n_points ``(V, G)``.
         labels: ``(V, *grid.counts)`` int16: global attractor id of every cell, -1 sink,
             -2 unresolved.
@@ -132,6 +138,7 @@ class BasinSweep(GlobalShares):
     sink_share: np.ndarray = array_field(lambda b: (b.param_coord,))
     unresolved_share: np.ndarray = array_field(lambda b: (b.param_coord,))
     period: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
+    multiplier: np.ndarray | None = array_field(lambda b: (b.param_coord, "attractor"), later=True, default=None)
     points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor", "point", "state"))
     n_points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
     labels: np.ndarray = array_field(lambda b: (b.param_coord,) + tuple(b.grid.axis_names))
@@ -148,8 +155,8 @@ class BasinSweep(GlobalShares):
 
     def __post_init__(self):
         self._unmeasured_as_nan()
-        for f in ("values", "shares", "sink_share", "unresolved_share", "period", "points", "n_points", "labels",
-                  "uncertainty_step", "uncertainty_start"):
+        for f in ("values", "shares", "sink_share", "unresolved_share", "period", "multiplier", "points", "n_points",
+                  "labels", "uncertainty_step", "uncertainty_start"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     def attractor_label(self, g: int) -> str:
@@ -218,8 +225,8 @@ class BasinSweep(GlobalShares):
                                      first=float(self.values[self.present[:, g]][0]),
                                      last=float(self.values[self.present[:, g]][-1]),
                                      max_share=float(self.shares[:, g].max())) for g in range(self.n_attractors)],
-                    shares=self.shares.tolist(), sink_share=self.sink_share.tolist(),
-                    unresolved_share=self.unresolved_share.tolist(),
+                    shares=self.shares.tolist(), multiplier=self.multiplier.tolist(),
+                    sink_share=self.sink_share.tolist(), unresolved_share=self.unresolved_share.tolist(),
                     uncertainty_step=self.uncertainty_step.tolist(), uncertainty_start=self.uncertainty_start.tolist(),
                     events=self.events())
 
@@ -414,14 +421,15 @@ def analyses_at(system, params_list, grid, method, out, kind: str, settings: dic
 def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarray]:
     """The per-result arrays of a sweep or map from the analyses ``results`` and the global
     ids of their attractors ``gids`` (:func:`match_across_values`): ``shares``, ``period``
-    (-1 where absent), ``points`` (NaN padded), ``n_points`` (each ``(n, G, ...)``),
+    (-1 where absent), ``multiplier`` (NaN where absent), ``points`` (NaN padded),
+    ``n_points`` (each ``(n, G, ...)``),
     ``labels`` ``(n, *grid.counts)`` int16 (global ids, -1 sink, -2 unresolved),
     ``sink_share``, ``unresolved_share``, ``uncertainty_step`` and ``uncertainty_start``
     ``(n,)`` (NaN where not measured)."""
     n = len(results)
     G = int(max([g.max(initial=-1) for g in gids] + [-1])) + 1
     K = max([len(a.points) for r in results for a in r.attractors] + [1])
-    out = dict(shares=np.zeros((n, G)), period=np.full((n, G), -1, dtype=np.int64),
+    out = dict(shares=np.zeros((n, G)), period=np.full((n, G), -1, dtype=np.int64), multiplier=np.full((n, G), np.nan),
                points=np.full((n, G, K, dim), np.nan), n_points=np.zeros((n, G), dtype=np.int64),
                labels=np.empty((n, *grid.counts), dtype=np.int16), sink_share=np.empty(n),
                unresolved_share=np.empty(n), uncertainty_step=np.full(n, np.nan), uncertainty_start=np.full(n, np.nan))
@@ -431,6 +439,7 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
         for a, gg in zip(r.attractors, g):
             pts = np.asarray(a.points)
             out["shares"][i, gg], out["period"][i, gg], out["n_points"][i, gg] = a.share, a.period, len(pts)
+            out["multiplier"][i, gg] = a.multiplier
             out["points"][i, gg, : len(pts)] = pts
             lut[a.id + 2] = gg
         out["labels"][i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
