@@ -1,5 +1,6 @@
 """``jaxgear analyze`` end to end on a reduced grid of the paper preset."""
 
+import inspect
 import json
 
 import numpy as np
@@ -65,7 +66,8 @@ def test_sweep_in_one_pool_writes_the_sweep_of_separate_analyses(tmp_path, monke
     from jaxgear.sweep import _basins
 
     pooled, real = [], _basins._analyze_values
-    monkeypatch.setattr(_basins, "_analyze_values", lambda *a, **k: pooled.append(a[-1]) or real(*a, **k))
+    batched = lambda *a, **k: inspect.signature(real).bind(*a, **k).arguments.get("batched", False)  # noqa: E731
+    monkeypatch.setattr(_basins, "_analyze_values", lambda *a, **k: pooled.append(batched(*a, **k)) or real(*a, **k))
     base = ["sweep", "--kind", "basins", "--param", "b", "--values", "4:6:2", "--grid", "6,4,6", "--no-figures",
             "--quiet"]
     assert main([*base, "--out", str(tmp_path / "separate")]) == 0

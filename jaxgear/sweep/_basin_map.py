@@ -126,7 +126,7 @@ class BasinMap(GlobalShares):
             if code == -1 or np.any(share > 0):
                 rows.append((name, "-", f"{int((share > 0).sum())}/{n}", f"{int((self.dominant == code).sum())}",
                              f"{100 * share.min():.1f}", f"{100 * share.mean():.1f}", f"{100 * share.max():.1f}"))
-        note = self.uncertainty_note().replace(" values measured", " points measured")
+        note = self.uncertainty_note("points")
         return format_table(rows, ("attractor", "label", "present at", "largest at", "min %", "mean %", "max %")) + (
             "\n" + note if note else "")
 

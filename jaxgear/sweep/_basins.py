@@ -82,16 +82,16 @@ class GlobalShares:
         if self.multiplier is None:
             object.__setattr__(self, "multiplier", np.full(np.shape(self.shares), np.nan))
 
-    def uncertainty_note(self) -> str:
-        """One line: the largest label uncertainties over the parameter values ("" when
-        none was measured)."""
+    def uncertainty_note(self, where: str = "values") -> str:
+        """One line: the largest label uncertainties over the parameter ``where`` (values,
+        points) ("" when none was measured)."""
         step, start = np.asarray(self.uncertainty_step), np.asarray(self.uncertainty_start)
         if not np.isfinite(step).any():
             return ""
         return (f"label uncertainty: at most {100 * np.nanmax(step):.1f} % of the sampled cells change label with "
                 f"a refined step, {100 * np.nanmax(start):.1f} % when their start moves (mean "
                 f"{100 * np.nanmean(step):.1f} % and {100 * np.nanmean(start):.1f} % over the "
-                f"{int(np.isfinite(step).sum())} values measured)")
+                f"{int(np.isfinite(step).sum())} {where} measured)")
 
     def _cell_coords(self, coords: dict) -> dict:
         """``coords`` (the parameters') with the attractor, state and cell-centre coordinates."""
