@@ -160,6 +160,18 @@ def test_figures(duffing_map):
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert labels == [f"{g}: {m.attractor_label(g)}" for g in sorted(set(m.dominant.ravel().tolist()))]
     assert len(ax.texts) == m.dominant.size  # the share written in every box
+    # the count panel: one shade per count, darker for more, none an attractor's colour (those name ids)
+    from matplotlib.collections import QuadMesh
+    from matplotlib.colors import to_hex, to_rgb
+
+    from jaxgear.plotting import attractor_color
+
+    mesh = next(c for c in fig.axes[1].collections if isinstance(c, QuadMesh))
+    shades = [to_rgb(c) for c in mesh.get_cmap().colors]
+    assert len(shades) == m.coexisting.max() + 1 >= 3
+    luminance = [0.2126 * r + 0.7152 * g + 0.0722 * b for r, g, b in shades]
+    assert all(a > b for a, b in zip(luminance, luminance[1:]))
+    assert not {to_hex(c) for c in shades} & {to_hex(attractor_color(g)) for g in range(10)}
     fig = plotting.plot_basin_map(m, "all")
     assert [a.get_title() for a in fig.axes if a.get_visible() and a.get_title()] == [
         f"{g}: {m.attractor_label(g)}" for g in range(m.n_attractors)]

@@ -210,12 +210,15 @@ def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None =
 
 
 def _count_panel(fig, ax, X, Y, data: np.ndarray, label: str) -> None:
-    """A map of counts (0, 1, 2, ...) on the cell edges ``X, Y``: one colour per count
-    (0 light), a colour bar with integer ticks labelled ``label``."""
+    """A map of counts (0, 1, 2, ...) on the cell edges ``X, Y``: one shade of a sequential
+    palette per count, darker for more (not the attractor colours, which name ids), a
+    colour bar with integer ticks labelled ``label``."""
+    import matplotlib
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
     top = max(int(data.max()), 1)
-    cmap = ListedColormap((["#f7f7f7"] + [_PALETTE[i % len(_PALETTE)] for i in range(top)])[: top + 1])
+    shades = matplotlib.colormaps["YlGnBu"](np.linspace(0.15, 0.95, top))
+    cmap = ListedColormap(["#f7f7f7", *shades])
     m = ax.pcolormesh(X, Y, data, cmap=cmap, norm=BoundaryNorm(np.arange(-0.5, top + 1.5), cmap.N), shading="flat")
     fig.colorbar(m, ax=ax, ticks=np.arange(0, top + 1)).set_label(label)
 
