@@ -292,9 +292,9 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             another moment of the pool, and the odd cell near a basin boundary can be
             captured differently: 1 of 5,760 cells at one point of a benchmark map).
             Off by default: on the 2-core CPU of the
-            benchmarks it is about as fast (1.05x, ``benchmarks/sweep_scale.py``: the
-            cells' integration dominates, and what one pool saves, the pilot's and the
-            tail's draining, is a small part of each analysis), while a sweep value by
+            benchmarks it is about as fast (0.9 to 1.05x, ``benchmarks/sweep_scale.py``:
+            the cells' integration dominates, and what one pool saves, the pilot's and
+            the tail's draining, is a small part of each analysis), while a sweep value by
             value saves and reports each value as it ends; one pool saves more on a GPU,
             whose pools drain with most lanes idle.
         uncertainty: cells sampled at each value for its label uncertainty
