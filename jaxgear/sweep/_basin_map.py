@@ -66,31 +66,15 @@ class BasinMap(GlobalShares):
     param_y: str = ""
     fields_y: tuple[str, ...] = ()
     values_y: np.ndarray = array_field(lambda m: (m.coords_xy[1],))
-    shares: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
-    sink_share: np.ndarray = array_field(lambda m: m.coords_xy[::-1])
-    unresolved_share: np.ndarray = array_field(lambda m: m.coords_xy[::-1])
-    period: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
-    multiplier: np.ndarray | None = array_field(lambda m: (*m.coords_xy[::-1], "attractor"), later=True,
-                                                default=None)
-    points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor", "point", "state"))
-    n_points: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], "attractor"))
-    labels: np.ndarray = array_field(lambda m: (*m.coords_xy[::-1], *m.grid.axis_names))
-    uncertainty_step: np.ndarray | None = array_field(lambda m: m.coords_xy[::-1], later=True, default=None)
-    uncertainty_start: np.ndarray | None = array_field(lambda m: m.coords_xy[::-1], later=True, default=None)
-    grid: CellGrid = None  # type: ignore[assignment]
-    method: str = ""
-    match_tol: float = 0.0
-    system: str = ""
-    state_names: tuple[str, ...] = ()
-    params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
-    version: str = ""
 
     def __post_init__(self):
-        self._unmeasured_as_nan()
-        for f in ("values_x", "values_y", "shares", "sink_share", "unresolved_share", "period", "multiplier", "points",
-                  "n_points", "labels", "uncertainty_step", "uncertainty_start"):
+        super().__post_init__()
+        for f in ("values_x", "values_y"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def value_dims(self) -> tuple[str, ...]:
+        return self.coords_xy[::-1]
 
     @property
     def coexisting(self) -> np.ndarray:

@@ -59,9 +59,49 @@ def match_across_values(results, match_tol: float) -> list[np.ndarray]:
     return out
 
 
+def _at(*tail):
+    """Dimensions of a per-value array: the result's parameter dimensions, then ``tail``."""
+    return lambda r: (*r.value_dims, *tail)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class GlobalShares:
-    """What a basin sweep and a basin map share: shares ``(..., G)`` and periods of global
-    attractors (-1 where absent) over parameter values, and the cell grid's coordinates."""
+    """What a basin sweep and a basin map share: per parameter value (the ``...`` axes,
+    named by :attr:`value_dims`) the shares ``(..., G)``, periods, multipliers and points
+    of global attractors (absent: period -1, share 0, NaN), the sink and unresolved
+    shares, every cell's global label, the label uncertainty, and the common settings.
+    Fields added after files were first written (``multiplier``, ``uncertainty_step``,
+    ``uncertainty_start``) load as NaN from those files."""
+
+    shares: np.ndarray = array_field(_at("attractor"))
+    sink_share: np.ndarray = array_field(_at())
+    unresolved_share: np.ndarray = array_field(_at())
+    period: np.ndarray = array_field(_at("attractor"))
+    multiplier: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
+    points: np.ndarray = array_field(_at("attractor", "point", "state"))
+    n_points: np.ndarray = array_field(_at("attractor"))
+    labels: np.ndarray = array_field(lambda r: (*r.value_dims, *r.grid.axis_names))
+    uncertainty_step: np.ndarray | None = array_field(_at(), later=True, default=None)
+    uncertainty_start: np.ndarray | None = array_field(_at(), later=True, default=None)
+    grid: CellGrid = None  # type: ignore[assignment]
+    method: str = ""
+    match_tol: float = 0.0
+    system: str = ""
+    state_names: tuple[str, ...] = ()
+    params: dict = dataclasses.field(default_factory=dict)
+    settings: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+
+    def __post_init__(self):
+        self._unmeasured_as_nan()
+        for f in ("shares", "sink_share", "unresolved_share", "period", "multiplier", "points", "n_points", "labels",
+                  "uncertainty_step", "uncertainty_start"):
+            object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def value_dims(self) -> tuple[str, ...]:
+        """Names of the parameter dimensions in the saved file (set by each result type)."""
+        raise NotImplementedError
 
     @property
     def n_attractors(self) -> int:
@@ -134,30 +174,14 @@ class BasinSweep(GlobalShares):
     param: str
     fields: tuple[str, ...]
     values: np.ndarray = array_field(lambda b: (b.param_coord,))
-    shares: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
-    sink_share: np.ndarray = array_field(lambda b: (b.param_coord,))
-    unresolved_share: np.ndarray = array_field(lambda b: (b.param_coord,))
-    period: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
-    multiplier: np.ndarray | None = array_field(lambda b: (b.param_coord, "attractor"), later=True, default=None)
-    points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor", "point", "state"))
-    n_points: np.ndarray = array_field(lambda b: (b.param_coord, "attractor"))
-    labels: np.ndarray = array_field(lambda b: (b.param_coord,) + tuple(b.grid.axis_names))
-    uncertainty_step: np.ndarray | None = array_field(lambda b: (b.param_coord,), later=True, default=None)
-    uncertainty_start: np.ndarray | None = array_field(lambda b: (b.param_coord,), later=True, default=None)
-    grid: CellGrid = None  # type: ignore[assignment]
-    method: str = ""
-    match_tol: float = 0.0
-    system: str = ""
-    state_names: tuple[str, ...] = ()
-    params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
-    version: str = ""
 
     def __post_init__(self):
-        self._unmeasured_as_nan()
-        for f in ("values", "shares", "sink_share", "unresolved_share", "period", "multiplier", "points", "n_points",
-                  "labels", "uncertainty_step", "uncertainty_start"):
-            object.__setattr__(self, f, read_only(getattr(self, f)))
+        super().__post_init__()
+        object.__setattr__(self, "values", read_only(self.values))
+
+    @property
+    def value_dims(self) -> tuple[str, ...]:
+        return (self.param_coord,)
 
     def attractor_label(self, g: int) -> str:
         """``"P-4"`` or ``"P-4/P-8"`` when its period changes along the sweep."""
