@@ -377,6 +377,13 @@ def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
     for bad in (-1, 1.5, True):
         with pytest.raises(ValueError, match="uncertainty"):
             basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=bad, **kw)
+    # a resume folder records the option only when it is not the default, so that a folder begun
+    # before the option existed (its analyses measured the default) resumes; another value is
+    # another sweep
+    basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, out=tmp_path / "run", **kw)
+    assert "uncertainty" not in json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]
+    with pytest.raises(ValueError, match="other settings"):
+        basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, out=tmp_path / "run", uncertainty=0, **kw)
 
 
 def test_basin_sweep_in_one_pool_pure_jax():

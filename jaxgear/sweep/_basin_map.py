@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .._cells import CellGrid
-from .._checks import check_bool, check_int
+from .._checks import check_bool
 from .._codec import array_field, result_type
 from .._devices import process_index
 from .._format import format_table
@@ -28,7 +28,7 @@ from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod
 from ..analysis._uncertainty import DEFAULT_SAMPLES
-from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_options
+from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_options, uncertainty_setting
 from ._bifurcation import read_only
 from ._classify import period_label
 from ._values import apply_values, check_values, coord_name, sorted_values
@@ -227,10 +227,10 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     check_bool(progress, "progress")
     check_bool(restart, "restart")
     check_bool(save, "save")
-    check_int(uncertainty, "uncertainty", 0)
     settings = dict(kind="basin_map", system=system.name, param_x=param_x, values_x=vx.tolist(), param_y=param_y,
                     values_y=vy.tolist(), params=params_to_dict(params), grid=grid.to_dict(),
-                    method=method.to_dict(), match_tol=match_tol, uncertainty=int(uncertainty), version=__version__)
+                    method=method.to_dict(), match_tol=match_tol, **uncertainty_setting(uncertainty),
+                    version=__version__)
     results = analyses_at(system, [apply_values(params, names, v) for v in VV], grid, method, out, "basin_map",
                           settings, restart, batched, progress, f"basin map {param_x} x {param_y}", int(uncertainty))
     ny, nx = len(vy), len(vx)

@@ -343,10 +343,9 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     check_bool(progress, "progress")
     check_bool(restart, "restart")
     check_bool(save, "save")
-    check_int(uncertainty, "uncertainty", 0)
     settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
-                    match_tol=float(match_tol), uncertainty=int(uncertainty), version=__version__)
+                    match_tol=float(match_tol), **uncertainty_setting(uncertainty), version=__version__)
     me = process_index()
     results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, out, "basins",
                           settings, restart, batched, progress, f"basins {param}", int(uncertainty))
@@ -358,6 +357,14 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     if out is not None and save and me == 0:  # one process writes
         sweep.save(Path(out) / "basins.nc")
     return sweep
+
+
+def uncertainty_setting(uncertainty) -> dict:
+    """The sweep settings entry of its label-uncertainty samples (checked): none for the
+    default, so that a resume folder begun before the option existed (whose analyses
+    measured the default) still matches its settings."""
+    check_int(uncertainty, "uncertainty", 0)
+    return {} if int(uncertainty) == DEFAULT_SAMPLES else {"uncertainty": int(uncertainty)}
 
 
 def resolve_basin_options(system, params, method, grid, match_tol):
