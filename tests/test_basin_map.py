@@ -11,6 +11,7 @@ References that do not come from the map's code:
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -220,6 +221,9 @@ def test_cli(tmp_path, capsys):
     assert m.labels.shape == (2, 2, 3, 2, 3) and m.fields_x == ("kappa_sp_amp", "kappa_rp_amp")
     assert m.fields_y == ("b_sp", "b_rp")
     assert (out / "basin_map.png").is_file() and (out / "basin_map_shares.png").is_file()
+    summary = json.loads((out / "summary.json").read_text())  # the per-point arrays, NaN as null
+    for f in ("shares", "multiplier", "sink_share", "unresolved_share", "uncertainty_step", "uncertainty_start"):
+        np.testing.assert_array_equal(np.array(summary[f], dtype=float), getattr(m, f), err_msg=f)
     assert main(["sweep", "--param", "b", "--values", "4:5:2", "--param2", "b_sp", "--values2", "4:5:2",
                  "--kind", "basins", "--out", str(tmp_path / "x")]) == 2
     assert "same field" in capsys.readouterr().err

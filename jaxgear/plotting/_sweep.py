@@ -157,7 +157,7 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     if multipliers:
         mu = np.asarray(sweep.multiplier, dtype=float)
         for g in range(sweep.n_attractors):
-            ax_mu.plot(x, mu[:, g], "o-", color=attractor_color(g), ms=3, lw=1.2, label=f"{g}")
+            ax_mu.plot(x, mu[:, g], "o-", color=attractor_color(g), ms=3, lw=1.2)
         ax_mu.axhline(1.0, color="k", ls="--", lw=0.8)
         top = np.nanmax(mu, initial=1.0)
         ax_mu.set_ylim(0.0, max(1.05, 1.02 * top))

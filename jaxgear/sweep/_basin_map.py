@@ -124,9 +124,7 @@ class BasinMap(GlobalShares):
                                      max_share=float(self.shares[..., g].max())) for g in range(self.n_attractors)],
                     coexisting_counts={str(m): int((self.coexisting == m).sum())
                                        for m in np.unique(self.coexisting).tolist()},
-                    shares=self.shares.tolist(), multiplier=self.multiplier.tolist(), sink_share=self.sink_share.tolist(),
-                    unresolved_share=self.unresolved_share.tolist(),
-                    uncertainty_step=self.uncertainty_step.tolist(), uncertainty_start=self.uncertainty_start.tolist())
+                    **self._per_value_summary())
 
     @property
     def coords_xy(self) -> tuple[str, str]:

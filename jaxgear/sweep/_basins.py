@@ -133,6 +133,12 @@ class GlobalShares:
                 f"{100 * np.nanmean(step):.1f} % and {100 * np.nanmean(start):.1f} % over the "
                 f"{int(np.isfinite(step).sum())} {where} measured)")
 
+    def _per_value_summary(self) -> dict[str, list]:
+        """The per-value arrays of :meth:`summary` (shares, multipliers, sink and
+        unresolved shares, label uncertainties) as nested lists."""
+        return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "sink_share", "unresolved_share",
+                                                        "uncertainty_step", "uncertainty_start")}
+
     def _cell_coords(self, coords: dict) -> dict:
         """``coords`` (the parameters') with the attractor, state and cell-centre coordinates."""
         coords.update(attractor=("attractor", np.arange(self.n_attractors)), state=("state", list(self.state_names)))
@@ -249,10 +255,7 @@ class BasinSweep(GlobalShares):
                                      first=float(self.values[self.present[:, g]][0]),
                                      last=float(self.values[self.present[:, g]][-1]),
                                      max_share=float(self.shares[:, g].max())) for g in range(self.n_attractors)],
-                    shares=self.shares.tolist(), multiplier=self.multiplier.tolist(),
-                    sink_share=self.sink_share.tolist(), unresolved_share=self.unresolved_share.tolist(),
-                    uncertainty_step=self.uncertainty_step.tolist(), uncertainty_start=self.uncertainty_start.tolist(),
-                    events=self.events())
+                    **self._per_value_summary(), events=self.events())
 
     @property
     def param_coord(self) -> str:
