@@ -17,7 +17,9 @@ method :class:`jaxgear.Direct`):
    included), with a warm compilation cache (a first run of each fills it); whether both
    write the same labels and shares; and, as the floor two processes can reach, one
    process on half the cells (each of the two pays the start, the loading of the
-   compiled computations, the pilot and the draining tail in full);
+   compiled computations, the pilot and the draining tail in full), and two such
+   processes at once, one per core, without any exchange (what the machine gives two
+   busy cores: shared caches, memory bandwidth and other tenants);
 3. *sweep*: ``benchmarks/sweep_scale.py`` in a fresh process, the basin sweep of 8
    backlash values in one lane pool against 8 separate analyses.
 
@@ -126,6 +128,8 @@ def processes(counts, repeat: int, tmp: Path) -> None:
         "2 processes": lambda: [(base + ["--grid", grid, "--out", str(tmp / "two")], str(i), cache, 2, i, port)
                                 for i in range(2)],
         "1 process, half the cells": lambda: [(base + ["--grid", half, "--out", str(tmp / "half")], "0", cache)],
+        "2 separate processes, half the cells each": lambda: [
+            (base + ["--grid", half, "--out", str(tmp / f"half{i}")], str(i), cache) for i in range(2)],
     }
     walls = {}
     for name, runs in configs.items():
@@ -141,6 +145,8 @@ def processes(counts, repeat: int, tmp: Path) -> None:
     print(f"   identical labels and shares: {same}")
     print(f"   the floor of 2 processes (1 process of half the cells: start, compilation cache, pilot and "
           f"tail are paid in full): {walls['1 process'] / walls['1 process, half the cells']:.2f}x")
+    print(f"   the floor on this machine (2 separate processes of half the cells, one per core, no exchange): "
+          f"{walls['1 process'] / walls['2 separate processes, half the cells each']:.2f}x")
     print(f"   processes ratio (1 process / 2 processes): {walls['1 process'] / walls['2 processes']:.2f}x")
 
 
