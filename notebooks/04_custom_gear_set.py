@@ -134,7 +134,7 @@ grid = jg.CellGrid.box([(-10.0, 10.0), (-10.0, 15.0)], counts, axes=(0, 2 * N),
 # the label uncertainty integrates sampled cells again (half the step, a moved start):
 # the quick run skips it
 result = jg.analyze_global(system, p_phased, grid, method=jg.Direct(), progress=False,
-                           uncertainty=1024 if FULL else 0)
+                           uncertainty=jg.analysis.DEFAULT_SAMPLES if FULL else 0)
 print(result.table())
 assert len(result.attractors) >= 1 and result.n_unresolved == 0
 assert abs(sum(result.shares.values()) - 1) < 1e-12
