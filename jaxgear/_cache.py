@@ -62,8 +62,11 @@ def enable_compilation_cache() -> Path | None:
     return path
 
 
-_WRITE_ARGS = ("cache_key", "compile_time_secs", "module_name", "backend", "executable", "host_callbacks")
-"""The arguments of the JAX function :func:`write_from_every_process` replaces."""
+_WRITE_SIGNATURES = (
+    ("cache_key", "compile_time_secs", "module_name", "backend", "executable", "host_callbacks"),  # jax <= 0.10
+    ("cache_key", "compile_time_secs", "module_name", "backend", "executable"),  # later: callbacks are cacheable
+)
+"""The signatures of the JAX function :func:`write_from_every_process` replaces."""
 
 
 def write_from_every_process() -> bool:
@@ -89,18 +92,21 @@ def write_from_every_process() -> bool:
         return False
     if getattr(own, "writes_from_every_process", False):
         return True
-    if list(inspect.signature(own).parameters) != list(_WRITE_ARGS):  # another JAX: its own rule
+    signature = inspect.signature(own)
+    if tuple(signature.parameters) not in _WRITE_SIGNATURES:  # another JAX: its own rule
         return False
 
-    def write(cache_key, compile_time_secs, module_name, backend, executable, host_callbacks):
+    def write(*args, **kwargs):
+        a = signature.bind(*args, **kwargs).arguments
+        backend, seconds = a["backend"], a["compile_time_secs"]
         if distributed.global_state.process_id == 0 or getattr(backend, "platform", None) != "cpu":
-            return own(cache_key, compile_time_secs, module_name, backend, executable, host_callbacks)
+            return own(*args, **kwargs)
         import jax
 
-        if host_callbacks or compile_time_secs < jax.config.jax_persistent_cache_min_compile_time_secs:
+        if a.get("host_callbacks") or seconds < jax.config.jax_persistent_cache_min_compile_time_secs:
             return None  # JAX's other conditions for writing
         try:
-            put(cache_key, module_name, executable, backend, int(compile_time_secs))
+            put(a["cache_key"], a["module_name"], a["executable"], backend, int(seconds))
         except Exception:  # a cache that cannot be written costs a compilation, nothing else
             pass
         return None
