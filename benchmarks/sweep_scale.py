@@ -61,16 +61,12 @@ def integration_alone(params, grid, results, repeat: int):
     return best(run, repeat)[0], periods
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--values", type=int, default=8)
-    ap.add_argument("--counts", type=int, nargs=3, default=(20, 12, 24))
-    ap.add_argument("--repeat", type=int, default=2)
-    a = ap.parse_args()
-    warnings.simplefilter("ignore")
+def measure(n_values: int = 8, counts=(20, 12, 24), repeat: int = 2) -> dict:
+    """The module's measurement: seconds of each way (best of ``repeat`` after a warm-up),
+    whether both ways give the same labels, and the two ratios."""
     params = jg.paper_params()
-    grid = jg.CellGrid.paper(tuple(a.counts))
-    values = np.linspace(4.0, 6.0, a.values)
+    grid = jg.CellGrid.paper(tuple(counts))
+    values = np.linspace(4.0, 6.0, n_values)
 
     def batched():
         return jg.basin_sweep(jg.REDUCED, params, "b", values, grid, progress=False, batched=True)
@@ -78,25 +74,42 @@ def main():
     def separate():
         return [jg.analyze_global(jg.REDUCED, jg.with_param(params, "b", v), grid, progress=False) for v in values]
 
-    t_sep, results = best(separate, a.repeat)
-    t_bat, sweep = best(batched, a.repeat)
+    t_sep, results = best(separate, repeat)
+    t_bat, sweep = best(batched, repeat)
     same = True
     for i, r in enumerate(results):
         gid = jg.sweep.match_across_values(results, sweep.match_tol)[i]
         lut = np.concatenate([[-2, -1], gid])
         same &= bool(np.array_equal(lut[np.asarray(r.labels) + 2], sweep.labels[i]))
-    print(f"machine: {jg.__version__}, grid {a.counts} = {grid.n_cells} cells, {a.values} values of b")
-    print(f"separate analyses: {t_sep:8.2f} s")
-    print(f"batched pool:      {t_bat:8.2f} s")
-    print(f"same labels at every value: {same}")
     t_cls, classified = best(lambda: [jg.analyze_global(jg.REDUCED, jg.with_param(params, "b", v), grid,
-                                                        progress=False, uncertainty=0) for v in values], a.repeat)
-    t_int, periods = integration_alone(params, grid, classified, a.repeat)
-    print(f"separate analyses without the label uncertainty: {t_cls:8.2f} s")
-    print(f"integration alone of their {len(values) * grid.n_cells} cells x {periods} periods (one batch): "
-          f"{t_int:8.2f} s")
-    print(f"ceiling of any pooling (separate without uncertainty / integration alone): {t_cls / t_int:.2f}x")
-    print(f"basin sweep, batched pool vs separate analyses: {t_sep / t_bat:.2f}x")
+                                                        progress=False, uncertainty=0) for v in values], repeat)
+    t_int, periods = integration_alone(params, grid, classified, repeat)
+    return dict(values=n_values, counts=list(counts), cells=grid.n_cells, separate_s=t_sep, batched_s=t_bat,
+                same_labels=same, separate_without_uncertainty_s=t_cls, integration_alone_s=t_int,
+                periods=periods, ceiling=t_cls / t_int, ratio=t_sep / t_bat)
+
+
+def report(m: dict) -> None:
+    """Print :func:`measure`'s figures, the headline (separate / batched) last."""
+    print(f"machine: {jg.__version__}, grid {tuple(m['counts'])} = {m['cells']} cells, {m['values']} values of b")
+    print(f"separate analyses: {m['separate_s']:8.2f} s")
+    print(f"batched pool:      {m['batched_s']:8.2f} s")
+    print(f"same labels at every value: {m['same_labels']}")
+    print(f"separate analyses without the label uncertainty: {m['separate_without_uncertainty_s']:8.2f} s")
+    print(f"integration alone of their {m['values'] * m['cells']} cells x {m['periods']} periods (one batch): "
+          f"{m['integration_alone_s']:8.2f} s")
+    print(f"ceiling of any pooling (separate without uncertainty / integration alone): {m['ceiling']:.2f}x")
+    print(f"basin sweep, batched pool vs separate analyses: {m['ratio']:.2f}x")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--values", type=int, default=8)
+    ap.add_argument("--counts", type=int, nargs=3, default=(20, 12, 24))
+    ap.add_argument("--repeat", type=int, default=2)
+    a = ap.parse_args()
+    warnings.simplefilter("ignore")
+    report(measure(a.values, a.counts, a.repeat))
 
 
 if __name__ == "__main__":
