@@ -260,6 +260,14 @@ def _finish(procs, timeout=600):
         assert p.returncode == 0, err.decode()[-3000:]
 
 
+def _kill(proc) -> None:
+    """SIGKILL ``proc`` and reap it, its stderr pipe read and closed."""
+    import signal
+
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate()
+
+
 def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
     """A basin sweep as two JAX processes (each takes every other value; process 0 writes
     the file): one of them killed (SIGKILL) after its first value, the job stopped, the
@@ -276,15 +284,13 @@ def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
     t0 = time.time()
     while time.time() - t0 < 300 and procs[1].poll() is None and not (run / "parts" / "value_00001.nc").exists():
         time.sleep(0.005)
-    procs[1].send_signal(signal.SIGKILL)
-    procs[1].wait()
+    _kill(procs[1])
     assert procs[1].returncode == -signal.SIGKILL
     assert not (run / "parts" / "value_00003.nc").exists()  # process 1's second value: lost
     deadline = time.time() + 120  # process 0 finishes its own values, then waits for process 1's: stop the job
     while time.time() < deadline and not all((run / "parts" / f"value_0000{i}.nc").exists() for i in (0, 2)):
         time.sleep(0.05)
-    procs[0].send_signal(signal.SIGKILL)
-    procs[0].wait()
+    _kill(procs[0])
     assert not (run / "basins.nc").exists()
     kept = sorted(p.name for p in (run / "parts").glob("value_*.nc"))
     assert kept == ["value_00000.nc", "value_00001.nc", "value_00002.nc"], kept

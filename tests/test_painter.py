@@ -87,11 +87,10 @@ def test_workers_end_with_their_parent(tmp_path):
         time.sleep(60)
     """).replace("_children(", "__import__('test_painter')._descendants(")
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, env=env, stdout=subprocess.PIPE, text=True)
-    workers = [int(x) for x in proc.stdout.readline().split()]
+    with subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, env=env, stdout=subprocess.PIPE, text=True) as proc:
+        workers = [int(x) for x in proc.stdout.readline().split()]
+        os.kill(proc.pid, signal.SIGKILL)  # the with block closes its pipe (no unclosed-file warning later)
     assert len(workers) == 2
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
     deadline = time.monotonic() + 20
     while time.monotonic() < deadline and any(_alive(w) for w in workers):
         time.sleep(0.1)

@@ -68,7 +68,7 @@ class Checkpoint:
         """The arrays of a saved block, or ``None`` when the part is unreadable (it is then
         removed and the block is computed again)."""
         try:
-            with np.load(self.parts / name) as z:
+            with open(self.parts / name, "rb") as f, np.load(f) as z:  # closed also when np.load fails
                 return {k: z[k] for k in z.files}
         except Exception:  # truncated or corrupted part: recompute it
             (self.parts / name).unlink(missing_ok=True)
