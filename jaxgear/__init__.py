@@ -13,136 +13,124 @@ Poincaré maps (``_poincare``), the cell space (``_cells``), global analysis
 and the command line (``cli``). Every public name is re-exported here.
 """
 
-import gc as _gc
+import jax as _jax
 
-# Importing jax and jaxgear makes about a million objects; the garbage collector would
-# scan them again and again while they are made (0.1 s of the import). It is paused for
-# the import and left as it was found (the few cycles made meanwhile are collected later).
-_collecting = _gc.isenabled()
-_gc.disable()
-try:
-    import jax as _jax
+_jax.config.update("jax_enable_x64", True)
 
-    _jax.config.update("jax_enable_x64", True)
-
-    from ._version import __version__ as __version__  # noqa: E402
-    from ._status import Status as Status  # noqa: E402
-    from ._system import ForcedSystem as ForcedSystem, check_system as check_system  # noqa: E402
-    from ._params import (  # noqa: E402
-        GearParams as GearParams,
-        PARAM_NAMES as PARAM_NAMES,
-        PARAM_ALIASES as PARAM_ALIASES,
-        with_param as with_param,
-        get_param as get_param,
-        param_names as param_names,
-        replace_params as replace_params,
-    )
-    from ._gearset import GearSet as GearSet  # noqa: E402
-    from ._presets import (  # noqa: E402
-        paper_gear_set as paper_gear_set,
-        paper_params as paper_params,
-        get_preset as get_preset,
-        resolve_params as resolve_params,
-    )
-    from ._model import (  # noqa: E402
-        REDUCED as REDUCED,
-        backlash as backlash,
-        nplanet_system as nplanet_system,
-        reduced_vector_field as reduced_vector_field,
-        nplanet_vector_field as nplanet_vector_field,
-        reduced_to_nplanet as reduced_to_nplanet,
-    )
-    from ._examples import (  # noqa: E402
-        DUFFING as DUFFING,
-        DuffingParams as DuffingParams,
-        SPUR_PAIR as SPUR_PAIR,
-        SpurPairParams as SpurPairParams,
-        PARAM_DUFFING as PARAM_DUFFING,
-        ParamDuffingParams as ParamDuffingParams,
-    )
-    from .integrate import (  # noqa: E402
-        AbstractIntegrator as AbstractIntegrator,
-        KinkAwareRK4 as KinkAwareRK4,
-        RK4 as RK4,
-        Adaptive as Adaptive,
-        default_integrator as default_integrator,
-    )
-    from ._poincare import (  # noqa: E402
-        stroboscopic_map as stroboscopic_map,
-        stroboscopic_orbit as stroboscopic_orbit,
-        section_map as section_map,
-        SectionHit as SectionHit,
-        sample_trajectory as sample_trajectory,
-    )
-    from ._cells import CellGrid as CellGrid, PAPER_REGION as PAPER_REGION  # noqa: E402
-    from .analysis import (  # noqa: E402
-        AbstractGlobalMethod as AbstractGlobalMethod,
-        Direct as Direct,
-        PoincareCellMap as PoincareCellMap,
-        StroboscopicCellMap as StroboscopicCellMap,
-        analyze_global as analyze_global,
-        default_method as default_method,
-        analyze_cell_map as analyze_cell_map,
-        cell_images as cell_images,
-        compare_with_direct as compare_with_direct,
-        label_uncertainty as label_uncertainty,
-        with_label_uncertainty as with_label_uncertainty,
-        detect_period as detect_period,
-        Attractor as Attractor,
-        GlobalResult as GlobalResult,
-        SINK as SINK,
-        UNRESOLVED as UNRESOLVED,
-    )
-    from .shooting import (  # noqa: E402
-        periodic_orbit as periodic_orbit,
-        find_periodic_orbits as find_periodic_orbits,
-        verify_orbit as verify_orbit,
-        monodromy as monodromy,
-        floquet_multipliers as floquet_multipliers,
-        seeds_from_result as seeds_from_result,
-        seeds_in_box as seeds_in_box,
-        Instability as Instability,
-        ShootResult as ShootResult,
-        PeriodicOrbit as PeriodicOrbit,
-        OrbitSearch as OrbitSearch,
-        OrbitCheck as OrbitCheck,
-    )
-    from .continuation import (  # noqa: E402
-        continue_orbit as continue_orbit,
-        switch_branch as switch_branch,
-        Branch as Branch,
-        BifurcationPoint as BifurcationPoint,
-    )
-    from .sweep import (  # noqa: E402
-        bifurcation_diagram as bifurcation_diagram,
-        basin_sweep as basin_sweep,
-        basin_map as basin_map,
-        parameter_map as parameter_map,
-        BifurcationDiagram as BifurcationDiagram,
-        BasinSweep as BasinSweep,
-        BasinMap as BasinMap,
-        ParameterMap as ParameterMap,
-    )
-    from .design import (  # noqa: E402
-        design as design,
-        DesignResult as DesignResult,
-        OrbitSamples as OrbitSamples,
-        sample_orbit as sample_orbit,
-        MeshForces as MeshForces,
-        mesh_forces as mesh_forces,
-        transmission_error as transmission_error,
-        peak_to_peak as peak_to_peak,
-        rms as rms,
-        max_multiplier as max_multiplier,
-        mesh_force_ptp as mesh_force_ptp,
-        mesh_force_rms as mesh_force_rms,
-        transmission_error_rms as transmission_error_rms,
-    )
-    from ._io import load as load  # noqa: E402
-
-finally:
-    if _collecting:
-        _gc.enable()
+from ._version import __version__ as __version__
+from ._status import Status as Status
+from ._system import ForcedSystem as ForcedSystem, check_system as check_system
+from ._params import (
+    GearParams as GearParams,
+    PARAM_NAMES as PARAM_NAMES,
+    PARAM_ALIASES as PARAM_ALIASES,
+    with_param as with_param,
+    get_param as get_param,
+    param_names as param_names,
+    replace_params as replace_params,
+)
+from ._gearset import GearSet as GearSet
+from ._presets import (
+    paper_gear_set as paper_gear_set,
+    paper_params as paper_params,
+    get_preset as get_preset,
+    resolve_params as resolve_params,
+)
+from ._model import (
+    REDUCED as REDUCED,
+    backlash as backlash,
+    nplanet_system as nplanet_system,
+    reduced_vector_field as reduced_vector_field,
+    nplanet_vector_field as nplanet_vector_field,
+    reduced_to_nplanet as reduced_to_nplanet,
+)
+from ._examples import (
+    DUFFING as DUFFING,
+    DuffingParams as DuffingParams,
+    SPUR_PAIR as SPUR_PAIR,
+    SpurPairParams as SpurPairParams,
+    PARAM_DUFFING as PARAM_DUFFING,
+    ParamDuffingParams as ParamDuffingParams,
+)
+from .integrate import (
+    AbstractIntegrator as AbstractIntegrator,
+    KinkAwareRK4 as KinkAwareRK4,
+    RK4 as RK4,
+    Adaptive as Adaptive,
+    default_integrator as default_integrator,
+)
+from ._poincare import (
+    stroboscopic_map as stroboscopic_map,
+    stroboscopic_orbit as stroboscopic_orbit,
+    section_map as section_map,
+    SectionHit as SectionHit,
+    sample_trajectory as sample_trajectory,
+)
+from ._cells import CellGrid as CellGrid, PAPER_REGION as PAPER_REGION
+from .analysis import (
+    AbstractGlobalMethod as AbstractGlobalMethod,
+    Direct as Direct,
+    PoincareCellMap as PoincareCellMap,
+    StroboscopicCellMap as StroboscopicCellMap,
+    analyze_global as analyze_global,
+    default_method as default_method,
+    analyze_cell_map as analyze_cell_map,
+    cell_images as cell_images,
+    compare_with_direct as compare_with_direct,
+    label_uncertainty as label_uncertainty,
+    with_label_uncertainty as with_label_uncertainty,
+    detect_period as detect_period,
+    Attractor as Attractor,
+    GlobalResult as GlobalResult,
+    SINK as SINK,
+    UNRESOLVED as UNRESOLVED,
+)
+from .shooting import (
+    periodic_orbit as periodic_orbit,
+    find_periodic_orbits as find_periodic_orbits,
+    verify_orbit as verify_orbit,
+    monodromy as monodromy,
+    floquet_multipliers as floquet_multipliers,
+    seeds_from_result as seeds_from_result,
+    seeds_in_box as seeds_in_box,
+    Instability as Instability,
+    ShootResult as ShootResult,
+    PeriodicOrbit as PeriodicOrbit,
+    OrbitSearch as OrbitSearch,
+    OrbitCheck as OrbitCheck,
+)
+from .continuation import (
+    continue_orbit as continue_orbit,
+    switch_branch as switch_branch,
+    Branch as Branch,
+    BifurcationPoint as BifurcationPoint,
+)
+from .sweep import (
+    bifurcation_diagram as bifurcation_diagram,
+    basin_sweep as basin_sweep,
+    basin_map as basin_map,
+    parameter_map as parameter_map,
+    BifurcationDiagram as BifurcationDiagram,
+    BasinSweep as BasinSweep,
+    BasinMap as BasinMap,
+    ParameterMap as ParameterMap,
+)
+from .design import (
+    design as design,
+    DesignResult as DesignResult,
+    OrbitSamples as OrbitSamples,
+    sample_orbit as sample_orbit,
+    MeshForces as MeshForces,
+    mesh_forces as mesh_forces,
+    transmission_error as transmission_error,
+    peak_to_peak as peak_to_peak,
+    rms as rms,
+    max_multiplier as max_multiplier,
+    mesh_force_ptp as mesh_force_ptp,
+    mesh_force_rms as mesh_force_rms,
+    transmission_error_rms as transmission_error_rms,
+)
+from ._io import load as load
 
 
 def __getattr__(name):

@@ -2,24 +2,23 @@
 
 One root folder, ``$JAXGEAR_CACHE_DIR`` (default ``~/.cache/jaxgear``), holds
 
-- ``xla/``: JAX's persistent compilation cache, enabled by the command line (a repeated
-  command loads its compiled computations instead of compiling them again);
-- ``kept/``: the lowered computations a command keeps for the next
-  (:mod:`jaxgear._kept`: a warm command loads its lane pools instead of tracing them);
+- ``xla/``: JAX's persistent compilation cache, switched on by the command line through
+  JAX's public configuration (a repeated command loads its compiled computations
+  instead of compiling them again). It holds data that JAX itself reads and checks;
+  nothing in it is executed as Python;
 - ``native/``: the compiled CPU kernel of the gear models
   (:mod:`jaxgear.integrate._native`), built on first use.
 
-``JAXGEAR_CACHE_DIR=off`` turns the compilation cache and the kept computations off; the
-kernel is then built in the default folder.
+``JAXGEAR_CACHE_DIR=off`` turns the compilation cache off; the kernel is then built in
+the default folder.
 """
 
 from __future__ import annotations
 
-import inspect
 import os
 from pathlib import Path
 
-__all__ = ["cache_root", "native_dir", "enable_compilation_cache", "write_from_every_process"]
+__all__ = ["cache_root", "native_dir", "enable_compilation_cache"]
 
 _OFF = ("", "0", "off", "none", "false", "no")
 
@@ -44,8 +43,13 @@ def native_dir() -> Path:
 def enable_compilation_cache() -> Path | None:
     """Keep every compiled XLA computation in ``<cache root>/xla`` (whatever its compile
     time: a run of the global analysis compiles a dozen computations of under a second
-    each, which together cost seconds). Returns the folder, or ``None`` when caching is off
-    or the folder cannot be created (then nothing changes)."""
+    each, which together cost seconds), through JAX's public configuration. Returns the
+    folder, or ``None`` when caching is off or the folder cannot be created (then
+    nothing changes).
+
+    JAX writes entries from process 0 of a multi-process run only; on CPUs the other
+    processes' keys name their own devices, so they compile their computations at each
+    start (the price of using JAX's cache as JAX defines it)."""
     root = cache_root()
     if root is None:
         return None
@@ -60,57 +64,3 @@ def enable_compilation_cache() -> Path | None:
     except (OSError, AttributeError):  # read-only home or an older jax: run without the cache
         return None
     return path
-
-
-_WRITE_SIGNATURES = (
-    ("cache_key", "compile_time_secs", "module_name", "backend", "executable", "host_callbacks"),  # jax <= 0.10
-    ("cache_key", "compile_time_secs", "module_name", "backend", "executable"),  # later: callbacks are cacheable
-)
-"""The signatures of the JAX function :func:`write_from_every_process` replaces."""
-
-
-def write_from_every_process() -> bool:
-    """Let every process of a multi-process CPU program write its own entries into JAX's
-    persistent compilation cache; returns whether it could.
-
-    JAX writes cache entries from process 0 only (so that processes do not contend for
-    the same entry on a shared file system). On CPUs the key of a computation holds the
-    ids of the devices it runs on, so the other processes never find process 0's entries:
-    without their own, they compile every computation again at every start (seconds per
-    pool program on one core, more than the analysis of their share of the cells). Their
-    keys differ from process 0's and from each other's, so writing them contends for
-    nothing. Other platforms keep JAX's rule (GPU keys leave the devices out: process 0's
-    entries serve every process). This reaches into JAX's compiler module; a JAX without
-    the hook it replaces keeps its own behaviour (and this returns ``False``)."""
-    try:
-        from jax._src import compilation_cache, compiler, distributed
-    except ImportError:
-        return False
-    own = getattr(compiler, "_cache_write", None)
-    put = getattr(compilation_cache, "put_executable_and_time", None)
-    if own is None or put is None:
-        return False
-    if getattr(own, "writes_from_every_process", False):
-        return True
-    signature = inspect.signature(own)
-    if tuple(signature.parameters) not in _WRITE_SIGNATURES:  # another JAX: its own rule
-        return False
-
-    def write(*args, **kwargs):
-        a = signature.bind(*args, **kwargs).arguments
-        backend, seconds = a["backend"], a["compile_time_secs"]
-        if distributed.global_state.process_id == 0 or getattr(backend, "platform", None) != "cpu":
-            return own(*args, **kwargs)
-        import jax
-
-        if a.get("host_callbacks") or seconds < jax.config.jax_persistent_cache_min_compile_time_secs:
-            return None  # JAX's other conditions for writing
-        try:
-            put(a["cache_key"], a["module_name"], a["executable"], backend, int(seconds))
-        except Exception:  # a cache that cannot be written costs a compilation, nothing else
-            pass
-        return None
-
-    write.writes_from_every_process = True
-    compiler._cache_write = write
-    return True

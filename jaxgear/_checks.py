@@ -11,6 +11,7 @@ import numbers
 from collections.abc import Iterable
 from typing import Any
 
+import jax
 import numpy as np
 
 __all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article"]
@@ -99,3 +100,16 @@ def _range_text(lo, hi, strict_lo: bool = False, strict_hi: bool = False) -> str
     if hi is not None:
         return f" {'<' if strict_hi else '<='} {hi:g}"
     return ""
+
+
+def is_traced(x) -> bool:
+    """Whether ``x`` is an abstract value inside a JAX transformation (``jit``, ``vmap``,
+    ``grad``) rather than a concrete number or array, told by JAX's public error for
+    converting such a value to numpy."""
+    if not isinstance(x, jax.Array):
+        return False
+    try:
+        x.__array__()
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return True
+    return False

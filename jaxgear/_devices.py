@@ -48,8 +48,6 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from ._cache import write_from_every_process
-
 __all__ = ["local_devices", "put", "placement", "split_rows", "shard_rows", "batch_mesh",
            "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
            "values_over_processes", "allgather", "rows_over_processes"]
@@ -239,7 +237,6 @@ def initialize(coordinator_address: str | None = None, num_processes: int | None
     jax.config.update("jax_cpu_collectives_implementation", "gloo")  # CPU processes exchange results
     jax.distributed.initialize(coordinator_address=coordinator_address, num_processes=num_processes,
                                process_id=process_id)
-    write_from_every_process()  # else the processes other than 0 compile everything at every start on CPUs
 
 
 def process_index() -> int:

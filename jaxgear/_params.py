@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import is_traced
 from ._format import fmt_value, format_table
 
 __all__ = [
@@ -97,7 +98,7 @@ PARAM_MEANINGS = {
 
 
 def _f64(x):
-    if isinstance(x, (jax.Array, jax.core.Tracer)):
+    if isinstance(x, jax.Array):
         return jnp.asarray(x, dtype=jnp.float64)
     # a number from the host: placed as it is (jnp.asarray would compile a conversion,
     # the first computation of a run: a tenth of a second before the run can start)
@@ -105,7 +106,7 @@ def _f64(x):
 
 
 def _is_concrete(x) -> bool:
-    return not isinstance(x, jax.core.Tracer)
+    return not is_traced(x)
 
 
 def require(cond: bool, name: str, value, allowed: str) -> None:

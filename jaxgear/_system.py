@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import is_traced
+
 __all__ = ["ForcedSystem", "check_system", "check_state_shape", "state_index"]
 
 
@@ -176,7 +178,7 @@ def check_state_shape(system: ForcedSystem, x: Any) -> None:
             f"{system.name}: states must have shape (..., {system.dim}) "
             f"({', '.join(system.state_names)}); got shape {shape}."
         )
-    if not isinstance(x, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(x))):
+    if not is_traced(x) and not np.all(np.isfinite(np.asarray(x))):
         raise ValueError(f"{system.name}: initial states contain NaN or infinite values.")
 
 

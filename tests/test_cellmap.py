@@ -258,14 +258,18 @@ def test_direct_never_reports_an_unstable_cycle():
 
 
 def test_capture_radius_stays_below_attractor_separation():
-    from jaxgear.analysis._direct import capture_radius as _capture_radius
+    """The pool's automatic capture radius (computed on the device from a value's table):
+    a quarter of the smallest gap between points of two attractors, at most 1 % of
+    ``1 + max |x|``; a given radius is used as it is."""
+    from jaxgear.analysis._lanes import capture_radius, seed_tables
 
     a = np.array([[0.0, 0.0], [1.0, 0.0]])
     b = np.array([[0.0, 0.04], [1.0, 1.0]])
-    r = _capture_radius([[a, 2, 0.0], [b, 2, 0.0]], "auto")
-    assert r == pytest.approx(0.01)  # a quarter of the 0.04 gap between the two attractors
-    assert _capture_radius([[a, 2, 0.0]], "auto") == pytest.approx(0.02)  # 1 % of 1 + max|x|
-    assert _capture_radius([[a, 2, 0.0]], 0.3) == 0.3
+    pts, ks, _ = seed_tables([[(a, 2), (b, 2)]], 2, 2)
+    assert float(capture_radius(pts[0], ks[0], None)) == pytest.approx(0.01)  # a quarter of the 0.04 gap
+    pts, ks, _ = seed_tables([[(a, 2)]], 2, 2)
+    assert float(capture_radius(pts[0], ks[0], None)) == pytest.approx(0.02)  # 1 % of 1 + max|x|
+    assert float(capture_radius(pts[0], ks[0], 0.3)) == 0.3
     with pytest.raises(ValueError, match="capture_radius"):
         jg.Direct(capture_radius=-1)
 
@@ -276,13 +280,13 @@ def test_pool_compaction_keeps_every_busy_lane_and_its_history():
     the busy lanes, each with the state, ring, streaks, row and age it had."""
     import jax
 
-    from jaxgear.analysis import _pool
+    from jaxgear.analysis import _lanes
 
     rng = np.random.default_rng(3)
     L, dim, M = 6000, 4, 3  # more lanes to move (about 1,500) than one chunk of MOVE_CHUNK (1,024)
     X = rng.normal(size=(L, dim))
-    att = _pool._seed_attractors([()], M, dim)
-    s = _pool._init(L, L, dim, M, jax.device_put(X), jax.device_put(np.zeros(L, np.int32)), *att)
+    att = _lanes.seed_tables([()], M, dim)
+    s = _lanes.init_pool(L, M, jax.device_put(X), jax.device_put(np.zeros(L, np.int32)), *att)
     busy = rng.random(L) < 0.45
     s = s._replace(hist=jax.device_put(rng.normal(size=s.hist.shape)),
                    streak=jax.device_put(rng.integers(0, 9, size=s.streak.shape).astype(np.int32)),
@@ -290,7 +294,7 @@ def test_pool_compaction_keeps_every_busy_lane_and_its_history():
                    cell=jax.device_put(np.where(busy, np.arange(L), -1).astype(np.int32)))
     before = {int(c): (np.asarray(s.Y)[:, j], np.asarray(s.hist)[:, :, j], np.asarray(s.streak)[:, j],
                        int(s.age[j])) for j, c in enumerate(np.asarray(s.cell)) if c >= 0}
-    out = jax.jit(_pool._compact)(s)
+    out = jax.jit(_lanes.compact)(s)
     c = int(busy.sum())
     cell = np.asarray(out.cell)
     assert int(out.n_active) == c

@@ -425,8 +425,8 @@ def test_one_pool_rows_decide_against_their_own_tables():
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
     X = np.asarray(grid.centres(), np.float64)
     m = jg.Direct(integrator=jg.RK4(64), max_period=4)
-    kw = dict(chunk=64, R=m.round_periods, max_periods=m.max_periods, max_period=m.max_period, tol=m.period_tol,
-              capture=m.capture_radius, bound=m.escape_bound, merge_tol=m.merge_tol, progress=False, pilot=0)
+    m = jg.Direct(integrator=jg.RK4(64), max_period=4, chunk_size=64)
+    kw = dict(options=m.pool_options(pilot=0), progress=False)
     p13, p10 = jg.DuffingParams(**DUFF, omega=1.3), jg.DuffingParams(**DUFF, omega=1.0)
     _, atts, _ = run_pool(jg.DUFFING, p13, X, m.integrator, **kw)
     assert len(atts) == 2

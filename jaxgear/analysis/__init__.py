@@ -10,7 +10,8 @@
 - :mod:`._diagnostics` — warnings when a result looks unreliable;
 - :mod:`._compare` — agreement with direct integration on a sample of cells;
 - :mod:`._uncertainty` — :func:`label_uncertainty`, how far a result's labels can be trusted;
-- :mod:`._pool` — the direct method's device-resident lane pool.
+- :mod:`._lanes`, :mod:`._placement`, :mod:`._pool` — the direct method's device-resident lane
+  pool: its device program, where it runs, and its host driver.
 """
 
 from ._cellmap import PoincareCellMap, StroboscopicCellMap, cell_images
@@ -21,13 +22,12 @@ from ._global import (
                       analyze_global,
                       analyze_global_values,
                       default_method,
-                      prepare_analysis,
-                      prepare_label_uncertainty,
                       with_label_uncertainty,
 )
 from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
 from ._orbits import detect_period
+from ._pool import PoolOptions
 from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
@@ -36,4 +36,4 @@ __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCel
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
            "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty", "DEFAULT_SAMPLES",
-           "with_label_uncertainty", "prepare_label_uncertainty", "prepare_analysis"]
+           "with_label_uncertainty", "PoolOptions"]

@@ -26,7 +26,7 @@ from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import largest_multipliers, refine_orbits
-from ._pool import DEFAULT_PILOT, prepare_pools, run_pool, run_pools
+from ._pool import PoolOptions, run_pool, run_pools
 from ._result import UNRESOLVED
 
 __all__ = ["Direct", "STABLE_BELOW"]
@@ -58,8 +58,9 @@ class Direct(AbstractGlobalMethod):
     Attributes:
         round_periods: periods per round between checks (>= 1).
         max_periods: limit per cell (then ``UNRESOLVED``).
-        capture_radius: ``"auto"`` (a quarter of the smallest distance between two known
-            attractors' points, at most 1 % of their scale) or a number >= 0 (state units).
+        capture_radius: a number >= 0 (state units), or ``None`` (the default): a quarter
+            of the smallest distance between two known attractors' points, at most 1 % of
+            their scale.
         escape_bound: norm beyond which a state counts as escaped (state units).
         integrator, max_period, period_tol, merge_tol, chunk_size: see
             :class:`AbstractGlobalMethod`.
@@ -68,13 +69,13 @@ class Direct(AbstractGlobalMethod):
     name: ClassVar[str] = "direct"
     round_periods: int = eqx.field(static=True, default=5)
     max_periods: int = eqx.field(static=True, default=2000)
-    capture_radius: float | str = eqx.field(static=True, default="auto")
+    capture_radius: float | None = eqx.field(static=True, default=None)
     escape_bound: float = eqx.field(static=True, default=1e6)
 
     def __check_init__(self):
         check_int(self.round_periods, "round_periods", 1)
         check_int(self.max_periods, "max_periods", 1)
-        if self.capture_radius != "auto":
+        if self.capture_radius is not None:
             check_number(self.capture_radius, "capture_radius", 0)
         check_number(self.escape_bound, "escape_bound", 0, strict_min=True)
 
@@ -90,11 +91,11 @@ class Direct(AbstractGlobalMethod):
         return cls(integrator=method.integrator if integrator is None else integrator, max_period=method.max_period,
                    period_tol=method.period_tol, merge_tol=method.merge_tol, chunk_size=method.chunk_size)
 
-    def prepare(self, system, params, grid: CellGrid) -> None:
-        prepare_pools(system, [params], self.integrator, grid.n_cells, chunk=self.chunk_size, R=self.round_periods,
-                      max_periods=self.max_periods, max_period=self.max_period, tol=self.period_tol,
-                      capture=self.capture_radius, bound=self.escape_bound, merge_tol=self.merge_tol,
-                      pilot=DEFAULT_PILOT)
+    def pool_options(self, pilot: int = PoolOptions.pilot) -> PoolOptions:
+        """The lane pool's options (:class:`~jaxgear.analysis.PoolOptions`) of this method."""
+        return PoolOptions(max_period=self.max_period, round_periods=self.round_periods, period_tol=self.period_tol,
+                           merge_tol=self.merge_tol, max_periods=self.max_periods, escape_bound=self.escape_bound,
+                           capture_radius=self.capture_radius, lanes=self.chunk_size, pilot=pilot)
 
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         labels, atts, mean = self.label_states(system, params, grid.centres(), progress)
@@ -117,10 +118,8 @@ class Direct(AbstractGlobalMethod):
     def label_states_values(self, system, params_list, X: np.ndarray, progress: bool = False, label="direct"):
         """:meth:`label_states` of the same states ``X (n, dim)`` under each parameter set of
         ``params_list``, in one lane pool: a list of its results, one per value."""
-        pooled = run_pools(system, params_list, [X] * len(params_list), self.integrator, chunk=self.chunk_size,
-                           R=self.round_periods, max_periods=self.max_periods, max_period=self.max_period,
-                           tol=self.period_tol, capture=self.capture_radius, bound=self.escape_bound,
-                           merge_tol=self.merge_tol, progress=progress, label=label)
+        pooled = run_pools(system, params_list, [X] * len(params_list), self.integrator, self.pool_options(),
+                           progress=progress, label=label)
         out = []
         for params, (labels, atts, used) in zip(params_list, pooled):
             res = self._refined(system, params, atts)
@@ -165,11 +164,8 @@ class Direct(AbstractGlobalMethod):
             # pools of such passes share a few compiled shapes (across the values of a sweep)
             size = max(64, 1 << (len(cells) - 1).bit_length())
             queue = np.concatenate([cells, np.repeat(cells[-1:], size - len(cells))])
-            lab, atts, use = run_pool(system, params, X[queue], self.integrator, chunk=self.chunk_size,
-                                      R=self.round_periods, max_periods=self.max_periods,
-                                      max_period=self.max_period, tol=self.period_tol,
-                                      capture=self.capture_radius, bound=self.escape_bound, merge_tol=self.merge_tol,
-                                      progress=progress, pilot=0, attractors=seeds, label="direct (off repellers)")
+            lab, atts, use = run_pool(system, params, X[queue], self.integrator, self.pool_options(pilot=0),
+                                      attractors=seeds, progress=progress, label="direct (off repellers)")
             lab, use = lab[: len(cells)], use[: len(cells)]
             found = atts[len(seeds):]  # slots after the seeds: cycles met on the way
             labels[cells] = np.where(lab >= len(seeds), lab - len(seeds) + len(res), lab)
@@ -177,21 +173,3 @@ class Direct(AbstractGlobalMethod):
             used[cells] += use
             res = res + self._refined(system, params, found)
         return labels, res, used
-
-
-def capture_radius(attractors: list, capture) -> float:
-    """Capture radius around known attractors' points (state units).
-
-    ``capture="auto"``: a quarter of the smallest distance between points of two
-    different known attractors, and at most 1 % of ``1 + max |point|`` (the attractors'
-    scale); a number is used as given.
-    """
-    if capture != "auto":
-        return float(capture)
-    pts = [np.asarray(p) for p, _, _ in attractors]
-    r = 0.01 * (1.0 + max(float(np.abs(p).max()) for p in pts))
-    for i in range(len(pts)):
-        for j in range(i):
-            d = np.linalg.norm(pts[i][:, None, :] - pts[j][None, :, :], axis=-1).min()
-            r = min(r, 0.25 * float(d))
-    return r

@@ -23,9 +23,9 @@ from .._version import __version__
 from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import largest_multipliers, prepare_section_points, section_points_of
+from ._orbits import largest_multipliers, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
-from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty, prepare_label_uncertainties
+from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
 
 __all__ = ["analyze_global", "analyze_global_values", "default_method", "DEFAULT_METHOD", "with_label_uncertainty"]
 
@@ -93,7 +93,6 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
         raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
     method.check(system, grid)
     check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
-    prepare_analysis(system, params, grid, method, uncertainty)
 
     labels, raw, cycles, mean_periods = method.classify(system, params, grid, progress)
     labels, raw, cycles = _merge_same(labels, raw, cycles, method)
@@ -117,27 +116,6 @@ def with_label_uncertainty(result: GlobalResult, system, params, method: Abstrac
     return dataclasses.replace(result, uncertainty=u)
 
 
-def prepare_analysis(system, params, grid: CellGrid, method: AbstractGlobalMethod,
-                     uncertainty: int = DEFAULT_SAMPLES) -> None:
-    """Start compiling, on a side thread and in the order they will run, the computations
-    of :func:`analyze_global` with these arguments (the method's, the section points',
-    those of a label uncertainty of ``uncertainty`` samples), and return at once.
-    :func:`analyze_global` calls it itself; a caller that measures the uncertainty later
-    (:func:`with_label_uncertainty`) calls it first, with the samples it will ask for."""
-    method.prepare(system, params, grid)
-    _prepare_assembly(system, params, method)
-    if uncertainty:
-        prepare_label_uncertainty(system, params, grid, method, uncertainty)
-
-
-def prepare_label_uncertainty(system, params, grid: CellGrid, method: AbstractGlobalMethod,
-                              samples: int = DEFAULT_SAMPLES) -> None:
-    """Start compiling, on a side thread, what :func:`with_label_uncertainty` with these
-    arguments will run, and return at once: called before the analysis, the compilation
-    overlaps with it."""
-    prepare_label_uncertainties(system, [params], grid, Direct.like(method), samples)
-
-
 def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, method: AbstractGlobalMethod, *,
                           progress: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> list[GlobalResult]:
     """:func:`analyze_global` at several parameter sets of one system on one grid (the
@@ -156,9 +134,6 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
     t_start = time.perf_counter()
     for params in params_list:
         check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
-    _prepare_assembly(system, params_list[0], method)
-    if uncertainty:
-        prepare_label_uncertainties(system, params_list, grid, Direct.like(method), uncertainty)
     results = []
     for params, (labels, raw, cycles, mean_periods) in zip(params_list,
                                                            method.classify_values(system, params_list, grid,
@@ -198,11 +173,6 @@ def _merge_same(labels, raw, cycles, method):
 
 def _section_index(system, method):
     return method.section_index if method.section_index is not None else system.section_index
-
-
-def _prepare_assembly(system, params, method) -> None:
-    """Compile what :func:`_assemble` runs on a side thread while the analysis runs."""
-    prepare_section_points(system, params, method.integrator, _section_index(system, method), method.direction)
 
 
 def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime) -> GlobalResult:

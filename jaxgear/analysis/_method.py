@@ -84,11 +84,6 @@ class AbstractGlobalMethod(eqx.Module):
     def check(self, system, grid: CellGrid) -> None:
         """Raise ``ValueError`` when the method cannot run on ``system`` with ``grid``."""
 
-    def prepare(self, system, params, grid: CellGrid) -> None:
-        """Start compiling, on a side thread, what :meth:`classify` with these arguments
-        will run (and return at once); the default does nothing."""
-        return None
-
     @abc.abstractmethod
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         """Label every cell of ``grid`` and return the attractors found."""
@@ -144,6 +139,8 @@ def method_from_dict(d: dict[str, Any]) -> AbstractGlobalMethod:
     cls = METHODS[name]
     fields = {f.name for f in dataclasses.fields(cls)}
     opts = {k: v for k, v in d.items() if k in fields and k != "integrator"}
+    if opts.get("capture_radius") == "auto":  # files written when the automatic radius was spelled "auto"
+        opts["capture_radius"] = None
     integ = d.get("integrator")
     if isinstance(integ, dict):
         opts["integrator"] = integrator_from_dict(integ)

@@ -2,18 +2,17 @@
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._ahead import compile_ahead, wait_for
-from .._kept import kept_jit
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
-__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "section_points",
-           "section_points_of", "advance_states"]
+__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "section_points_of", "advance_states"]
 
 
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
@@ -136,7 +135,7 @@ def largest_multipliers(system, params, cycles, integrator, max_period: int | No
     return out
 
 
-@kept_jit(static_argnames=("system", "stepper", "index", "direction"))
+@functools.partial(jax.jit, static_argnames=("system", "stepper", "index", "direction"))
 def _crossings(system, params, X, stepper, index: int, direction: int):
     """One forcing period from each state ``X (n, dim)`` at phase 0 with the fixed-step
     ``stepper``, and at every step the crossing of ``x_index = 0`` inside it: whether the
@@ -178,22 +177,6 @@ SECTION_ROWS = 32
 two): one compiled shape for every result with up to 32 cycle points."""
 
 
-def _section_key(system, stepper, rows: int, index, direction: int) -> tuple:
-    return ("section points", system, stepper, int(rows), int(index), int(direction))
-
-
-def prepare_section_points(system, params, integrator, index, direction) -> None:
-    """Compile, on a side thread, what :func:`section_points_of` with these arguments runs
-    for up to :data:`SECTION_ROWS` cycle points (returns at once)."""
-    if index is None:
-        return
-    stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
-    X = jax.ShapeDtypeStruct((SECTION_ROWS, system.dim), jnp.float64)
-    compile_ahead(_section_key(system, stepper, SECTION_ROWS, index, direction),
-                  lambda: _crossings.prepare(system, params, X, stepper=stepper, index=int(index),
-                                             direction=direction))
-
-
 def section_points_of(system, params, cycles, integrator, index, direction) -> list[np.ndarray]:
     """Crossings of Σ = {x_index = 0} over the k periods of each periodic orbit (``cycles``:
     a list of stroboscopic point arrays ``(k, dim)`` in cycle order), in time order:
@@ -212,7 +195,6 @@ def section_points_of(system, params, cycles, integrator, index, direction) -> l
     X = np.concatenate(rows)
     Xp = _pad_rows(X, SECTION_ROWS)
     stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
-    wait_for(_section_key(system, stepper, len(Xp), index, direction))
     hits, Zs = _crossings(system, params, jax.device_put(Xp), stepper=stepper, index=int(index), direction=direction)
     hits, Zs = np.asarray(hits)[:, : len(X)], np.asarray(Zs)[:, :, : len(X)]
     lane, step = np.nonzero(hits.T)  # by state (cycle order), then time
@@ -228,9 +210,3 @@ def section_points_of(system, params, cycles, integrator, index, direction) -> l
         out.append(found[(lane >= start) & (lane < start + k)])
         start += k
     return out
-
-
-def section_points(system, params, points: np.ndarray, integrator, index, direction) -> np.ndarray:
-    """Crossings of Σ = {x_index = 0} over the k periods of a periodic orbit (k = len(points));
-    see :func:`section_points_of`."""
-    return section_points_of(system, params, [np.asarray(points)], integrator, index, direction)[0]

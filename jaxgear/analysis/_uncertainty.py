@@ -18,17 +18,13 @@ result's attractors as the known ones:
 
 from __future__ import annotations
 
-import contextvars
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
-from .._devices import cell_processes
-from ._pool import prepare_pools, run_pools
+from ._pool import run_pools
 
-__all__ = ["label_uncertainty", "label_uncertainties", "prepare_label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
+__all__ = ["label_uncertainty", "label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
 
 DEFAULT_SAMPLES = 1024
 """Cells sampled for the estimate (the direct method's pilot size: the same compiled pool)."""
@@ -54,19 +50,6 @@ def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attrac
                                perturbation=perturbation, seed=seed, progress=progress)[0]
 
 
-def prepare_label_uncertainties(system, params_list, grid: CellGrid, direct, samples: int = DEFAULT_SAMPLES) -> None:
-    """Start compiling the pools of :func:`label_uncertainties` on a side thread (it returns
-    at once), so that a later call does not wait for compilation: called before the
-    analysis whose result will be measured, the compilation overlaps with it."""
-    S = min(int(samples), grid.n_cells)
-    if S < 1:
-        return
-    for integrator in (direct.integrator.refined(), direct.integrator):
-        prepare_pools(system, list(params_list), integrator, S, chunk=direct.chunk_size, R=direct.round_periods,
-                      max_periods=direct.max_periods, max_period=direct.max_period, tol=direct.period_tol,
-                      capture=direct.capture_radius, bound=direct.escape_bound, merge_tol=direct.merge_tol)
-
-
 def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attractors_list, direct, *,
                         samples: int = DEFAULT_SAMPLES, perturbation: float = DEFAULT_PERTURBATION, seed: int = 0,
                         progress: bool = False) -> list[dict]:
@@ -89,10 +72,8 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
             for atts in attractors_list]
 
     def relabel(X, integrator, name):
-        pooled = run_pools(system, params_list, [X] * len(params_list), integrator, chunk=direct.chunk_size,
-                           R=direct.round_periods, max_periods=direct.max_periods, max_period=direct.max_period,
-                           tol=direct.period_tol, capture=direct.capture_radius, bound=direct.escape_bound,
-                           merge_tol=direct.merge_tol, progress=progress, pilot=0, attractors=knowns, label=name)
+        pooled = run_pools(system, params_list, [X] * len(params_list), integrator, direct.pool_options(pilot=0),
+                           attractors=knowns, progress=progress, label=name)
         outs = []
         for (lab, _, _), ids in zip(pooled, idss):
             out = lab.copy()
@@ -103,15 +84,8 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
         return outs
 
     fine = direct.integrator.refined()
-    if cell_processes()[1] > 1:  # the pools exchange blocks between processes: one after the other
-        steps = relabel(X, fine, "uncertainty: step halved")
-        starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
-    else:  # the two pools at once (each one's draining tail leaves cores idle), in this context
-        with ThreadPoolExecutor(1) as side:
-            moved = side.submit(contextvars.copy_context().run, relabel, X + dX, direct.integrator,
-                                "uncertainty: start moved")
-            steps = relabel(X, fine, "uncertainty: step halved")
-            starts = moved.result()
+    steps = relabel(X, fine, "uncertainty: step halved")
+    starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
     return [dict(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
                  perturbation=float(perturbation), refined_integrator=fine.to_dict())
             for step, start, ref in zip(steps, starts, refs)]

@@ -8,10 +8,7 @@ multipliers), ``jaxgear sweep`` (bifurcation diagrams, basin shares, continuatio
 from __future__ import annotations
 
 import argparse
-import atexit
-import gc
 import importlib
-import os
 import re
 import sys
 import warnings
@@ -97,57 +94,8 @@ def main(argv=None) -> int:
 
 
 def console() -> None:
-    """The ``jaxgear`` command (and ``python -m jaxgear``): :func:`main`, then an exit that
-    skips the interpreter's teardown.
-
-    Tearing the interpreter down collects and frees every object of every module JAX
-    loaded, on one core: about 0.4 s after the work is done, a twentieth of an analysis.
-    A command that returned has flushed its files and joined its workers, so after the
-    pending compilations (a cache entry must not be cut short), the exit handlers
-    (``atexit``, but for JAX's clearing of its caches and backends; a distributed run is
-    shut down) and flushing the output, the process ends with :func:`os._exit`. An
-    exception leaves the normal way, with its traceback.
-    """
-    gc.freeze()  # the objects of the modules imported so far live to the end: collections skip them
-    from .. import _kept
-
-    _kept.enable()  # this process runs one command: its compiled pools are kept for the next
-    code = main()
-    from .._ahead import wait_all
-
-    wait_all()
-    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)
-    if run_exit_handlers is None:  # not CPython: the ordinary exit
-        sys.exit(code)
-    try:
-        skipped = _unregister_jax_teardown()
-        run_exit_handlers()
-        if skipped:  # what JAX's handler does that matters at exit, in its place (after the others)
-            import jax
-
-            jax.distributed.shutdown()
-    finally:
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-    os._exit(code)
-
-
-def _unregister_jax_teardown() -> bool:
-    """Take JAX's exit handler off the list (True if it was found): it clears JAX's caches
-    and destroys its backends (0.14 s of an analysis run), nothing a process about to end
-    needs but the shutdown of a distributed run, which :func:`console` does instead."""
-    try:
-        from jax._src import api
-    except ImportError:
-        return False
-    handler = getattr(api, "clean_up", None)
-    if handler is None:
-        return False
-    atexit.unregister(handler)
-    return True
+    """The ``jaxgear`` command (and ``python -m jaxgear``): :func:`main` and its exit code."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":

@@ -12,10 +12,8 @@ import dataclasses
 import time
 from pathlib import Path
 
-from .._ahead import compile_ahead, wait_for
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from ._painter import Painter
 from .common import add_param_options, check_counts, check_options, check_region, parse_counts, parse_ranges
 
 OWNED = ("result.nc", "summary.json", "compare.json", "domains.png", "shares.png", "domains_3d.png",
@@ -106,16 +104,10 @@ def run(args) -> int:
     # every option is checked before any integration and before --out is touched
     check_options(args, OPTIONS)
     check_output_folder(args.out)
-    # the figures' worker starts before the first JAX computation (see _painter)
-    painter = None if args.no_figures or args.distributed else Painter(_import_plotting, _figures)
-    try:
-        return _run_checked(args, painter)
-    finally:
-        if painter is not None:
-            painter.close()
+    return _run_checked(args)
 
 
-def _run_checked(args, painter) -> int:
+def _run_checked(args) -> int:
     from .._cells import CellGrid
     from .._model import REDUCED
     from .._presets import resolve_params
@@ -135,10 +127,6 @@ def _run_checked(args, painter) -> int:
     check_counts(counts, f"--grid {where}", n_axes, default.axis_names)
     grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
     method.check(REDUCED, grid)
-    # everything the run will compute compiles on a side thread, in order, from now on
-    from ..analysis import prepare_analysis
-
-    prepare_analysis(REDUCED, params, grid, method, args.uncertainty_samples)
 
     if args.distributed:
         from .._devices import process_index
@@ -149,46 +137,36 @@ def _run_checked(args, painter) -> int:
 
             args.no_figures, args.quiet = True, True
             with contextlib.redirect_stdout(io.StringIO()):
-                _analyze(args, params, grid, method, None, None)
+                _analyze(args, params, grid, method, None)
             return 0
     print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, preset {args.preset}, Omega={float(params.Omega):.4g}")
     with OutputFolder(args.out, OWNED) as out:
-        written = _analyze(args, params, grid, method, out, painter)
+        written = _analyze(args, params, grid, method, out)
     print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0
 
 
-def _analyze(args, params, grid, method, out: Path | None, painter) -> list[str]:
+def _analyze(args, params, grid, method, out: Path | None) -> list[str]:
     """The analysis, its report and its files (written into the staging folder ``out``,
-    none when ``out`` is ``None``: a process of a multi-process run other than 0; the
-    figures by ``painter``, a :class:`~jaxgear.cli._painter.Painter`, or none)."""
+    none when ``out`` is ``None``: a process of a multi-process run other than 0)."""
     import numpy as np
 
     from .._model import REDUCED
-    from ..analysis import analyze_global, compare_with_direct, with_label_uncertainty
+    from ..analysis import analyze_global, compare_with_direct
 
     t0 = time.perf_counter()
-    # xarray (for saving) is imported on the side thread after the compilations
-    # (prepare_analysis), once the device is busy: imported at once, its quarter second
-    # of Python would delay the first computations
-    if out is not None:
-        compile_ahead(_OUTPUT_LIBRARIES, _import_output_libraries)
-    result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet, uncertainty=0)
-    if painter is not None:  # the figures are drawn while the label uncertainty is measured and the result saved
-        painter.submit(result, out)
-    if args.uncertainty_samples:
-        result = with_label_uncertainty(result, REDUCED, params, method, args.uncertainty_samples,
-                                        progress=not args.quiet)
+    result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet,
+                            uncertainty=args.uncertainty_samples)
     result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
     print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
     print(result.table())
     written = []
     if out is not None:
-        wait_for(_OUTPUT_LIBRARIES)
         result.save(out / "result.nc")
         result.write_summary(out / "summary.json")
         written += ["result.nc", "summary.json"]
-    figure_names = painter.names() if painter is not None else []
+        if not args.no_figures:
+            written += _figures(result, out)
     if args.compare:
         rep = compare_with_direct(result, REDUCED, params, n_samples=args.compare, progress=not args.quiet)
         if out is not None:
@@ -201,40 +179,11 @@ def _analyze(args, params, grid, method, out: Path | None, painter) -> list[str]
         for d in rep["direct_only"]:
             print(f"  found only by direct integration: P-{d['period']} at {np.round(d['point'], 4).tolist()} "
                   f"({d['cells']} of the sampled cells)")
-    return written + figure_names
+    return written
 
 
-_OUTPUT_LIBRARIES = ("import", "xarray")
-"""Key of the side thread's import of the saving libraries (:mod:`jaxgear._ahead`)."""
-
-
-def _import_output_libraries() -> None:
-    import xarray  # noqa: F401
-
-
-def _import_plotting() -> None:
-    """What the figure workers do before the result comes (the computing process has a
-    core to spare while it starts): import the plotting module and draw a throwaway
-    figure with a 3D axis into memory, so that what matplotlib loads on first use (fonts,
-    the 3D toolkit, the PNG writer) is loaded then, not while the figures are drawn
-    (about 0.13 s of the drawing)."""
-    import io
-
-    import matplotlib.pyplot as plt
-
-    from .. import plotting  # noqa: F401
-
-    fig = plt.figure(figsize=(2, 2))
-    fig.add_subplot(121).plot([0, 1], [0, 1])
-    fig.add_subplot(122, projection="3d").scatter([0], [0], [0])
-    fig.savefig(io.BytesIO(), format="png", dpi=20)
-    plt.close(fig)
-
-
-def _figures(result, out, part: int = 0, parts: int = 1) -> list[str]:
-    """Draw the analysis's figures into ``out``; with ``parts`` painters, the share
-    ``part`` of them (the list is ordered so that alternate figures split the cost evenly:
-    the slices and the 3D view cost the most)."""
+def _figures(result, out) -> list[str]:
+    """Draw the analysis's figures into ``out``: the names of the files written."""
     from ..plotting import plot_attractors, plot_domains, plot_domains_3d, plot_shares
 
     out = Path(out)
@@ -245,7 +194,7 @@ def _figures(result, out, part: int = 0, parts: int = 1) -> list[str]:
     if result.attractors:
         figures.append(("attractors.png", lambda: plot_attractors(result, section=result.method == "poincare-like")))
     names = []
-    for name, plot in figures[part::parts]:
+    for name, plot in figures:
         save_figure(plot(), out / name, dpi=120)
         names.append(name)
     return names

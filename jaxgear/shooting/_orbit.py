@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_int, check_number
+from .._checks import check_int, check_number, is_traced
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from ..integrate import AbstractIntegrator, resolve_integrator
@@ -153,7 +153,7 @@ def shoot_kernel(system, params, X, t0, k, integrator, tol, max_iter, max_norm, 
 
 def params_concrete(params) -> bool:
     """True when no parameter leaf is a tracer (the parameters can be checked concretely)."""
-    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(params))
+    return not any(is_traced(leaf) for leaf in jax.tree_util.tree_leaves(params))
 
 
 def check_newton_options(tol, max_iter, period_tol, max_norm=1e6) -> None:

@@ -1,0 +1,463 @@
+"""The direct method's lane pool on the device: its options, its state, and one round.
+
+``L`` lanes integrate cell centres on the stroboscopic map, one forcing period at a time
+(the integrator's ``advance``; on CPUs the compiled kernel). Everything the method
+decides happens on the device inside one ``lax.while_loop`` over rounds of
+``round_periods`` periods (:func:`run_rounds`), with no host round trip of per-lane data:
+
+- every period the new stroboscopic point goes into a ring of the last ``H = 2M + 1``
+  points (``M = max_period``; one slot for all lanes, they share the clock) and, for
+  each ``k <= M``, a per-lane streak counts the consecutive periods with
+  ``|x_t - x_(t-k)| <= tol (1 + |x_t|)``: a lane is P-k when the streak of ``k`` reaches
+  ``k + 1`` (a whole cycle and one more step repeat), the smallest such ``k`` wins;
+- after each round a lane is decided (:func:`decide`) when it escaped (norm above
+  ``escape_bound`` or not finite: the sink), when its last ``k`` points follow the cycle
+  of a known P-k attractor within the capture radius and did not move away from it over
+  the ``k`` before (capture), when it recurs (a known attractor if its newest point lies
+  on one, else a new attractor is registered, one per value and round), or when it
+  reached ``max_periods`` (unresolved);
+- decided lanes write their cell's label and take the next cells of the queue; once the
+  queue is empty, the busy lanes beyond the first ``c`` (the busy count) move into the
+  free lanes below it (:func:`compact`), so only ``n_active = c`` lanes are integrated.
+
+Several parameter sets (the values of a sweep) share one pool: each cell carries its
+value's row, a lane integrates with its row's parameters (``integrator.advance_rows``)
+and decides against its row's own attractor table. The queue runs value after value,
+so the busy lanes hold a short range of rows at a time, and a round's decisions loop
+over the (row, slot) pairs of that range only.
+
+The host side (the pilot, steering, placement on devices) is
+:mod:`jaxgear.analysis._pool` and :mod:`jaxgear.analysis._placement`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_int, check_number
+
+__all__ = ["PoolOptions", "PoolState", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
+           "table_slots", "NOT_DONE"]
+
+NOT_DONE = -3
+"""Label of a cell not decided yet (never returned)."""
+_SINK, _UNRESOLVED = -1, -2
+_ON_REPELLER = -4
+"""A round's mark of a lane that shadows a repeller (never a label): it is neither
+decided nor registers a new attractor, and integrates on."""
+
+COMPACT_BELOW = 7 / 8
+"""A round ends with a compaction once the busy lanes fill at most this share of the
+active range (a compaction costs about a tenth of a period of the lanes' integration:
+more often loses more to its cost than it saves)."""
+
+MOVE_CHUNK = 1024
+"""Lanes moved per step of a compaction (:func:`compact`)."""
+
+
+class PoolOptions(eqx.Module):
+    """Every option of the lane pool (static: they shape the compiled program).
+
+    Attributes:
+        max_period: largest period ``M`` recognised (P-1 ... P-M).
+        round_periods: periods ``R`` per round between decisions.
+        period_tol: relative recurrence tolerance ``|x_t - x_(t-k)| <= tol (1 + |x_t|)``.
+        merge_tol: relative distance under which a recurring lane lies on a known cycle.
+        max_periods: periods per cell before it is unresolved.
+        escape_bound: norm beyond which a state has escaped (state units).
+        capture_radius: radius around a known cycle's points within which a lane that
+            follows the whole cycle is captured (state units), or ``None``: a quarter of
+            the smallest distance between two known attractors' points, at most 1 % of
+            their scale.
+        lanes: lanes of the pool (memory is bounded by it).
+        pilot: states of the pilot pool that runs first (0: none).
+    """
+
+    max_period: int = eqx.field(static=True, default=16)
+    round_periods: int = eqx.field(static=True, default=5)
+    period_tol: float = eqx.field(static=True, default=1e-6)
+    merge_tol: float = eqx.field(static=True, default=1e-4)
+    max_periods: int = eqx.field(static=True, default=2000)
+    escape_bound: float = eqx.field(static=True, default=1e6)
+    capture_radius: float | None = eqx.field(static=True, default=None)
+    lanes: int = eqx.field(static=True, default=1 << 16)
+    pilot: int = eqx.field(static=True, default=1024)
+
+    def __check_init__(self):
+        check_int(self.max_period, "max_period", 1)
+        check_int(self.round_periods, "round_periods", 1)
+        check_int(self.max_periods, "max_periods", 1)
+        check_int(self.lanes, "lanes", 1)
+        check_int(self.pilot, "pilot", 0)
+        check_number(self.period_tol, "period_tol", 0, strict_min=True)
+        check_number(self.merge_tol, "merge_tol", 0, strict_min=True)
+        check_number(self.escape_bound, "escape_bound", 0, strict_min=True)
+        if self.capture_radius is not None:
+            check_number(self.capture_radius, "capture_radius", 0)
+
+
+class PoolState(NamedTuple):
+    """The pool's state (device arrays); ``L`` lanes, ``n`` cells, ``V`` values, ``A`` attractor slots."""
+
+    Y: jax.Array  # (dim, L) current states
+    hist: jax.Array  # (2H, dim, L) ring of the last H stroboscopic points, written at slots c and c + H
+    #                  (c = clock % H), so any M consecutive points back are one contiguous slice
+    streak: jax.Array  # (M, L) int32 recurrence streaks
+    cell: jax.Array  # (L,) int32 cell held, -1 idle
+    row: jax.Array  # (L,) int32 parameter row (value) of the cell held
+    age: jax.Array  # (L,) int32 periods integrated for the cell held
+    labels: jax.Array  # (n,) int32
+    used: jax.Array  # (n,) int32 periods integrated per cell
+    next_cell: jax.Array  # () int32
+    n_done: jax.Array  # () int32
+    clock: jax.Array  # () int32
+    att_pts: jax.Array  # (V, A, M, dim) attractor points in cycle order (NaN padded), per parameter row
+    att_k: jax.Array  # (V, A) int32 periods (0: empty slot; -k: a repeller, an unstable P-k cycle)
+    n_att: jax.Array  # (V,) int32
+    radius: jax.Array  # (V,) capture radius
+    n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
+    overflow: jax.Array  # () bool: a new attractor found no free slot
+    rounds: jax.Array  # () int32 rounds run
+
+
+# ----------------------------------------------------------------------------- attractor tables
+def table_slots(count: int) -> int:
+    """Slots of an attractor table that holds ``count`` attractors: 8, or the next power of two."""
+    return max(8, 1 << max(0, int(count) - 1).bit_length())
+
+
+def seed_tables(attractors, M: int, dim: int):
+    """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,))`` (numpy)
+    of ``V`` values, each holding its value's known cycles ``[(points (k, dim), k)]``
+    first (``A``: :func:`table_slots`); a cycle of period ``-k`` is a repeller (an
+    unstable P-k cycle whose lanes integrate on)."""
+    known = [[(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in att] for att in attractors]
+    if any(not 0 < abs(k) <= M for kn in known for _, k in kn):
+        raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M})")
+    A = table_slots(max(len(kn) for kn in known))
+    V = len(known)
+    pts = np.full((V, A, M, dim), np.nan)
+    ks = np.zeros((V, A), np.int32)
+    for v, kn in enumerate(known):
+        for a, (p, k) in enumerate(kn):
+            pts[v, a, :abs(k)] = p[:abs(k)]
+            ks[v, a] = k
+    return pts, ks, np.array([len(kn) for kn in known], np.int32)
+
+
+# ----------------------------------------------------------------------------- the state
+def init_pool(L: int, M: int, X, Xrow, att_pts, att_k, n_att, n_real=None) -> PoolState:
+    """The pool of ``L`` lanes over the queue ``X (n, dim)`` (parameter rows ``Xrow (n,)``),
+    its first lanes holding the first cells; ``n_real`` (traced, optional): the queue's
+    real length when ``X`` is padded (the padding never enters a lane)."""
+    n, dim = X.shape
+    H = 2 * M + 1
+    take = jnp.asarray(min(L, n), jnp.int32)
+    if n_real is not None:
+        take = jnp.minimum(take, n_real).astype(jnp.int32)
+    lane = jnp.arange(L, dtype=jnp.int32)
+    first = lane < take
+    src = jnp.minimum(lane, n - 1)
+    return PoolState(
+        Y=jnp.where(first[None], X[src].T, 0.0), hist=jnp.full((2 * H, dim, L), jnp.nan, dtype=jnp.float64),
+        streak=jnp.zeros((M, L), jnp.int32), cell=jnp.where(first, lane, -1).astype(jnp.int32),
+        row=jnp.where(first, Xrow[src], 0).astype(jnp.int32), age=jnp.zeros(L, jnp.int32),
+        labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32), next_cell=take,
+        n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32), att_pts=att_pts, att_k=att_k,
+        n_att=jnp.asarray(n_att, jnp.int32), radius=jnp.zeros(att_k.shape[0], jnp.float64), n_active=take,
+        overflow=jnp.asarray(False), rounds=jnp.asarray(0, jnp.int32))
+
+
+def resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolState:
+    """The pool with ``L`` lanes (the first ``L``: busy lanes are at the front) or ``A``
+    attractor slots per value."""
+    if L is not None:
+        s = s._replace(Y=s.Y[:, :L], hist=s.hist[:, :, :L], streak=s.streak[:, :L], cell=s.cell[:L], row=s.row[:L],
+                       age=s.age[:L], n_active=jnp.minimum(s.n_active, L))
+    if A is not None:
+        V, A0, M, dim = s.att_pts.shape
+        s = s._replace(att_pts=jnp.concatenate([s.att_pts, jnp.full((V, A - A0, M, dim), jnp.nan)], axis=1),
+                       att_k=jnp.concatenate([s.att_k, jnp.zeros((V, A - A0), jnp.int32)], axis=1),
+                       overflow=jnp.asarray(False))
+    return s
+
+
+# ----------------------------------------------------------------------------- one period
+def _sqdist(a, b):
+    """Squared Euclidean distance over axis ``-2`` (the state coordinates of ``(..., dim, L)``
+    arrays), summed coordinate by coordinate (XLA fuses this; a reduction over a middle
+    axis it runs several times slower)."""
+    a, b = jnp.broadcast_arrays(a, b)
+    return sum((a[..., i, :] - b[..., i, :]) ** 2 for i in range(a.shape[-2]))
+
+
+def _back(hist, g, start: int, count: int):
+    """The points ``start, ..., start + count - 1`` periods back from period ``g`` (newest
+    first): ``(count, dim, L)`` (one contiguous slice of the doubled ring)."""
+    H = hist.shape[0] // 2
+    top = g % H + H - start  # slot of the point `start` periods back
+    return jax.lax.dynamic_slice_in_dim(hist, top - count + 1, count, axis=0)[::-1]
+
+
+def one_period(system, params, integrator, o: PoolOptions, s: PoolState) -> PoolState:
+    """Every active lane one forcing period on, its point into the ring, its streaks updated."""
+    H = s.hist.shape[0] // 2
+    if s.att_k.shape[0] == 1:  # one parameter set
+        Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
+    else:  # params holds one row per value; each lane uses its cell's
+        Y = integrator.advance_rows(system, params, s.row, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
+    g = s.clock + 1
+    c = g % H
+    hist = jax.lax.dynamic_update_slice_in_dim(s.hist, Y[None], c, axis=0)
+    hist = jax.lax.dynamic_update_slice_in_dim(hist, Y[None], c + H, axis=0)
+    busy = s.cell >= 0
+    age = jnp.where(busy, s.age + 1, s.age)
+    thr = (o.period_tol * (1.0 + jnp.sqrt(_sqdist(Y, 0.0)))) ** 2
+    ks = jnp.arange(1, o.max_period + 1, dtype=jnp.int32)
+    prev = _back(hist, g, 1, o.max_period)  # (M, dim, L): x_(t-1), ..., x_(t-M)
+    ok = (_sqdist(Y[None], prev) <= thr[None]) & (age[None] > ks[:, None])  # x_(t-k) is this cell's
+    streak = jnp.where(ok, s.streak + 1, 0)
+    return s._replace(Y=Y, hist=hist, streak=streak, age=age, clock=g)
+
+
+# ----------------------------------------------------------------------------- decisions
+def capture_radius(att_pts, att_k, capture: float | None):
+    """The capture radius of one value's table ``(A, M, dim), (A,)``: ``capture`` itself, or
+    (``None``) a quarter of the smallest distance between two attractors' points, at most
+    1 % of ``1 + max |point|``."""
+    if capture is not None:
+        return jnp.asarray(capture, jnp.float64)
+    A, M, _ = att_pts.shape
+    valid = (jnp.arange(M, dtype=jnp.int32)[None] < att_k[:, None])  # (A, M)
+    pts = jnp.where(valid[..., None], att_pts, 0.0)
+    scale = 1.0 + jnp.max(jnp.where(valid[..., None], jnp.abs(pts), 0.0))
+    d = jnp.sqrt(jnp.sum((pts[:, None, :, None] - pts[None, :, None, :]) ** 2, axis=-1))  # (A, A, M, M)
+    pair = valid[:, None, :, None] & valid[None, :, None, :] & ~jnp.eye(A, dtype=bool)[:, :, None, None]
+    gap = jnp.min(jnp.where(pair, d, jnp.inf))
+    return jnp.minimum(0.01 * scale, 0.25 * gap)
+
+
+class _Lanes(NamedTuple):
+    """What a round's decisions know of each lane ``(L,)``."""
+
+    esc: jax.Array  # escaped (the sink)
+    live: jax.Array  # busy and not escaped
+    per: jax.Array  # smallest recurring period (M + 1: none)
+    rec: jax.Array  # live and recurring
+
+
+def _lane_status(o: PoolOptions, s: PoolState) -> _Lanes:
+    M = o.max_period
+    busy = s.cell >= 0
+    norms = jnp.sqrt(_sqdist(s.Y, 0.0))
+    esc = busy & (~jnp.isfinite(norms) | (norms > o.escape_bound))
+    ks = jnp.arange(1, M + 1, dtype=jnp.int32)
+    per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0).astype(jnp.int32)
+    live = busy & ~esc
+    return _Lanes(esc=esc, live=live, per=per, rec=live & (per <= M))
+
+
+def _cycle_distances(s: PoolState, P, m, k):
+    """The largest distance of the lanes' last ``k`` points to the cycle ``P (M, dim)``
+    followed back from ``P[m]`` (``m (L,)``: the cycle point nearest the newest point),
+    and of the ``k`` points before those: one slice of the ring per step, so no
+    ``(M, dim, L)`` copy of the ring or of the cycle is made."""
+    H = s.hist.shape[0] // 2
+    g = s.clock
+    kk = jnp.maximum(k, 1)
+
+    def point(j, dists):
+        d_now, d_bef = dists
+        q = jnp.take(P, jnp.mod(m - j, kk), axis=0).T  # (dim, L)
+        w_now = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j, axis=0, keepdims=False)
+        w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k, axis=0, keepdims=False)
+        return jnp.maximum(d_now, _sqdist(w_now, q)), jnp.maximum(d_bef, _sqdist(w_bef, q))
+
+    zero = jnp.zeros(s.cell.shape[0])
+    d_now, d_bef = jax.lax.fori_loop(0, k, point, (zero, zero))
+    d_now = jnp.where(s.age >= k, jnp.sqrt(d_now), jnp.inf)
+    d_bef = jnp.where(s.age >= 2 * k, jnp.sqrt(d_bef), jnp.inf)
+    return d_now, d_bef
+
+
+def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
+    """Lanes captured by (or recurring onto) the attractor in slot ``a`` of value ``v``'s
+    table, a P-k cycle: every quantity of the attractor is a scalar or broadcast over the
+    lanes. A repeller's slot (period ``-k``) marks its lanes ``_ON_REPELLER`` instead:
+    they integrate on (an attractor's slot still takes them)."""
+    P = s.att_pts[v, a]  # (M, dim)
+    repeller = s.att_k[v, a] < 0
+    k = jnp.abs(s.att_k[v, a])
+    valid = jnp.arange(o.max_period, dtype=jnp.int32) < k
+    dn = jnp.where(valid[:, None], jnp.sqrt(_sqdist(s.Y[None], P[:, :, None])), jnp.inf)  # (M, L)
+    m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
+    d_now, d_bef = _cycle_distances(s, P, m, k)
+    cap = lanes.live & (k > 0) & (d_now <= s.radius[v]) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
+    scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0))
+    same = lanes.rec & (k > 0) & (lanes.per == k) & (jnp.min(dn, axis=0) <= o.merge_tol * scale)
+    hit = cap | same
+    if s.att_k.shape[0] > 1:
+        hit = hit & (s.row == v)  # the lanes of value v; a lane's label is a slot of its value's table
+    return jnp.where((label < 0) & hit, jnp.where(repeller, _ON_REPELLER, a), label).astype(jnp.int32)
+
+
+def _busy_rows(s: PoolState):
+    """The range ``[lo, hi]`` of values the busy lanes hold."""
+    busy = s.cell >= 0
+    V = s.att_k.shape[0]
+    return jnp.min(jnp.where(busy, s.row, V)), jnp.max(jnp.where(busy, s.row, -1))
+
+
+def _over_rows(s: PoolState, body, carry):
+    """``body(v, carry)`` over the values the busy lanes hold (value 0 alone for one value)."""
+    if s.att_k.shape[0] == 1:
+        return body(0, carry)
+    lo, hi = _busy_rows(s)
+    return jax.lax.fori_loop(lo, hi + 1, body, carry)
+
+
+def _match_known(o: PoolOptions, s: PoolState, lanes: _Lanes):
+    """Each lane's attractor slot among the known ones (-1: none; ``_ON_REPELLER``)."""
+    def row(v, label):
+        return jax.lax.fori_loop(0, s.n_att[v], lambda a, label: _match_slot(o, s, lanes, v, a, label), label)
+
+    return _over_rows(s, row, jnp.full(s.cell.shape[0], -1, jnp.int32))
+
+
+def _register_new(o: PoolOptions, s: PoolState, lanes: _Lanes, label, radius):
+    """A recurring lane on no known attractor or repeller of its value registers a new one
+    (the first such lane, one per value and round); the other recurring lanes of the value
+    whose newest point lies on it join it. Returns the tables, the radii, the labels and
+    the overflow flag."""
+    M = o.max_period
+    i = jnp.arange(M, dtype=jnp.int32)
+    new = lanes.rec & (label == -1)
+
+    def register(v, c):
+        att_pts, att_k, n_att, radius, label, overflow = c
+        new_v = new if s.att_k.shape[0] == 1 else new & (s.row == v)
+        has_new = jnp.any(new_v)
+        room = n_att[v] < att_k.shape[1]
+        l0 = jnp.argmax(new_v)
+        k0 = lanes.per[l0]
+        last = _back(s.hist[:, :, l0], s.clock, 0, M)  # (M, dim), newest first
+        valid0 = i < k0
+        pts0 = jnp.where(valid0[:, None], last[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)  # oldest of the last k0 first
+
+        def add(c):
+            att_pts, att_k, n_att, radius, label = c
+            slot = n_att[v]
+            att_pts, att_k = att_pts.at[v, slot].set(pts0), att_k.at[v, slot].set(k0)
+            scale0 = 1.0 + jnp.max(jnp.where(valid0[:, None], jnp.abs(pts0), 0.0))
+            d0 = jnp.where(valid0[:, None], _sqdist(s.Y[None], pts0[:, :, None]), jnp.inf)  # (M, L)
+            joins = new_v & (lanes.per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
+            radius = radius.at[v].set(capture_radius(att_pts[v], att_k[v], o.capture_radius))
+            return att_pts, att_k, n_att.at[v].add(1), radius, jnp.where(joins, slot, label).astype(jnp.int32)
+
+        c = jax.lax.cond(has_new & room, add, lambda c: c, (att_pts, att_k, n_att, radius, label))
+        return (*c, overflow | (has_new & ~room))
+
+    return _over_rows(s, register, (s.att_pts, s.att_k, s.n_att, radius, label, s.overflow))
+
+
+def _refill(s: PoolState, decided, X, Xrow, n) -> PoolState:
+    """Freed lanes take the next cells of the queue (only lanes below ``n_active`` once it
+    is empty)."""
+    L = s.cell.shape[0]
+    lane = jnp.arange(L, dtype=jnp.int32)
+    free = ((s.cell < 0) | decided) & (lane < jnp.where(s.next_cell < n, L, s.n_active))
+    nc = s.next_cell + jnp.cumsum(free, dtype=jnp.int32) - 1
+    take = free & (nc < n)
+    src = jnp.clip(nc, 0, X.shape[0] - 1)
+    cell = jnp.where(take, nc, jnp.where(free, -1, s.cell)).astype(jnp.int32)
+    row = jnp.where(take, Xrow[src], s.row).astype(jnp.int32)
+    Y = jnp.where(take[None], X[src].T, jnp.where(free[None], 0.0, s.Y))
+    next_cell = jnp.minimum(s.next_cell + jnp.sum(take, dtype=jnp.int32), n).astype(jnp.int32)
+    highest = jnp.max(jnp.where(cell >= 0, lane, -1)) + 1  # busy lanes lie below it
+    n_active = jnp.where(s.next_cell < n, jnp.maximum(s.n_active, highest), s.n_active).astype(jnp.int32)
+    return s._replace(Y=Y, cell=cell, row=row, age=jnp.where(free, 0, s.age),
+                      streak=jnp.where(free[None], 0, s.streak), next_cell=next_cell, n_active=n_active)
+
+
+def decide(o: PoolOptions, s: PoolState, X, Xrow, n) -> PoolState:
+    """A round's decisions (see the module): escaped, captured, recurring and timed-out
+    lanes write their cells' labels, new attractors are registered, freed lanes refill."""
+    lanes = _lane_status(o, s)
+    label = _match_known(o, s, lanes)
+    # the capture radius follows its value's table: computed for every value in the
+    # pool's first round (it starts at 0), then only for a value whose table grew
+    radius = jax.lax.cond(s.rounds == 0, lambda: jax.vmap(lambda p, k: capture_radius(p, k, o.capture_radius))(
+        s.att_pts, s.att_k), lambda: s.radius)
+    att_pts, att_k, n_att, radius, label, overflow = _register_new(o, s, lanes, label, radius)
+    unres = lanes.live & (label < 0) & (s.age >= o.max_periods)
+    decided = lanes.esc | (label >= 0) | unres
+    value = jnp.where(lanes.esc, _SINK, jnp.where(unres, _UNRESOLVED, label)).astype(jnp.int32)
+    target = jnp.where(decided, s.cell, s.labels.shape[0])  # dropped
+    s = s._replace(labels=s.labels.at[target].set(value, mode="drop"), used=s.used.at[target].set(s.age, mode="drop"),
+                   n_done=s.n_done + jnp.sum(decided, dtype=jnp.int32), att_pts=att_pts, att_k=att_k, n_att=n_att,
+                   radius=radius, overflow=overflow, rounds=s.rounds + 1)
+    return _refill(s, decided, X, Xrow, n)
+
+
+def compact(s: PoolState) -> PoolState:
+    """Move the busy lanes that lie beyond the first ``c`` lanes (``c``: the busy count)
+    into the free lanes below ``c``, so lanes ``[0, c)`` hold every busy lane and only
+    those are integrated (``n_active = c``). Only the lanes out of place move, in steps of
+    :data:`MOVE_CHUNK`, so a compaction costs what it moves (the ring of a lane is most of
+    the pool's memory)."""
+    L = s.cell.shape[0]
+    pos = jnp.arange(L, dtype=jnp.int32)
+    busy = s.cell >= 0
+    c = jnp.sum(busy, dtype=jnp.int32)
+    out_of_place = busy & (pos >= c)
+    m = jnp.sum(out_of_place, dtype=jnp.int32)
+    src_all = jnp.nonzero(out_of_place, size=L, fill_value=L)[0].astype(jnp.int32)
+    dst_all = jnp.nonzero(~busy & (pos < c), size=L, fill_value=L)[0].astype(jnp.int32)
+    K = min(MOVE_CHUNK, L)
+    pad = jnp.full(K, L, jnp.int32)  # so the last chunk's slice stays inside the arrays
+    src_all, dst_all = jnp.concatenate([src_all, pad]), jnp.concatenate([dst_all, pad])
+
+    def move(j, s):
+        src = jax.lax.dynamic_slice_in_dim(src_all, j * K, K)
+        dst = jax.lax.dynamic_slice_in_dim(dst_all, j * K, K)
+        src_c = jnp.minimum(src, L - 1)
+
+        def mv(a):  # lanes on the last axis
+            return a.at[..., dst].set(jnp.take(a, src_c, axis=-1), mode="drop")
+
+        return s._replace(Y=mv(s.Y), hist=mv(s.hist), streak=mv(s.streak), cell=mv(s.cell), row=mv(s.row),
+                          age=mv(s.age))
+
+    s = jax.lax.fori_loop(0, (m + K - 1) // K, move, s)
+    cell = jnp.where(pos >= c, -1, s.cell).astype(jnp.int32)  # the lanes moved from
+    return s._replace(cell=cell, n_active=jnp.minimum(s.n_active, c).astype(jnp.int32))
+
+
+def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, X, Xrow, n, L_min: int, rounds):
+    """At most ``rounds`` rounds (traced: the host sizes its calls by their duration), fewer
+    when every cell of the queue ``X[:n]`` is decided, an attractor table overflows or the
+    pool can move to ``L_min`` lanes. ``n`` may be traced (a padded block of a sharded
+    queue). Returns the state and its progress row ``(done, overflow, n_active,
+    next_cell, attractors)``."""
+    def cond(c):
+        s, r = c
+        shrink = (s.next_cell >= n) & (s.n_active <= L_min) & (s.Y.shape[1] > L_min)
+        return (r < rounds) & (s.n_done < n) & ~s.overflow & ~shrink
+
+    def body(c):
+        s, r = c
+        s = jax.lax.fori_loop(0, o.round_periods, lambda _, s: one_period(system, params, integrator, o, s), s)
+        s = decide(o, s, X, Xrow, n)
+        # once the queue is empty, the busy lanes are gathered at the front as lanes free up
+        busy = jnp.sum(s.cell >= 0, dtype=jnp.int32)
+        worth = (s.next_cell >= n) & (busy.astype(jnp.float64) <= COMPACT_BELOW * s.n_active.astype(jnp.float64))
+        return jax.lax.cond(worth, compact, lambda s: s, s), r + 1
+
+    s, _ = jax.lax.while_loop(cond, body, (s, jnp.asarray(0, jnp.int32)))
+    info = jnp.stack([s.n_done, s.overflow.astype(jnp.int32), s.n_active, s.next_cell, jnp.sum(s.n_att, dtype=jnp.int32)])
+    return s, info

@@ -1,0 +1,257 @@
+"""Where a lane pool runs: one device, a mesh of local devices, and several processes.
+
+A placement is a strategy object with one interface (:class:`OneDevice`,
+:class:`DeviceMesh`): ``start`` the pool over one queue block per device, ``run`` rounds,
+``resize`` it, ``collect`` each block's labels and tables. Each of its steps is one
+``jax.jit`` (compiled on its first call, from the real arrays); the host makes the
+data-dependent decisions from the progress rows (:func:`jaxgear.analysis._pool.drive`).
+
+On a mesh the blocks run in one SPMD program: a ``jax.jit`` of a ``jax.shard_map`` over
+the 1-D mesh of the devices (:func:`jaxgear._devices.batch_mesh`), each device's pool
+state a block along a leading device axis; each device runs the pool of one device on
+its block (its own ``while_loop`` and attractor table, no collectives). The blocks are
+padded to one shape; a block's real length is a per-device operand, so the padding
+never enters a lane.
+
+:func:`run_blocks` cuts a queue into one block per device of every process, runs this
+process's blocks, exchanges them between processes (:func:`jaxgear._devices.allgather`)
+and merges the attractors the blocks registered (:func:`jaxgear._matching.same_attractor`).
+The merged table lists, per value, the known attractors (in their order) and then the
+attractors found later in the order of the first cell of the queue they label: an order
+that does not depend on the number of devices.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import numpy as np
+from jax.sharding import NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
+from .._matching import same_attractor
+from ._lanes import PoolOptions, init_pool, resize, run_rounds, table_slots
+
+__all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS"]
+
+MIN_BLOCK_CELLS = 16
+"""Fewest cells a device's block holds (smaller queues run on the first device alone)."""
+
+
+# ----------------------------------------------------------------------------- one device
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _init_one(L: int, M: int, X, Xrow, att_pts, att_k, n_att):
+    return init_pool(L, M, X, Xrow, att_pts, att_k, n_att)
+
+
+@functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "L_min"), donate_argnums=(0,))
+def _run_one(s, system, params, integrator, o: PoolOptions, X, Xrow, L_min: int, rounds):
+    return run_rounds(s, system, params, integrator, o, X, Xrow, X.shape[0], L_min, rounds)
+
+
+_resize_one = jax.jit(resize, static_argnames=("L", "A"))
+
+
+class OneDevice:
+    """The pool of one queue on one device (``None``: the default device, uncommitted)."""
+
+    def __init__(self, device=None):
+        self.device = device
+
+    def start(self, params, X_blocks, row_blocks, L: int, M: int, att):
+        """The pool over the one queue block ``X (n, dim)`` (rows ``(n,)``) and the arrays it reads."""
+        (X,), (Xrow,) = X_blocks, row_blocks
+        data = put((params, X, Xrow), self.device)
+        return _init_one(L, M, data[1], data[2], *put(att, self.device)), data
+
+    def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
+        params, X, Xrow = data
+        s, info = _run_one(s, system, params, integrator, o, X, Xrow, L_min, rounds)
+        return s, np.asarray(info).reshape(1, -1)
+
+    def resize(self, s, L=None, A=None):
+        return _resize_one(s, L=L, A=A)
+
+    def collect(self, s) -> list[tuple]:
+        """``[(labels, used, points, periods, counts)]`` of the one block (numpy)."""
+        return [tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att)))]
+
+
+# ----------------------------------------------------------------------------- a mesh of devices
+def _local(tree):
+    """A device's block of ``tree`` (inside ``shard_map``), without its device axis."""
+    return jax.tree.map(lambda a: a[0], tree)
+
+
+def _stacked(tree):
+    """``tree`` as a device's block along the leading device axis."""
+    return jax.tree.map(lambda a: a[None], tree)
+
+
+def _per_device(mesh, body, replicated=()):
+    """``body`` as one ``shard_map`` over ``mesh``: the arguments (but those at the
+    positions ``replicated``) and the outputs split along their leading device axis. No
+    collectives: ``check_vma`` off, as in :func:`jaxgear._devices.shard_rows`."""
+    def specs(*args):
+        return tuple(P() if i in replicated else P(BATCH) for i in range(len(args)))
+
+    return lambda *args: jax.shard_map(body, mesh=mesh, in_specs=specs(*args), out_specs=P(BATCH),
+                                       check_vma=False)(*args)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _init_mesh(mesh, L: int, M: int, X, Xrow, n_real, att_pts, att_k, n_att):
+    def body(X, Xrow, n_real, *att):
+        return _stacked(init_pool(L, M, X[0], Xrow[0], *_local(att), n_real=n_real[0]))
+
+    return _per_device(mesh, body)(X, Xrow, n_real, att_pts, att_k, n_att)
+
+
+@functools.partial(jax.jit, static_argnames=("mesh", "system", "integrator", "o", "L_min"), donate_argnums=0)
+def _run_mesh(s, system, params, integrator, o: PoolOptions, X, Xrow, n_real, L_min: int, rounds, mesh):
+    def body(s, params, X, Xrow, n_real, rounds):
+        s, info = run_rounds(_local(s), system, params, integrator, o, X[0], Xrow[0], n_real[0], L_min, rounds)
+        return _stacked((s, info))
+
+    return _per_device(mesh, body, replicated=(1, 5))(s, params, X, Xrow, n_real, rounds)
+
+
+@functools.partial(jax.jit, static_argnames=("mesh", "L", "A"))
+def _resize_mesh(s, mesh, L: int | None = None, A: int | None = None):
+    return _per_device(mesh, lambda s: _stacked(resize(_local(s), L=L, A=A)))(s)
+
+
+class DeviceMesh:
+    """One pool per device of ``mesh`` (a 1-D mesh of local devices), one block of the
+    queue each, in one sharded program."""
+
+    def __init__(self, mesh):
+        self.mesh = mesh
+
+    def start(self, params, X_blocks, row_blocks, L: int, M: int, att):
+        """The pools over the blocks ``[X (n_d, dim)]`` (rows ``[(n_d,)]``), padded to one
+        shape with copies of each block's last entry (never taken into a lane)."""
+        D = len(X_blocks)
+        n_real = np.array([len(b) for b in X_blocks], np.int32)
+        n = int(n_real.max())
+        split, rep = NamedSharding(self.mesh, P(BATCH)), NamedSharding(self.mesh, P())
+
+        def padded(blocks):
+            return jax.device_put(np.stack([np.concatenate([b, np.repeat(b[-1:], n - len(b), axis=0)])
+                                            for b in blocks]), split)
+
+        data = (jax.device_put(params, rep), padded(X_blocks), padded(row_blocks), jax.device_put(n_real, split))
+        atts = jax.device_put(tuple(np.broadcast_to(a, (D, *a.shape)) for a in att), split)
+        self.n_real = n_real
+        return _init_mesh(self.mesh, L, M, data[1], data[2], data[3], *atts), data
+
+    def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
+        params, X, Xrow, n_real = data
+        s, info = _run_mesh(s, system, params, integrator, o, X, Xrow, n_real, L_min, rounds, self.mesh)
+        return s, np.asarray(info).reshape(-1, 5)
+
+    def resize(self, s, L=None, A=None):
+        return _resize_mesh(s, self.mesh, L=L, A=A)
+
+    def collect(self, s) -> list[tuple]:
+        lab, use, pts, ks, cnt = (np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k,
+                                                                         s.n_att)))
+        return [(lab[d, :m], use[d, :m], pts[d], ks[d], cnt[d]) for d, m in enumerate(self.n_real)]
+
+
+# ----------------------------------------------------------------------------- blocks and processes
+def _my_blocks(n: int):
+    """The blocks ``(start, stop)`` a queue of ``n`` cells is cut into for the local devices
+    of every process, the indices of this process's blocks, and its placement for them
+    (:class:`OneDevice` for one block, :class:`DeviceMesh` for several, ``None``)."""
+    devices = local_devices()
+    me, procs = cell_processes()
+    blocks = split_rows(n, max(1, min(procs * len(devices), n // MIN_BLOCK_CELLS)))
+    mine = [i for i in range(len(blocks)) if i % procs == me]
+    if not mine:
+        return blocks, mine, None
+    if len(mine) == 1:
+        return blocks, mine, OneDevice(devices[0])
+    return blocks, mine, DeviceMesh(batch_mesh(tuple(devices[:len(mine)])))
+
+
+def run_blocks(drive, X: np.ndarray, rows: np.ndarray, att, merge_tol: float):
+    """Label the queue ``X (n, dim)`` (value rows ``rows (n,)``) in one pool per device of
+    every process (``drive(placement, X_blocks, row_blocks) -> [(labels, used, points,
+    periods, counts)]`` runs this process's blocks), starting from the attractor tables
+    ``att = (points (V, A, M, dim), periods (V, A), counts (V,))``. Returns ``(labels
+    (n,), periods used (n,), merged tables)`` as numpy arrays, the whole queue's in every
+    process."""
+    me, procs = cell_processes()
+    blocks, mine, placement = _my_blocks(len(X))
+    local = drive(placement, [X[blocks[i][0]:blocks[i][1]] for i in mine],
+                  [rows[blocks[i][0]:blocks[i][1]] for i in mine]) if mine else []
+    results = dict(zip(mine, local))
+    if procs > 1:
+        results = _exchange(blocks, results, me, procs, len(local_devices()))
+    labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], merge_tol)
+    used = np.concatenate([results[i][1] for i in range(len(blocks))])
+    return labels, used, tables
+
+
+def _exchange(blocks, local: dict, me: int, P: int, D: int) -> dict:
+    """Every block's ``(labels, used, points, periods, counts)`` in every process, from
+    each process's own blocks (``local``; block ``i`` is process ``i % P``'s slot ``i // P``)."""
+    longest = max(b - a for a, b in blocks)
+    some = next(iter(local.values()), None)
+    A = int(allgather(np.array([some[2].shape[1] if some is not None else 0])).max())
+    shapes = allgather(np.array(some[2].shape if some is not None else (0, 0, 0, 0)))
+    V, _, M, dim = (int(x) for x in shapes.max(axis=0))
+    lab = np.full((D, longest), -9, np.int64)
+    use = np.zeros((D, longest), np.int64)
+    pts = np.full((D, V, A, M, dim), np.nan)
+    ks = np.zeros((D, V, A), np.int32)
+    ns = np.zeros((D, V), np.int32)
+    for i, r in local.items():
+        j = i // P
+        lab[j, : len(r[0])], use[j, : len(r[1])] = r[0], r[1]
+        pts[j, :, : r[2].shape[1]], ks[j, :, : r[3].shape[1]], ns[j] = r[2], r[3], r[4]
+    lab, use, pts, ks, ns = (allgather(x) for x in (lab, use, pts, ks, ns))
+    out = {}
+    for i, (a, b) in enumerate(blocks):
+        p, j = i % P, i // P
+        out[i] = (lab[p, j, : b - a], use[p, j, : b - a], pts[p, j], ks[p, j], ns[p, j])
+    return out
+
+
+def _merge(n0, blocks, merge_tol: float):
+    """Merge the attractor tables of the blocks ``[(rows (n_b,), (labels, used, points,
+    periods, counts))]`` (in queue order), which share their first ``n0[v]`` entries per
+    value: the labels of the whole queue and the merged tables (see the module)."""
+    V, _, M, dim = blocks[0][1][2].shape
+    luts = [np.tile(np.arange(r[2].shape[1], dtype=np.int64), (V, 1)) for _, r in blocks]
+    tables: list[list] = []
+    for v in range(V):
+        reps = [(blocks[0][1][2][v, a], int(blocks[0][1][3][v, a])) for a in range(int(n0[v]))]
+        cands, offset = [], 0
+        for b, (rows, (lab, *_, n)) in enumerate(blocks):
+            for a in range(int(n0[v]), int(n[v])):
+                hit = np.flatnonzero((rows == v) & (lab == a))
+                cands.append((offset + int(hit[0]) if len(hit) else np.inf, b, a))
+            offset += len(lab)
+        for _, b, a in sorted(cands):
+            pts, k = blocks[b][1][2][v, a], int(blocks[b][1][3][v, a])
+            same = [g for g, (p, kk) in enumerate(reps)  # (a repeller, kk < 0, is never the same)
+                    if kk > 0 and same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
+            if same:
+                luts[b][v, a] = same[0]
+            else:
+                luts[b][v, a] = len(reps)
+                reps.append((pts, k))
+        tables.append(reps)
+    A = table_slots(max(len(t) for t in tables))
+    pts = np.full((V, A, M, dim), np.nan)
+    ks = np.zeros((V, A), np.int32)
+    for v, reps in enumerate(tables):
+        for a, (p, k) in enumerate(reps):
+            pts[v, a], ks[v, a] = p, k
+    labels = np.concatenate([np.where(lab >= 0, lut[rows, np.maximum(lab, 0)], lab)
+                             for (rows, (lab, *_)), lut in zip(blocks, luts)])
+    return labels, (pts, ks, np.array([len(t) for t in tables], np.int32))
