@@ -7,6 +7,7 @@ grid, and the results do not depend on the chunk size.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Iterator
 
@@ -41,10 +42,18 @@ def pad_rows(X: np.ndarray, size: int) -> np.ndarray:
     return np.concatenate([X, np.repeat(X[:1], size - len(X), axis=0)], axis=0)
 
 
-def progress_bar(total: int, desc: str, enabled: bool, unit: str = "cell"):
-    """A tqdm bar (a widget in notebooks when ipywidgets is installed) with time left."""
+@functools.cache
+def _bar_class():
+    """tqdm's bar class (a widget in notebooks when ipywidgets is installed) without its
+    monitor thread (tqdm starts one for every bar class that leaves ``monitor_interval``
+    set, even for disabled bars): jaxgear starts no thread of its own."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # tqdm.auto warns when ipywidgets is missing, then falls back
         from tqdm.auto import tqdm
 
-        return tqdm(total=total, desc=desc, unit=unit, unit_scale=True, disable=not enabled, leave=False)
+    return type("ProgressBar", (tqdm,), {"monitor_interval": 0})
+
+
+def progress_bar(total: int, desc: str, enabled: bool, unit: str = "cell"):
+    """A tqdm bar (a widget in notebooks when ipywidgets is installed) with time left."""
+    return _bar_class()(total=total, desc=desc, unit=unit, unit_scale=True, disable=not enabled, leave=False)

@@ -16,7 +16,7 @@ makes), in one of two ways:
   (:func:`split_rows`), also as one ``jax.jit`` of a ``jax.shard_map`` over the mesh: each
   device runs the pool's loop of one device on its block, and the host makes the
   data-dependent decisions (stop, grow the attractor tables, shrink the pools) from the
-  devices' progress rows (:mod:`jaxgear.analysis._sharded`).
+  devices' progress rows (:mod:`jaxgear.analysis._placement`).
 
 Either way each row is computed alone by the kernel of one device, so results do not
 depend on the device count (bit for bit where the batch shape a device runs does not

@@ -3,7 +3,7 @@ of one device.
 
 References that do not come from the code under test: the same analyses run with one
 device (``XLA_FLAGS=--xla_force_host_platform_device_count=1``), in a fresh process each;
-spies on the sharded pool of the direct method (:mod:`jaxgear.analysis._sharded`: the
+spies on the sharded pool of the direct method (:mod:`jaxgear.analysis._placement`: the
 sharding of its state, the threads that call it) and on the ``shard_map`` call of
 :func:`jaxgear._devices.shard_rows` (the stateless maps: the sharding of its output) show
 that the work really was split.
@@ -28,12 +28,12 @@ import numpy as np
 import jax
 import jaxgear as jg
 from jaxgear import _devices
-from jaxgear.analysis import _pool, _sharded
+from jaxgear.analysis import _placement
 
 pools = []  # devices spanned by the state of each call of the sharded pool
 callers = set()  # the threads that ran pool rounds
 plain = []  # calls of the one-device pool
-real_blocks, real_run = _sharded._run_blocks, _pool._run
+real_blocks, real_run = _placement._run_mesh, _placement._run_one
 
 
 def blocks_spy(*a, **k):
@@ -49,8 +49,7 @@ def run_spy(*a, **k):
     return real_run(*a, **k)
 
 
-blocks_spy.lower, run_spy.prepare = real_blocks.lower, real_run.prepare  # compiling ahead
-_sharded._run_blocks, _pool._run = blocks_spy, run_spy
+_placement._run_mesh, _placement._run_one = blocks_spy, run_spy
 
 
 def pooled():
@@ -454,71 +453,3 @@ def test_two_processes_sweep_the_values_of_one(tmp_path):
     for kind, name in (("bif", "bifurcation.nc"), ("map", "parameter_map.nc")):
         assert not (tmp_path / "r2" / f"{kind}_1").exists()  # process 1 writes nothing
         _assert_same_file(tmp_path / "r1" / f"{kind}_0" / name, tmp_path / "r2" / f"{kind}_0" / name, roundoff=True)
-
-
-CACHE_SCRIPT = r'''
-import sys
-from pathlib import Path
-import jax
-import jax.numpy as jnp
-from jax._src import distributed
-from jaxgear import _cache
-
-cache, patch = Path(sys.argv[1]), sys.argv[2] == "patch"
-jax.config.update("jax_compilation_cache_dir", str(cache))
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-if patch:
-    assert _cache.write_from_every_process()
-    assert _cache.write_from_every_process()  # a second call changes nothing
-distributed.global_state.process_id = 1  # what the runtime sets in the second process
-
-
-def wave(x):
-    return jnp.sin(x) * 3.0 + 1.0
-
-
-jax.jit(wave)(jnp.arange(5.0)).block_until_ready()
-print(sum(1 for p in cache.rglob("jit_wave-*") if "-atime" not in p.name))
-'''
-
-
-@pytest.mark.parametrize("patch", [False, True])
-def test_every_process_writes_its_compilation_cache_entries(tmp_path, patch):
-    """JAX writes persistent-cache entries from process 0 only; on CPUs a process other
-    than 0 never finds process 0's entries (its keys hold its own device ids), so
-    :func:`jaxgear._cache.write_from_every_process` lets it write its own: without it the
-    compilation of process 1 leaves no entry, with it its entry."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
-    r = subprocess.run([sys.executable, "-c", CACHE_SCRIPT, str(tmp_path / "xla"), "patch" if patch else "plain"],
-                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr[-3000:]
-    entries = int(r.stdout.split()[-1])
-    assert entries == (1 if patch else 0)
-
-
-def test_every_pool_was_compiled_ahead(monkeypatch):
-    """Each pool the direct analysis runs (the pilot, the queue's block after it, every
-    size it shrinks to, the label-uncertainty pools) waits on a compilation started
-    ahead under the same key: a pool whose shape or placement the preparation missed
-    would be traced and compiled on the main thread, in the run's serial path."""
-    import jaxgear as jg
-    from jaxgear import _ahead
-    from jaxgear.analysis import _pool
-
-    asked, missed = [], []
-    real = _pool.wait_for
-
-    def spy(key):
-        asked.append(key)
-        if key not in _ahead._STARTED:
-            missed.append(key)
-        real(key)
-
-    monkeypatch.setattr(_pool, "wait_for", spy)
-    p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.25)
-    method = jg.Direct(integrator=jg.RK4(48), max_period=4, chunk_size=4000)
-    grid = jg.CellGrid.box([(-3.1, 3.1), (-3.1, 3.1)], (70, 40), names=("x", "v"))  # 2,800 cells: a pilot, a block
-    jg.analyze_global(jg.DUFFING, p, grid, method, progress=False, uncertainty=256)
-    assert len({k[3:5] for k in asked}) >= 3  # pools of several shapes ran
-    assert not missed, missed

@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import DEFAULT_CHUNK_CELLS
 from .._checks import check_int, check_number
 
 __all__ = ["PoolOptions", "PoolState", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
@@ -85,7 +86,7 @@ class PoolOptions(eqx.Module):
     max_periods: int = eqx.field(static=True, default=2000)
     escape_bound: float = eqx.field(static=True, default=1e6)
     capture_radius: float | None = eqx.field(static=True, default=None)
-    lanes: int = eqx.field(static=True, default=1 << 16)
+    lanes: int = eqx.field(static=True, default=DEFAULT_CHUNK_CELLS)
     pilot: int = eqx.field(static=True, default=1024)
 
     def __check_init__(self):

@@ -1,0 +1,103 @@
+"""jaxgear behaves like a library: importing it sets float64 and nothing else global, an
+analysis starts no Python threads or processes, and nothing in a cache folder is ever
+unpickled or otherwise executed as Python.
+
+Each check runs in a fresh interpreter (the state before the import is that of plain
+``import jax``), so the tests see exactly what the package changes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _python(code: str, env=None, timeout=600) -> subprocess.CompletedProcess:
+    env = dict(os.environ if env is None else env)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *[p for p in sys.path if p]])
+    return subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+IMPORT_SCRIPT = r'''
+import gc, json, sys, threading, warnings
+import jax
+names = [n for n in dir(jax.config) if n.startswith("jax_")]
+def config():
+    out = {}
+    for n in names:
+        try:
+            out[n] = repr(getattr(jax.config, n))
+        except Exception:
+            pass
+    return out
+before = dict(config=config(), threads=sorted(t.name for t in threading.enumerate()), gc=gc.isenabled(),
+              filters=len(warnings.filters), hook=repr(sys.excepthook), frozen=gc.get_freeze_count())
+import jaxgear
+after = dict(config=config(), threads=sorted(t.name for t in threading.enumerate()), gc=gc.isenabled(),
+             filters=len(warnings.filters), hook=repr(sys.excepthook), frozen=gc.get_freeze_count())
+print(json.dumps(dict(before=before, after=after)))
+'''
+
+
+def test_import_sets_float64_and_nothing_else():
+    r = _python(IMPORT_SCRIPT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    before, after = out["before"], out["after"]
+    changed = {k for k in before["config"] if before["config"][k] != after["config"].get(k)}
+    assert changed == {"jax_enable_x64"}, changed
+    for key in ("threads", "gc", "filters", "hook", "frozen"):
+        assert before[key] == after[key], key
+
+
+ANALYSIS_SCRIPT = r'''
+import threading, multiprocessing
+import jaxgear as jg
+p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
+r = jg.analyze_global(jg.DUFFING, p, grid, jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False,
+                      uncertainty=32)
+assert len(r.attractors) >= 1
+print(sorted(t.name for t in threading.enumerate()), len(multiprocessing.active_children()))
+'''
+
+
+def test_an_analysis_starts_no_threads_or_processes():
+    r = _python(ANALYSIS_SCRIPT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip().splitlines()[-1] == "['MainThread'] 0"
+
+
+class _Planted:
+    """An object whose unpickling runs code: it writes ``marker`` (the attack a shared
+    cache folder allows when a library unpickles from it)."""
+
+    def __init__(self, marker: Path):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (Path(self.marker).write_text, ("executed",))
+
+
+def test_no_pickle_in_a_cache_folder_is_executed(tmp_path):
+    """Every file name a cache could hold computations under (the old ``kept/*.bin``,
+    JAX's ``xla/`` entries, anything else) holds a pickle that writes a marker when
+    loaded; a command run with that folder as its cache leaves no marker."""
+    cache, marker = tmp_path / "cache", tmp_path / "marker"
+    payload = pickle.dumps(_Planted(marker))
+    for rel in ("kept/a.bin", "kept/index.pkl", "xla/jit_run-0123456789abcdef", "analysis.pkl", "pool.bin"):
+        (cache / rel).parent.mkdir(parents=True, exist_ok=True)
+        (cache / rel).write_bytes(payload)
+    env = dict(os.environ, JAXGEAR_CACHE_DIR=str(cache))
+    r = _python("from jaxgear.cli import main; raise SystemExit(main(['analyze', '--grid', '4,3,4', '--no-figures', "
+                f"'--quiet', '--uncertainty-samples', '0', '--out', {str(tmp_path / 'out')!r}]))", env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "out" / "result.nc").exists()
+    assert not marker.exists()
