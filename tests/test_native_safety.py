@@ -226,6 +226,17 @@ def test_jaxgear_native_0_loads_and_builds_nothing(kernel, tmp_path):
     assert not xdg.exists()
 
 
+def test_without_a_compiler_the_pure_jax_path_runs_and_says_so_once(kernel, tmp_path):
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    xdg = tmp_path / "xdg"
+    env = {"XDG_CACHE_HOME": str(xdg), "PATH": str(empty), "CXX": ""}
+    out = probe(env, tmp_path, after="ok = _native.native_available() or _native.native_available()")
+    assert not out["ok"] and out["mapped"] == []
+    assert len(out["warnings"]) == 1, out["warnings"]
+    assert "no C++ compiler found" in out["warnings"][0] and "pure-JAX" in out["warnings"][0]
+
+
 @pytest.mark.slow
 def test_a_truncated_kernel_is_rebuilt_by_the_compiler(kernel, tmp_path):
     """As above with the machine's real compiler: the rebuilt kernel loads, and the next
