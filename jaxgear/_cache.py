@@ -5,12 +5,13 @@ One root folder, ``$JAXGEAR_CACHE_DIR`` (default ``~/.cache/jaxgear``), holds
 - ``xla/``: JAX's persistent compilation cache, switched on by the command line through
   JAX's public configuration (a repeated command loads its compiled computations
   instead of compiling them again). It holds data that JAX itself reads and checks;
-  nothing in it is executed as Python;
-- ``native/``: the compiled CPU kernel of the gear models
-  (:mod:`jaxgear.integrate._native`), built on first use.
+  nothing in it is executed as Python.
 
-``JAXGEAR_CACHE_DIR=off`` turns the compilation cache off; the kernel is then built in
-the default folder.
+``JAXGEAR_CACHE_DIR=off`` turns the compilation cache off.
+
+The compiled CPU kernel of the gear models (:mod:`jaxgear.integrate._native`) is not kept
+there: it is code, and that folder may be shared by the processes of a run. It lives in
+the user's private :func:`native_dir`, whatever ``JAXGEAR_CACHE_DIR`` says.
 """
 
 from __future__ import annotations
@@ -36,8 +37,13 @@ def cache_root() -> Path | None:
 
 
 def native_dir() -> Path:
-    """Folder of the compiled CPU kernel."""
-    return (cache_root() or _default_root()) / "native"
+    """Folder of the compiled CPU kernel: ``$XDG_CACHE_HOME/jaxgear/native`` (default
+    ``~/.cache/jaxgear/native``), private to the user (created 0700; the kernel refuses it
+    when others can write it). It does not follow ``JAXGEAR_CACHE_DIR``: the kernel is built
+    once per user and machine, and never loaded from a folder a run shares."""
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    base = Path(xdg) if os.path.isabs(xdg) else Path(os.path.expanduser("~")) / ".cache"
+    return base / "jaxgear" / "native"
 
 
 def enable_compilation_cache() -> Path | None:

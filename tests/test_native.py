@@ -8,6 +8,8 @@ no compiled kernel: it always runs the pure-JAX steps.)
 """
 
 import math
+import os
+import shutil
 
 import jax
 import jax.numpy as jnp
@@ -16,9 +18,26 @@ import pytest
 
 import jaxgear as jg
 from jaxgear.integrate import KinkAwareRK4
-from jaxgear.integrate._native import native_available
+from jaxgear.integrate._native import native_available, native_unavailable_reason
 
-pytestmark = pytest.mark.skipif(not native_available(), reason="no C++ compiler: the compiled kernel is not built")
+TURNED_OFF = os.environ.get("JAXGEAR_NATIVE", "1").lower() in ("0", "off", "false", "no")
+COMPILER = os.environ.get("CXX") or shutil.which("g++")
+
+# Where a compiler is present the kernel is required: a compile error (or a refused kernel
+# folder) fails every test here instead of skipping them.
+pytestmark = [pytest.mark.skipif(TURNED_OFF, reason="JAXGEAR_NATIVE=0 turns the compiled kernel off"),
+              pytest.mark.skipif(COMPILER is None, reason="no C++ compiler: the compiled kernel is not built")]
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _kernel_required():
+    if not native_available():
+        pytest.fail(f"a C++ compiler is present ({COMPILER}) but the compiled kernel is not available: "
+                    f"{native_unavailable_reason()}", pytrace=False)
+
+
+def test_the_kernel_is_built_where_a_compiler_is_present():
+    assert native_available(), native_unavailable_reason()
 
 TOL = 1e-12
 
