@@ -29,6 +29,7 @@ Pure functions the direct method's lane pool calls per period or per round:
 
 from __future__ import annotations
 
+import functools
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -62,7 +63,7 @@ _SINK, _UNRESOLVED = -1, -2
 
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_SALTS = tuple(np.uint64((0x9E3779B97F4A7C15 * (d + 1)) % 2**64) for d in range(64))
 
 
 def _mix(z):
@@ -115,6 +116,7 @@ def partition_from_box(lower, upper, resolution) -> FinePartition:
     return FinePartition(lo=jnp.asarray(lo), width=jnp.asarray(width))
 
 
+@jax.jit
 def cell_keys(partition: FinePartition, Y):
     """The box key of each state of ``Y (dim, L)``: ``int64 (L,)``, ``-1`` for a state
     outside the partition's index range or not finite.
@@ -133,7 +135,7 @@ def cell_keys(partition: FinePartition, Y):
     else:
         h = jnp.full(i.shape[1], np.uint64(dim), dtype=jnp.uint64)
         for d in range(dim):
-            h = _mix(h ^ (i[d].astype(jnp.uint64) + _GOLDEN * np.uint64(d + 1)))
+            h = _mix(h ^ (i[d].astype(jnp.uint64) + _SALTS[d % 64]))
         key = (h >> np.uint64(1)).astype(jnp.int64)
     return jnp.where(ok, key, -1).astype(jnp.int64)
 
@@ -169,6 +171,7 @@ def _probe(table: CellTable, keys):
     return slot, jnp.any(stop, axis=1)
 
 
+@jax.jit
 def lookup(table: CellTable, keys):
     """The label of each key of ``keys (L,)``: ``int32 (L,)``, ``-1`` when the key is absent
     (or is ``-1``). Vectorised over the keys, ``MAX_PROBES`` probes each."""
@@ -177,49 +180,34 @@ def lookup(table: CellTable, keys):
     return jnp.where(hit, table.labels[slot], -1).astype(jnp.int32)
 
 
+@jax.jit
 def insert(table: CellTable, keys, label):
-    """Insert ``keys (m,)`` with ``label`` (an int): ``(table, n_dropped)``.
+    """Insert ``keys (m,)`` with ``label`` (an int, or ``(m,)`` one per key): ``(table, n_dropped)``.
 
     Keys already present keep their label (the first attractor that registered a box owns
     it); keys ``-1`` are skipped; a key that finds no free slot within ``MAX_PROBES`` probes
-    is dropped and counted in ``n_dropped`` (int32: the caller reports it). A ``fori_loop``
-    over the keys, so duplicates within ``keys`` are inserted once.
+    is dropped and counted in ``n_dropped`` (int32: the caller reports it). Only the
+    distinct keys are inserted (the first label of a repeated key), one after the other
+    (a ``while_loop`` over the distinct keys: an insertion must see the previous ones).
     """
-    label = jnp.asarray(label, jnp.int32)
-
-    def one(j, c):
-        tk, tl, dropped = c
-        key = keys[j]
-        slot, found = _probe(CellTable(tk, tl), key[None])
-        slot, found = slot[0], found[0]
-        empty = tk[slot] == -1
-        put = (key >= 0) & found & empty
-        tk = jnp.where(put, tk.at[slot].set(key), tk)
-        tl = jnp.where(put, tl.at[slot].set(label), tl)
-        return tk, tl, dropped + ((key >= 0) & ~found).astype(jnp.int32)
-
-    tk, tl, dropped = jax.lax.fori_loop(0, keys.shape[0], one, (table.keys, table.labels, jnp.asarray(0, jnp.int32)))
-    return CellTable(tk, tl), dropped
-
-
-def _unique_first(keys):
-    """``keys`` sorted with every repeated key (and ``-1``) replaced by ``-1``, and the number
-    of distinct valid keys (they come first)."""
-    s = jnp.sort(keys)
-    first = (s >= 0) & jnp.concatenate([jnp.ones(1, bool), s[1:] != s[:-1]])
-    order = jnp.argsort(~first, stable=True)
-    return jnp.where(first, s, -1)[order], jnp.sum(first, dtype=jnp.int32)
-
-
-def _insert_unique(table: CellTable, keys, label):
-    """:func:`insert` of the distinct keys of ``keys`` only (a loop over the distinct ones)."""
-    u, count = _unique_first(keys)
-    label = jnp.asarray(label, jnp.int32)
+    keys = jnp.asarray(keys, jnp.int64)
+    label = jnp.broadcast_to(jnp.asarray(label, jnp.int32), keys.shape)
+    order = jnp.argsort(keys, stable=True)
+    sk, sl = keys[order], label[order]
+    first = (sk >= 0) & jnp.concatenate([jnp.ones(1, bool), sk[1:] != sk[:-1]])
+    pick = jnp.argsort(~first, stable=True)  # the distinct keys first
+    uk, ul = sk[pick], sl[pick]
+    count = jnp.sum(first, dtype=jnp.int32)
 
     def body(c):
         j, tk, tl, dropped = c
-        t, d = insert(CellTable(tk, tl), u[j][None], label)
-        return j + 1, t.keys, t.labels, dropped + d
+        key = uk[j]
+        slot, found = _probe(CellTable(tk, tl), key[None])
+        slot, found = slot[0], found[0]
+        put = found & (tk[slot] == -1)
+        tk = tk.at[slot].set(jnp.where(put, key, tk[slot]))
+        tl = tl.at[slot].set(jnp.where(put, ul[j], tl[slot]))
+        return j + 1, tk, tl, dropped + (~found).astype(jnp.int32)
 
     _, tk, tl, dropped = jax.lax.while_loop(lambda c: c[0] < count, body,
                                             (jnp.asarray(0, jnp.int32), table.keys, table.labels,
@@ -228,6 +216,7 @@ def _insert_unique(table: CellTable, keys, label):
 
 
 # --------------------------------------------------------------------------- per-lane tracking
+@jax.jit
 def track_hits(cell_label, att, hits, misses, max_misses):
     """One period of the per-lane hit counters (all ``(L,)`` arrays, int32).
 
@@ -283,6 +272,7 @@ def _flat(cloud):
     return jnp.moveaxis(cloud, 1, 0).reshape(dim, P * K)
 
 
+@jax.jit
 def recurrence_share(partition: FinePartition, cloud):
     """Share of the second half's points of ``cloud (P, dim, K)`` whose box the first half
     visited (points outside the partition count as not recurring): near 1 on an attractor
@@ -291,9 +281,10 @@ def recurrence_share(partition: FinePartition, cloud):
     k1 = jnp.sort(cell_keys(partition, _flat(cloud[: P // 2])))
     k2 = cell_keys(partition, _flat(cloud[P // 2:]))
     pos = jnp.clip(jnp.searchsorted(k1, k2), 0, k1.shape[0] - 1)
-    return jnp.mean((k1[pos] == k2) & (k2 >= 0))
+    return jnp.mean(((k1[pos] == k2) & (k2 >= 0)).astype(jnp.float64))
 
 
+@functools.partial(jax.jit, static_argnames="max_period")
 def near_periodic(partition: FinePartition, cloud, max_period: int):
     """Whether copy 0 of ``cloud (P, dim, K)`` repeats with some period ``k <= max_period``
     to within one box width on every coordinate over its last quarter: a cycle (or a slow
@@ -311,12 +302,13 @@ def near_periodic(partition: FinePartition, cloud, max_period: int):
     return jnp.any(jax.vmap(rep)(jnp.arange(1, max_period + 1)))
 
 
+@functools.partial(jax.jit, static_argnames="n_labels")
 def overlap_shares(table: CellTable, partition: FinePartition, points, n_labels: int):
     """Share of ``points (dim, m)`` lying in boxes of each label ``0 .. n_labels - 1`` of the
     table: ``(n_labels,)``. A new cloud whose share on a known attractor is large is that
     attractor (matching by occupied boxes, not by point distance)."""
     lab = lookup(table, cell_keys(partition, points))
-    return jnp.mean(lab[None] == jnp.arange(n_labels, dtype=jnp.int32)[:, None], axis=1)
+    return jnp.mean((lab[None] == jnp.arange(n_labels, dtype=jnp.int32)[:, None]).astype(jnp.float64), axis=1)
 
 
 # --------------------------------------------------------------------------- options and result
@@ -450,19 +442,16 @@ def _period(system, params, integrator, opt, part, tol, s: _State) -> _State:
     return s._replace(Y=Y, ring=ring, streak=streak, age=age, att=att, hits=hits, misses=misses)
 
 
-def _register(s: _State, pts, kind, keys):
-    """A new attractor with ``pts (Q, dim)`` (NaN padded) and period ``kind`` whose boxes are
-    ``keys``; or, with no free slot, the overflow flag. Returns ``(state, label)``."""
+def _register(s: _State, pts, kind):
+    """A new attractor slot with ``pts (Q, dim)`` (NaN padded) and period ``kind``; with no
+    free slot, the overflow flag. Returns ``(state, label)`` (label ``-1``: no slot); the
+    caller enters its boxes in the table."""
     A = s.kind.shape[0]
     room = s.n_att < A
-    a = s.n_att
-
-    def add(s):
-        table, dropped = _insert_unique(s.table, keys, a)
-        return s._replace(table=table, dropped=s.dropped + dropped, kind=s.kind.at[a].set(kind),
-                          points=s.points.at[a].set(pts), n_att=s.n_att + 1)
-
-    s = jax.lax.cond(room, add, lambda s: s._replace(overflow=jnp.asarray(True)), s)
+    a = jnp.minimum(s.n_att, A - 1)
+    s = s._replace(kind=jnp.where(room, s.kind.at[a].set(kind), s.kind),
+                   points=jnp.where(room, s.points.at[a].set(pts), s.points),
+                   n_att=s.n_att + room.astype(jnp.int32), overflow=s.overflow | ~room)
     return s, jnp.where(room, a, -1).astype(jnp.int32)
 
 
@@ -481,7 +470,7 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
     # periodic recurrence onto a known cycle (point level: same period, newest point on it)
     cyc = s.points[:, :M]  # (A, M, dim)
     dist = jax.vmap(lambda P: jax.vmap(lambda p: _sqn(s.Y - p[:, None]))(P))(cyc)  # (A, M, L)
-    valid = jnp.arange(M)[None, :] < s.kind[:, None]  # (A, M)
+    valid = jnp.arange(M, dtype=jnp.int32)[None, :] < s.kind[:, None]  # (A, M)
     dmin = jnp.min(jnp.where(valid[..., None], dist, jnp.inf), axis=1)  # (A, L)
     scale = 1.0 + jnp.nanmax(jnp.where(valid[..., None], jnp.abs(cyc), 0.0), axis=(1, 2))  # (A,)
     on = (s.kind[:, None] == per[None]) & (dmin <= (merge_tol * scale[:, None]) ** 2)
@@ -494,17 +483,20 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         s, label = c
         l0 = jnp.argmax(new)
         k0 = per[l0]
-        i = jnp.arange(Q)
+        i = jnp.arange(Q, dtype=jnp.int32)
         back = s.ring[:, :, l0]  # (M, dim) newest first
         pts = jnp.where((i < k0)[:, None], back[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)
-        s, a = _register(s, pts, k0, jnp.where(jnp.arange(M) < k0, cell_keys(part, back.T), -1))
+        s, a = _register(s, pts, k0)
+        ckeys = jnp.where((jnp.arange(M, dtype=jnp.int32) < k0) & (a >= 0), cell_keys(part, back.T), -1)
         d0 = jax.vmap(lambda p: _sqn(s.Y - p[:, None]))(pts[:M])  # (M, L)
         sc = 1.0 + jnp.max(jnp.where((i[:M] < k0)[:, None], jnp.abs(pts[:M]), 0.0))
         joins = new & (per == k0) & (jnp.nanmin(jnp.where((i[:M] < k0)[:, None], d0, jnp.inf), axis=0)
                                      <= (merge_tol * sc) ** 2)
-        return s, jnp.where(joins & (a >= 0), a, label).astype(jnp.int32)
+        return s, jnp.where(joins & (a >= 0), a, label).astype(jnp.int32), ckeys, a
 
-    s, label = jax.lax.cond(jnp.any(new), new_cycle, lambda c: c, (s, label))
+    s, label, ckeys, clabel = jax.lax.cond(jnp.any(new), new_cycle, lambda c: (*c, jnp.full(M, -1, jnp.int64),
+                                                                                 jnp.asarray(-1, jnp.int32)),
+                                           (s, label))
 
     # consecutive hits on a known attractor's boxes
     label = jnp.where(live & (label < 0) & (s.att >= 0) & (s.hits >= opt.hits), s.att, label).astype(jnp.int32)
@@ -531,20 +523,28 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         step = max(second.shape[1] // Q, 1)
         pts = jnp.full((Q, dim), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
 
-        def merge(s):
-            table, dropped = _insert_unique(s.table, keys, best)
-            return s._replace(table=table, dropped=s.dropped + dropped), best.astype(jnp.int32)
-
         def accept(s):
-            return jax.lax.cond(over[best] >= opt.overlap_share, merge,
-                                lambda s: _register(s, pts, jnp.asarray(APERIODIC, jnp.int32), keys), s)
+            return jax.lax.cond(over[best] >= opt.overlap_share, lambda s: (s, best.astype(jnp.int32)),
+                                lambda s: _register(s, pts, jnp.asarray(APERIODIC, jnp.int32)), s)
 
         s, a = jax.lax.cond(ok, accept, lambda s: (s, jnp.asarray(-1, jnp.int32)), s)
         s = s._replace(tried=s.tried.at[l0].set(s.age[l0]), cloud_work=s.cloud_work + P * opt.cloud_lanes,
                        age=s.age.at[l0].add(jnp.where(a >= 0, P, 0)))
-        return s, label.at[l0].set(jnp.where(a >= 0, a, label[l0]))
+        return s, label.at[l0].set(jnp.where(a >= 0, a, label[l0])), jnp.where(a >= 0, keys, -1), a
 
-    s, label = jax.lax.cond(jnp.any(cand), characterise, lambda c: c, (s, label))
+    KP = opt.cloud_periods * opt.cloud_lanes
+    s, label, vkeys, vlabel = jax.lax.cond(jnp.any(cand), characterise,
+                                           lambda c: (*c, jnp.full(KP, -1, jnp.int64), jnp.asarray(-1, jnp.int32)),
+                                           (s, label))
+    # the boxes of this round's new cycle and cloud enter the table (one insertion per round)
+    keys = jnp.concatenate([ckeys, vkeys])
+    klab = jnp.concatenate([jnp.full(M, clabel), jnp.full(KP, vlabel)])
+
+    def enter(s):
+        table, dropped = insert(s.table, keys, klab)
+        return s._replace(table=table, dropped=s.dropped + dropped)
+
+    s = jax.lax.cond(jnp.any(keys >= 0), enter, lambda s: s, s)
 
     unres = live & (label < 0) & (s.age >= max_periods)
     decided = esc | (label >= 0) | unres
