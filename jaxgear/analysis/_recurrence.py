@@ -19,6 +19,7 @@ Pure functions the direct method's lane pool calls per period or per round:
   open-addressing hash table on the device from box keys to attractor labels (bounded
   memory; an overflow is counted, never silent);
 - :func:`track_hits` — per lane, the run of consecutive hits on one attractor's boxes;
+- :func:`near_cycle_lanes` — per lane, whether it is approaching a cycle (then no candidate);
 - :func:`attractor_cloud`, :func:`recurrence_share`, :func:`near_periodic`,
   :func:`overlap_shares` — a candidate's point cloud, whether it recurs, whether it is a
   cycle the point-level recognition will take, and which known attractor it overlaps;
@@ -41,7 +42,7 @@ from .._checks import check_int, check_number
 from ..integrate import resolve_integrator
 
 __all__ = ["FinePartition", "partition_from_box", "cell_keys", "CellTable", "empty_table", "lookup", "insert",
-           "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "overlap_shares",
+           "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "overlap_shares",
            "RecurrenceOptions", "RecurrenceResult", "classify_by_recurrence", "APERIODIC", "INDEX_BITS",
            "MAX_PROBES"]
 
@@ -55,6 +56,10 @@ _PACKED_DIMS = 63 // INDEX_BITS
 MAX_PROBES = 32
 """Slots a lookup or an insertion probes at most (linear probing); an insertion that finds
 no free slot among them is dropped and counted."""
+
+CLOUD_STAGES = 4
+"""A candidate's cloud runs in this many stages; one whose stage ends on a cycle (or
+escapes) stops there (a lane slowly approaching a cycle costs a quarter of a cloud)."""
 
 APERIODIC = 0
 """The period recorded for an attractor found by recurrence of boxes (not of points)."""
@@ -242,15 +247,21 @@ def track_hits(cell_label, att, hits, misses, max_misses):
 
 
 # --------------------------------------------------------------------------- characterisation
-def attractor_cloud(system, params, integrator, y, *, periods: int, lanes: int, spread: float = 1e-7, key=None):
+def attractor_cloud(system, params, integrator, y, *, periods: int, lanes: int, spread: float = 1e-7, key=None,
+                    stages: int = 1, stop=None):
     """The stroboscopic points of ``lanes`` copies of the state ``y (dim,)`` over ``periods``
-    forcing periods: ``(periods, dim, lanes)``.
+    forcing periods: ``(cloud (periods, dim, lanes), periods run)``.
 
     Copy 0 is ``y``; the others are moved by ``spread (1 + |y|)`` in random directions, so on
     a chaotic attractor they soon sample it independently (more of the attractor per period
-    of wall time) while on a periodic one they stay together. One ``lax.scan`` over the
-    periods (the integrator's ``advance`` at phase 0).
+    of wall time) while on a periodic one they stay together. The periods run in
+    ``stages`` equal stages (``periods`` a multiple of ``stages``), each a ``lax.scan`` of
+    the integrator's ``advance`` at phase 0; after each, ``stop(points of the stage (S, dim,
+    lanes))`` (optional, a traced bool) may end the cloud early: the rows not run are NaN.
     """
+    if periods % stages:
+        raise ValueError(f"periods={periods} must be a multiple of stages={stages}.")
+    S = periods // stages
     dim = y.shape[0]
     key = jax.random.PRNGKey(0) if key is None else key
     d = jax.random.normal(key, (dim, lanes))
@@ -262,8 +273,17 @@ def attractor_cloud(system, params, integrator, y, *, periods: int, lanes: int, 
         Y = integrator.advance(system, params, Y, jnp.asarray(0.0), 1)
         return Y, Y
 
-    _, pts = jax.lax.scan(step, Y0, None, length=periods)
-    return pts
+    def body(c):
+        j, Y, buf, _ = c
+        Y, pts = jax.lax.scan(step, Y, None, length=S)
+        buf = jax.lax.dynamic_update_slice_in_dim(buf, pts, j * S, axis=0)
+        halt = jnp.asarray(False) if stop is None else stop(pts)
+        return j + 1, Y, buf, halt
+
+    buf = jnp.full((periods, dim, lanes), jnp.nan)
+    j, _, buf, _ = jax.lax.while_loop(lambda c: (c[0] < stages) & ~c[3], body,
+                                      (jnp.asarray(0, jnp.int32), Y0, buf, jnp.asarray(False)))
+    return buf, j * S
 
 
 def _flat(cloud):
@@ -302,6 +322,22 @@ def near_periodic(partition: FinePartition, cloud, max_period: int):
     return jnp.any(jax.vmap(rep)(jnp.arange(1, max_period + 1)))
 
 
+def near_cycle_lanes(points, width, max_period: int):
+    """Per lane, whether its last points ``points (2 max_period, dim, L)`` (newest first; NaN
+    before the lane has them) repeat with some period ``k <= max_period`` to within one box
+    ``width (dim,)`` on every coordinate: a lane approaching a cycle, which the point-level
+    recognition will take, is no candidate for an attractor of boxes (its cloud would be
+    integrated for nothing). ``(L,)`` bool."""
+    M = max_period
+    w = width[:, None]
+
+    def rep(k):
+        a = jax.lax.dynamic_slice_in_dim(points, k, M, axis=0)
+        return jnp.all(jnp.abs(points[:M] - a) <= w[None], axis=(0, 1))
+
+    return jnp.any(jax.vmap(rep)(jnp.arange(1, M + 1)), axis=0)
+
+
 @functools.partial(jax.jit, static_argnames="n_labels")
 def overlap_shares(table: CellTable, partition: FinePartition, points, n_labels: int):
     """Share of ``points (dim, m)`` lying in boxes of each label ``0 .. n_labels - 1`` of the
@@ -330,7 +366,8 @@ class RecurrenceOptions(eqx.Module):
             second half falls in boxes of its first half.
         overlap_share: a new cloud with at least this share of its points in a known
             attractor's boxes is that attractor (its boxes join it).
-        cloud_periods: periods each copy of a candidate is integrated (static).
+        cloud_periods: periods each copy of a candidate is integrated (static; a multiple
+            of :data:`CLOUD_STAGES`).
         cloud_lanes: copies of a candidate integrated together (static).
         max_points: cloud points kept per attractor (static; >= the largest period).
         capacity: slots of the box table (static, a power of two; ``8 * capacity`` bytes
@@ -339,7 +376,7 @@ class RecurrenceOptions(eqx.Module):
     """
 
     resolution: Any = eqx.field(converter=_as(jnp.float64), default=100.0)
-    transient: Any = eqx.field(converter=_as(jnp.int32), default=50)
+    transient: Any = eqx.field(converter=_as(jnp.int32), default=80)
     hits: Any = eqx.field(converter=_as(jnp.int32), default=20)
     max_misses: Any = eqx.field(converter=_as(jnp.int32), default=4)
     accept_share: Any = eqx.field(converter=_as(jnp.float64), default=0.8)
@@ -357,7 +394,9 @@ class RecurrenceOptions(eqx.Module):
         check_int(int(self.max_misses), "max_misses", 0)
         check_number(float(self.accept_share), "accept_share", 0, 1, strict_min=True)
         check_number(float(self.overlap_share), "overlap_share", 0, 1, strict_min=True)
-        check_int(self.cloud_periods, "cloud_periods", 8)
+        check_int(self.cloud_periods, "cloud_periods", 8 * CLOUD_STAGES)
+        if self.cloud_periods % CLOUD_STAGES:
+            raise ValueError(f"cloud_periods={self.cloud_periods} must be a multiple of {CLOUD_STAGES}.")
         check_int(self.cloud_lanes, "cloud_lanes", 1)
         check_int(self.max_points, "max_points", 1)
         c = check_int(self.capacity, "capacity", 2 * MAX_PROBES)
@@ -399,7 +438,7 @@ class RecurrenceResult(eqx.Module):
 # --------------------------------------------------------------------------- standalone classifier
 class _State(NamedTuple):
     Y: Any  # (dim, L)
-    ring: Any  # (M, dim, L) last M points, newest first
+    ring: Any  # (2M, dim, L) last 2M points, newest first
     streak: Any  # (M, L)
     age: Any  # (L,)
     cell: Any  # (L,) state held, -1 idle
@@ -427,13 +466,13 @@ def _sqn(a):
 
 def _period(system, params, integrator, opt, part, tol, s: _State) -> _State:
     """One forcing period of every lane: the point, the periodic streaks and the hit runs."""
-    M = s.ring.shape[0]
+    M = s.streak.shape[0]
     busy = s.cell >= 0
     Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1)
     age = jnp.where(busy, s.age + 1, s.age)
     thr = (tol * (1.0 + jnp.sqrt(_sqn(Y)))) ** 2
     ks = jnp.arange(1, M + 1, dtype=jnp.int32)
-    d = jax.vmap(lambda r: _sqn(Y - r))(s.ring)  # (M, L)
+    d = jax.vmap(lambda r: _sqn(Y - r))(s.ring[:M])  # (M, L)
     ok = (d <= thr[None]) & (age[None] > ks[:, None])
     streak = jnp.where(ok, s.streak + 1, 0)
     ring = jnp.concatenate([Y[None], s.ring[:-1]], axis=0)
@@ -456,7 +495,8 @@ def _register(s: _State, pts, kind):
 
 
 def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_periods, X, s: _State) -> _State:
-    M, dim, L = s.ring.shape
+    M = s.streak.shape[0]
+    _, dim, L = s.ring.shape
     A, Q, _ = s.points.shape
     n = X.shape[0]
     busy = s.cell >= 0
@@ -484,7 +524,7 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         l0 = jnp.argmax(new)
         k0 = per[l0]
         i = jnp.arange(Q, dtype=jnp.int32)
-        back = s.ring[:, :, l0]  # (M, dim) newest first
+        back = s.ring[:M, :, l0]  # (M, dim) newest first
         pts = jnp.where((i < k0)[:, None], back[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)
         s, a = _register(s, pts, k0)
         ckeys = jnp.where((jnp.arange(M, dtype=jnp.int32) < k0) & (a >= 0), cell_keys(part, back.T), -1)
@@ -503,18 +543,22 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
 
     # one candidate per round: the oldest undecided lane past the transient, not in a run of hits
     cand = live & (label < 0) & (per > M) & (s.age >= opt.transient) & (s.age - s.tried >= opt.transient) \
-        & (s.hits == 0)
+        & (s.hits == 0) & ~near_cycle_lanes(s.ring, part.width, M)
 
     def characterise(c):
         s, label = c
         l0 = jnp.argmax(jnp.where(cand, s.age, -1))
-        cloud = attractor_cloud(system, params, integrator, s.Y[:, l0], periods=opt.cloud_periods,
-                                lanes=opt.cloud_lanes, key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds))
         P = opt.cloud_periods
+
+        def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
+            return near_periodic(part, pts, M) | ~jnp.all(jnp.sqrt(_sqn(_flat(pts))) <= bound)
+
+        cloud, ran = attractor_cloud(system, params, integrator, s.Y[:, l0], periods=P, lanes=opt.cloud_lanes,
+                                     key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds),
+                                     stages=CLOUD_STAGES, stop=stop)
         flat = _flat(cloud)
-        bounded = jnp.all(jnp.sqrt(_sqn(flat)) <= bound)
         share = recurrence_share(part, cloud)
-        ok = bounded & (share >= opt.accept_share) & ~near_periodic(part, cloud, M)
+        ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share >= opt.accept_share)
         second = _flat(cloud[P // 2:])
         over = overlap_shares(s.table, part, second, A)
         over = jnp.where(s.kind > 0, 0.0, over)  # only attractors of boxes absorb clouds
@@ -528,7 +572,7 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
                                 lambda s: _register(s, pts, jnp.asarray(APERIODIC, jnp.int32)), s)
 
         s, a = jax.lax.cond(ok, accept, lambda s: (s, jnp.asarray(-1, jnp.int32)), s)
-        s = s._replace(tried=s.tried.at[l0].set(s.age[l0]), cloud_work=s.cloud_work + P * opt.cloud_lanes,
+        s = s._replace(tried=s.tried.at[l0].set(s.age[l0]), cloud_work=s.cloud_work + (ran * opt.cloud_lanes).astype(jnp.int64),
                        age=s.age.at[l0].add(jnp.where(a >= 0, P, 0)))
         return s, label.at[l0].set(jnp.where(a >= 0, a, label[l0])), jnp.where(a >= 0, keys, -1), a
 
@@ -580,7 +624,7 @@ def _classify_kernel(system, params, integrator, opt: RecurrenceOptions, part: F
     take = min(L, n)
     lanes = jnp.arange(L, dtype=jnp.int32)
     s = _State(
-        Y=jnp.zeros((dim, L)).at[:, :take].set(X[:take].T), ring=jnp.full((M, dim, L), jnp.nan),
+        Y=jnp.zeros((dim, L)).at[:, :take].set(X[:take].T), ring=jnp.full((2 * M, dim, L), jnp.nan),
         streak=jnp.zeros((M, L), jnp.int32), age=jnp.zeros(L, jnp.int32),
         cell=jnp.where(lanes < take, lanes, -1).astype(jnp.int32), att=jnp.full(L, -1, jnp.int32),
         hits=jnp.zeros(L, jnp.int32), misses=jnp.zeros(L, jnp.int32),
@@ -635,6 +679,9 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
     M = check_int(max_period, "max_period", 1)
     if options.max_points < M:
         raise ValueError(f"options.max_points={options.max_points} must be >= max_period={M}.")
+    if options.cloud_periods // CLOUD_STAGES < 2 * M + 1:
+        raise ValueError(f"options.cloud_periods={options.cloud_periods} must be at least {CLOUD_STAGES * (2 * M + 1)} "
+                         f"({CLOUD_STAGES} stages of 2 max_period + 1 periods) for max_period={M}.")
     R = check_int(round_periods, "round_periods", 1)
     L = check_int(chunk, "chunk", 1)
     check_number(escape_bound, "escape_bound", 0, strict_min=True)
