@@ -161,6 +161,35 @@ def test_near_periodic_sees_cycles_not_rotations():
     assert not bool(rec.near_periodic(part, _cloud(rot), 8))
 
 
+def test_near_cycle_lanes():
+    """Rings of the last 2 M points (newest first): a lane settling on a P-2 cycle (its
+    points within a box of the cycle's) is near a cycle, one on the irrational rotation and
+    one without history yet (NaN) are not."""
+    M = 4
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    t = np.arange(2 * M)
+    p2 = np.array([[0.5, 0.1], [-0.3, 0.7]])[t % 2] + 1e-3 * 0.9 ** t[:, None]
+    rot = np.column_stack([np.cos(2.4 * t), np.sin(2.4 * t)])
+    young = np.full((2 * M, 2), np.nan)
+    ring = jnp.asarray(np.stack([p2, rot, young], axis=-1))  # (2M, 2, 3)
+    assert np.asarray(rec.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False]
+
+
+def test_overlap_shares_match_clouds_by_boxes():
+    """Boxes of a circle registered as attractor 0 and of a smaller circle as attractor 1: a
+    new sampling of the first circle lies in 0's boxes, a disjoint circle in none."""
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    t = np.arange(3000) * 2 * np.pi * (np.sqrt(5) - 1) / 2
+    ring = np.column_stack([np.cos(t), np.sin(t)])
+    table, _ = rec.insert(rec.empty_table(1024), rec.cell_keys(part, jnp.asarray(0.8 * ring.T)), 0)
+    table, _ = rec.insert(table, rec.cell_keys(part, jnp.asarray(0.3 * ring.T)), 1)
+    s = np.random.default_rng(4).uniform(0, 2 * np.pi, 500)
+    again = jnp.asarray(0.8 * np.stack([np.cos(s), np.sin(s)]))
+    other = jnp.asarray(0.55 * np.stack([np.cos(s), np.sin(s)]))
+    np.testing.assert_allclose(np.asarray(rec.overlap_shares(table, part, again, 2)), [1.0, 0.0])
+    np.testing.assert_allclose(np.asarray(rec.overlap_shares(table, part, other, 2)), [0.0, 0.0])
+
+
 # --------------------------------------------------------------------------- a chaotic and a periodic attractor
 
 # x'' + 0.15 x' - x + x^3 = 0.3 cos t: a chaotic attractor coexists with a P-1 cycle

@@ -26,6 +26,30 @@ Pure functions the direct method's lane pool calls per period or per round:
 - :func:`classify_by_recurrence` — a standalone batched classifier built from them, one
   ``lax.while_loop`` over rounds of a refilled lane queue inside one ``jit``: the
   reference for the pool's wiring.
+
+Wiring into the lane pool (:mod:`jaxgear.analysis._pool`), as the classifier does it:
+
+- per period, after ``advance``: ``lookup(table, cell_keys(partition, Y))`` and
+  :func:`track_hits` on three ``(L,)`` int32 lane arrays (attractor, hits, misses); a
+  fourth, ``tried``, holds the age of a lane's last candidacy. They are reset with the lane.
+- per round: ``hits >= options.hits`` decides a lane with its run's attractor; then at most
+  one candidate (the oldest live undecided lane with ``age >= transient``, ``age - tried >=
+  transient``, no run of hits, not periodic, and not :func:`near_cycle_lanes` on the last
+  ``2 M`` points of the pool's ring) gets a staged cloud (``CLOUD_STAGES``, stopped on a
+  cycle or an escape); an accepted cloud joins the attractor of boxes it overlaps or takes
+  a new slot, and its boxes enter the table in the round's one :func:`insert`.
+- labels are one space for cycles and attractors of boxes: a cycle registered by point
+  recurrence also enters its ``k`` boxes (a chaotic lane visiting them resets its run);
+  a repeller's boxes never do. The pool's ``att_k = 0`` means an empty slot, so an
+  attractor of boxes needs another mark there, and its cloud (``max_points`` points) its
+  own array: the capture radius and the per-slot cycle loop must skip it.
+- a sweep in one pool needs one table per parameter row, or the row mixed into the key.
+- the partition is built once per analysis from the region (the non-gridded coordinates,
+  e.g. ``x4``, get the mean box width of the gridded ones), so boxes mean the same for
+  every lane.
+- a cloud of 8 copies over 600 periods costs about two rounds of a 1,024-lane pool on CPUs
+  (the compiled kernel, parameters passed as traced arguments: closed over as constants
+  the gear model falls back to the pure-JAX steps, 200 times slower).
 """
 
 from __future__ import annotations
