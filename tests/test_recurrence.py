@@ -301,3 +301,21 @@ def test_gear_chaotic_band_every_state_decided():
         assert np.all(np.max(np.abs(orbit[:, k:] - orbit[:, :-k]), axis=(1, 2)) > 1e-6)
     on = np.asarray(rec.lookup(r.table, rec.cell_keys(r.partition, jnp.asarray(orbit.reshape(-1, 4).T))))
     assert np.mean(on == 0) > 0.9
+
+
+@pytest.mark.slow
+def test_three_planet_model_uses_hashed_boxes():
+    """The 3-planet model (state dimension 8: hashed box keys) started from the reduced
+    model's states on its symmetric subspace, b = 2: every state is decided on one
+    aperiodic attractor, whose boxes all fit in the table."""
+    from jaxgear import paper_params
+    from jaxgear._model import nplanet_system, reduced_to_nplanet
+
+    rng = np.random.default_rng(3)
+    n = 16
+    X = np.column_stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n), np.zeros(n)])
+    r = rec.classify_by_recurrence(nplanet_system(3), paper_params(b_sp=2, b_rp=2),
+                                   np.asarray(reduced_to_nplanet(X, 3)), chunk=n)
+    assert np.asarray(r.periods).tolist() == [rec.APERIODIC]
+    assert np.all(np.asarray(r.labels) == 0)
+    assert int(r.dropped_cells) == 0 and int(np.asarray(r.cells)[0]) > 20
