@@ -1,0 +1,321 @@
+"""Attractors of every type by recurrences on a fine partition (jaxgear.analysis._recurrence).
+
+References that do not come from the code: a Python dict for the box table, numpy floors
+for the box keys, hand-made clouds, and a brute-force long integration of the forced
+Duffing oscillator in numpy (its own RK4, another step) for the shares of a chaotic and a
+periodic attractor that coexist.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgear  # noqa: F401  (float64)
+from jaxgear._examples import DUFFING, DuffingParams
+from jaxgear.analysis import _recurrence as rec
+from jaxgear.integrate import RK4
+
+# --------------------------------------------------------------------------- the box table
+
+
+def _insert_all(table, batches):
+    dropped = 0
+    for label, keys in batches:
+        table, d = rec.insert(table, jnp.asarray(keys, jnp.int64), label)
+        dropped += int(d)
+    return table, dropped
+
+
+@pytest.mark.parametrize("capacity, n_keys, key_range", [(64, 40, 2**62), (1024, 600, 700)])
+def test_table_agrees_with_a_dict(capacity, n_keys, key_range):
+    """Insert batches of random keys (repeats within and across batches; 40 keys in 64
+    slots force long shared probe chains) and look up present and absent keys: the same
+    answers as a dict where the first label of a key wins."""
+    rng = np.random.default_rng(capacity)
+    pool = rng.choice(key_range, size=n_keys, replace=False).astype(np.int64)
+    batches = [(lab, rng.choice(pool, size=n_keys // 2)) for lab in range(5)]
+    ref: dict[int, int] = {}
+    for lab, keys in batches:
+        for k in keys:
+            ref.setdefault(int(k), lab)
+    table, dropped = _insert_all(rec.empty_table(capacity), batches)
+    assert dropped == 0
+    absent = rng.integers(0, key_range, size=200)
+    absent = absent[~np.isin(absent, pool)]
+    probe = np.concatenate([pool, absent, [-1]])
+    got = np.asarray(rec.lookup(table, jnp.asarray(probe, jnp.int64)))
+    want = np.array([ref.get(int(k), -1) for k in probe])
+    np.testing.assert_array_equal(got, want)
+
+
+def test_table_overflow_is_counted():
+    """100 distinct keys into 64 slots: at least 36 are dropped, the count says exactly how
+    many, the others keep their labels and the dropped ones are absent."""
+    keys = np.arange(1, 101, dtype=np.int64) * 7919
+    labels = np.arange(100) % 7
+    table, dropped = rec.insert(rec.empty_table(64), jnp.asarray(keys), jnp.asarray(labels))
+    dropped = int(dropped)
+    got = np.asarray(rec.lookup(table, jnp.asarray(keys)))
+    stored = got >= 0
+    assert dropped >= 36
+    assert stored.sum() == 100 - dropped
+    np.testing.assert_array_equal(got[stored], labels[stored])
+
+
+def test_table_capacity_must_be_a_power_of_two():
+    with pytest.raises(ValueError, match="capacity=100"):
+        rec.empty_table(100)
+    with pytest.raises(ValueError, match="capacity"):
+        rec.RecurrenceOptions(capacity=3000)
+
+
+# --------------------------------------------------------------------------- box keys
+
+
+def test_packed_keys_are_the_numpy_box_coordinates():
+    """dim 4: the key unpacks into floor((y - lo) / width) computed in numpy; -1 outside."""
+    part = rec.partition_from_box([-25, -10, -10, -5], [25, 20, 50, 5], 100)
+    rng = np.random.default_rng(0)
+    Y = rng.uniform(-30, 60, (4, 500))
+    Y[:, :3] = [[1e9, np.nan, -1e9]] * 4  # outside the index range, not finite
+    keys = np.asarray(rec.cell_keys(part, jnp.asarray(Y)))
+    lo, w = np.asarray(part.lo), np.asarray(part.width)
+    idx = np.floor((Y - lo[:, None]) / w[:, None])
+    assert np.all(keys[:3] == -1)
+    mask = (1 << rec.INDEX_BITS) - 1
+    dec = np.stack([(keys[3:] >> (rec.INDEX_BITS * d)) & mask for d in range(4)])
+    np.testing.assert_array_equal(dec, idx[:, 3:].astype(np.int64))
+    np.testing.assert_allclose(w, [0.5, 0.3, 0.6, 0.1])
+
+
+def test_hashed_keys_separate_boxes_in_eight_dimensions():
+    """dim 8 (the 3-planet model): 4,000 boxes, many of them neighbours that differ in one
+    coordinate, each sampled twice inside: equal keys within a box, distinct across."""
+    dim = 8
+    part = rec.partition_from_box(np.zeros(dim), np.ones(dim), 64)
+    rng = np.random.default_rng(1)
+    boxes = np.unique(rng.integers(0, 4, (4000, dim)), axis=0)
+    boxes = np.concatenate([boxes, boxes[:500] + np.eye(dim, dtype=np.int64)[rng.integers(0, dim, 500)]])
+    boxes = np.unique(boxes, axis=0) + (1 << (rec.INDEX_BITS - 1))
+    lo, w = np.asarray(part.lo), np.asarray(part.width)
+    pts = [lo + (boxes + rng.uniform(0.05, 0.95, boxes.shape)) * w for _ in range(2)]
+    k1, k2 = (np.asarray(rec.cell_keys(part, jnp.asarray(p.T))) for p in pts)
+    np.testing.assert_array_equal(k1, k2)
+    assert np.all(k1 >= 0)
+    assert len(np.unique(k1)) == len(boxes)
+
+
+# --------------------------------------------------------------------------- per-lane runs
+
+
+def test_track_hits_runs():
+    """Hand-written sequences: hits on attractor 0 count, unregistered boxes are tolerated up
+    to max_misses in a row, a box of attractor 1 restarts the run on 1."""
+    seqs = {
+        "clean": ([0, 0, 0, 0], (0, 4)),
+        "tolerated": ([0, -1, 0, -1, -1, 0], (0, 3)),
+        "lost": ([0, 0, -1, -1, -1], (-1, 0)),  # three misses > max_misses = 2
+        "other": ([0, 0, 0, 1, 1], (1, 2)),
+        "back": ([0, 1, 0], (0, 1)),
+    }
+    L = len(seqs)
+    att, hits, misses = jnp.full(L, -1, jnp.int32), jnp.zeros(L, jnp.int32), jnp.zeros(L, jnp.int32)
+    n = max(len(s) for s, _ in seqs.values())
+    for t in range(n):
+        lab = jnp.asarray([s[t] if t < len(s) else -9 for s, _ in seqs.values()], jnp.int32)
+        a, h, m = rec.track_hits(lab, att, hits, misses, 2)
+        keep = lab == -9  # this sequence has ended
+        att, hits, misses = (jnp.where(keep, x, y) for x, y in ((att, a), (hits, h), (misses, m)))
+    assert list(zip(np.asarray(att).tolist(), np.asarray(hits).tolist())) == [want for _, want in seqs.values()]
+
+
+# --------------------------------------------------------------------------- clouds
+
+
+def _cloud(points):
+    """``(P, dim)`` -> ``(P, dim, 1)``."""
+    return jnp.asarray(np.asarray(points)[:, :, None])
+
+
+def test_recurrence_share_tells_attractors_from_transients():
+    """An irrational rotation of a circle recurs (its second half lies in the first half's
+    boxes); a drift along a line (a transient still moving on) does not."""
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    t = np.arange(4000) * 2 * np.pi * (np.sqrt(5) - 1) / 2
+    circle = np.column_stack([np.cos(t), np.sin(t)])
+    line = np.column_stack([np.linspace(-1, 1, 4000), np.zeros(4000)])
+    assert float(rec.recurrence_share(part, _cloud(circle))) > 0.99
+    assert float(rec.recurrence_share(part, _cloud(line))) == 0.0
+
+
+def test_near_periodic_sees_cycles_not_rotations():
+    """A P-3 cycle (with noise below a box) is a cycle; the irrational rotation is not."""
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    rng = np.random.default_rng(2)
+    cyc = np.array([[0.5, 0.1], [-0.3, 0.7], [0.2, -0.6]])[np.arange(600) % 3] + rng.normal(0, 1e-4, (600, 2))
+    t = np.arange(600) * 2 * np.pi * (np.sqrt(5) - 1) / 2
+    rot = np.column_stack([np.cos(t), np.sin(t)])
+    assert bool(rec.near_periodic(part, _cloud(cyc), 8))
+    assert not bool(rec.near_periodic(part, _cloud(rot), 8))
+
+
+def test_near_cycle_lanes():
+    """Rings of the last 2 M points (newest first): a lane settling on a P-2 cycle (its
+    points within a box of the cycle's) is near a cycle, one on the irrational rotation and
+    one without history yet (NaN) are not."""
+    M = 4
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    t = np.arange(2 * M)
+    p2 = np.array([[0.5, 0.1], [-0.3, 0.7]])[t % 2] + 1e-3 * 0.9 ** t[:, None]
+    rot = np.column_stack([np.cos(2.4 * t), np.sin(2.4 * t)])
+    young = np.full((2 * M, 2), np.nan)
+    ring = jnp.asarray(np.stack([p2, rot, young], axis=-1))  # (2M, 2, 3)
+    assert np.asarray(rec.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False]
+
+
+def test_overlap_shares_match_clouds_by_boxes():
+    """Boxes of a circle registered as attractor 0 and of a smaller circle as attractor 1: a
+    new sampling of the first circle lies in 0's boxes, a disjoint circle in none."""
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    t = np.arange(3000) * 2 * np.pi * (np.sqrt(5) - 1) / 2
+    ring = np.column_stack([np.cos(t), np.sin(t)])
+    table, _ = rec.insert(rec.empty_table(1024), rec.cell_keys(part, jnp.asarray(0.8 * ring.T)), 0)
+    table, _ = rec.insert(table, rec.cell_keys(part, jnp.asarray(0.3 * ring.T)), 1)
+    s = np.random.default_rng(4).uniform(0, 2 * np.pi, 500)
+    again = jnp.asarray(0.8 * np.stack([np.cos(s), np.sin(s)]))
+    other = jnp.asarray(0.55 * np.stack([np.cos(s), np.sin(s)]))
+    np.testing.assert_allclose(np.asarray(rec.overlap_shares(table, part, again, 2)), [1.0, 0.0])
+    np.testing.assert_allclose(np.asarray(rec.overlap_shares(table, part, other, 2)), [0.0, 0.0])
+
+
+# --------------------------------------------------------------------------- a chaotic and a periodic attractor
+
+# x'' + 0.15 x' - x + x^3 = 0.3 cos t: a chaotic attractor coexists with a P-1 cycle
+# (about 2/3 of the states of [-2, 2]^2 reach the chaotic one).
+DUFF = dict(delta=0.15, alpha=-1.0, beta=1.0, gamma=0.3, omega=1.0)
+
+
+def _duffing_brute_force(X, periods, tail, steps=80):
+    """numpy RK4 (``steps`` per period) of every state of ``X (n, 2)``: ``(labels, last points
+    (n, 2))``, label 1 for a P-k end (k <= 8: the last ``tail`` section points repeat to
+    1e-6), 0 for a bounded aperiodic end."""
+    d, a, b, g, w = (DUFF[k] for k in ("delta", "alpha", "beta", "gamma", "omega"))
+    T = 2 * np.pi / w
+    h = T / steps
+
+    def f(t, x, v):
+        return v, g * np.cos(w * t) - d * v - a * x - b * x**3
+
+    x, v = X[:, 0].copy(), X[:, 1].copy()
+    pts = []
+    for p in range(periods + tail):
+        for i in range(steps):
+            t = i * h  # the forcing is T-periodic: every period repeats the step times
+            k1 = f(t, x, v)
+            k2 = f(t + h / 2, x + h / 2 * k1[0], v + h / 2 * k1[1])
+            k3 = f(t + h / 2, x + h / 2 * k2[0], v + h / 2 * k2[1])
+            k4 = f(t + h, x + h * k3[0], v + h * k3[1])
+            x = x + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+            v = v + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+        if p >= periods:
+            pts.append(np.stack([x, v], axis=1))
+    pts = np.array(pts)  # (tail, n, 2)
+    assert np.all(np.abs(pts) < 10)
+    periodic = np.zeros(len(X), bool)
+    for k in range(1, 9):
+        periodic |= np.max(np.abs(pts[k:] - pts[:-k]), axis=(0, 2)) < 1e-6
+    return periodic.astype(int), pts[-1]
+
+
+def test_chaotic_and_periodic_attractors_coexist():
+    """Both attractors are found (one P-1 cycle, one aperiodic attractor of boxes), every
+    state is decided, and the share of each agrees with a brute-force numpy integration
+    of the same random states within 3 binomial standard errors; the cycle's point is the
+    brute force's, and the brute force's chaotic end points lie in the aperiodic
+    attractor's boxes."""
+    rng = np.random.default_rng(7)
+    n = 200
+    X = rng.uniform(-2, 2, (n, 2))
+    opt = rec.RecurrenceOptions(resolution=100, cloud_periods=400)
+    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), X, options=opt, integrator=RK4(64), chunk=n)
+    labels = np.asarray(r.labels)
+    periods = np.asarray(r.periods).tolist()
+    assert sorted(periods) == [rec.APERIODIC, 1]
+    assert np.all(labels >= 0)
+    chaotic = periods.index(rec.APERIODIC)
+    share = np.mean(labels == chaotic)
+
+    ref, last = _duffing_brute_force(X, periods=250, tail=30, steps=72)
+    ref_share = np.mean(ref == 0)
+    se = np.sqrt(ref_share * (1 - ref_share) / n)
+    assert 0.2 < ref_share < 0.9  # both attractors have a sizeable basin
+    assert abs(share - ref_share) <= 3 * se
+
+    cycle = np.asarray(r.points)[periods.index(1), 0]
+    np.testing.assert_allclose(last[ref == 1], np.broadcast_to(cycle, last[ref == 1].shape), atol=1e-3)
+    on = np.asarray(rec.lookup(r.table, rec.cell_keys(r.partition, jnp.asarray(last[ref == 0].T))))
+    assert np.mean(on == chaotic) > 0.9
+    assert int(r.dropped_cells) == 0 and not bool(r.attractor_overflow)
+
+
+def test_bad_options_are_refused():
+    with pytest.raises(ValueError, match="accept_share"):
+        rec.RecurrenceOptions(accept_share=1.5)
+    with pytest.raises(ValueError, match="X must be"):
+        rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="resolution"):
+        rec.partition_from_box([0, 0], [1, 1], 0)
+
+
+# --------------------------------------------------------------------------- the gear train in its chaotic band
+
+
+@pytest.mark.slow
+def test_gear_chaotic_band_every_state_decided():
+    """The paper preset at b_sp = b_rp = 2 (inside the aperiodic band of the backlash
+    diagram): every random state of the paper region is decided on one bounded aperiodic
+    attractor, within far fewer periods than the direct method's limit. Independently of
+    the classifier, a long stroboscopic orbit from a labelled state neither repeats (no
+    P-k, k <= 16, to 1e-6) nor leaves the attractor's boxes."""
+    from jaxgear import paper_params, stroboscopic_orbit
+    from jaxgear._model import REDUCED
+
+    params = paper_params(b_sp=2, b_rp=2)
+    rng = np.random.default_rng(3)
+    n = 64
+    X = np.column_stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n), np.zeros(n)])
+    r = rec.classify_by_recurrence(REDUCED, params, X, chunk=n)
+    labels = np.asarray(r.labels)
+    used = np.asarray(r.periods_used)
+    print(f"mean periods per state {used.mean():.1f} (median {np.median(used):.0f}, max {used.max()}), "
+          f"cloud lane-periods {int(r.cloud_work)}, boxes {np.asarray(r.cells).tolist()}")
+    assert np.asarray(r.periods).tolist() == [rec.APERIODIC]
+    assert np.all(labels == 0)
+    assert used.mean() < 128  # twice the paper preset's 64 periods per cell
+
+    orbit = np.asarray(stroboscopic_orbit(REDUCED, params, X[:4], n_points=600))[:, 300:]  # (4, 300, 4)
+    assert np.all(np.abs(orbit) < 100)
+    for k in range(1, 17):
+        assert np.all(np.max(np.abs(orbit[:, k:] - orbit[:, :-k]), axis=(1, 2)) > 1e-6)
+    on = np.asarray(rec.lookup(r.table, rec.cell_keys(r.partition, jnp.asarray(orbit.reshape(-1, 4).T))))
+    assert np.mean(on == 0) > 0.9
+
+
+@pytest.mark.slow
+def test_three_planet_model_uses_hashed_boxes():
+    """The 3-planet model (state dimension 8: hashed box keys) started from the reduced
+    model's states on its symmetric subspace, b = 2: every state is decided on one
+    aperiodic attractor, whose boxes all fit in the table."""
+    from jaxgear import paper_params
+    from jaxgear._model import nplanet_system, reduced_to_nplanet
+
+    rng = np.random.default_rng(3)
+    n = 16
+    X = np.column_stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n), np.zeros(n)])
+    r = rec.classify_by_recurrence(nplanet_system(3), paper_params(b_sp=2, b_rp=2),
+                                   np.asarray(reduced_to_nplanet(X, 3)), chunk=n)
+    assert np.asarray(r.periods).tolist() == [rec.APERIODIC]
+    assert np.all(np.asarray(r.labels) == 0)
+    assert int(r.dropped_cells) == 0 and int(np.asarray(r.cells)[0]) > 20
