@@ -20,6 +20,16 @@ decides happens on the device inside one ``lax.while_loop`` over rounds of
   queue is empty, the busy lanes beyond the first ``c`` (the busy count) move into the
   free lanes below it (:func:`compact`), so only ``n_active = c`` lanes are integrated.
 
+Attractors that never repeat a point (quasi-periodic, chaotic) are found by recurrences
+on a fine partition of the state space (:mod:`jaxgear.analysis._recurrence`, Datseris &
+Wagemakers 2022) when the pool is given :class:`Boxes`: every period a lane's point
+looks up its box in a device hash table of the known attractors' boxes and counts its
+consecutive hits on one attractor (enough hits decide it); once per round the oldest
+lane still undecided after ``transient`` periods, and not approaching a cycle, is the
+candidate: a cloud of its trajectory is integrated, and when the cloud recurs in its own
+boxes it is an attractor (a new slot of its value's table, marked :func:`aperiodic_mark`,
+its cloud kept), or joins the attractor of boxes it overlaps; its boxes enter the table.
+
 Several parameter sets (the values of a sweep) share one pool: each cell carries its
 value's row, a lane integrates with its row's parameters (``integrator.advance_rows``)
 and decides against its row's own attractor table. The queue runs value after value,
@@ -41,9 +51,24 @@ import numpy as np
 
 from .._batching import DEFAULT_CHUNK_CELLS
 from .._checks import check_int, check_number
+from ._recurrence import (
+    CLOUD_STAGES,
+    CellTable,
+    FinePartition,
+    RecurrenceOptions,
+    attractor_cloud,
+    empty_table,
+    insert,
+    lookup,
+    near_cycle_lanes,
+    near_periodic,
+    recurrence_share,
+    row_keys,
+    track_hits,
+)
 
-__all__ = ["PoolOptions", "PoolState", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
-           "table_slots", "NOT_DONE"]
+__all__ = ["PoolOptions", "PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
+           "table_slots", "NOT_DONE", "aperiodic_mark"]
 
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
@@ -102,6 +127,20 @@ class PoolOptions(eqx.Module):
             check_number(self.capture_radius, "capture_radius", 0)
 
 
+class Boxes(eqx.Module):
+    """The fine partition and the knobs of the detection by recurrences (a traced argument
+    of the pool: changing the numbers does not recompile)."""
+
+    options: RecurrenceOptions
+    partition: FinePartition
+
+
+def aperiodic_mark(M: int) -> int:
+    """The period entry of a table slot that holds an attractor of boxes (no cycle of
+    period <= ``M``): ``M + 1``."""
+    return int(M) + 1
+
+
 class PoolState(NamedTuple):
     """The pool's state (device arrays); ``L`` lanes, ``n`` cells, ``V`` values, ``A`` attractor slots."""
 
@@ -124,6 +163,13 @@ class PoolState(NamedTuple):
     n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
     overflow: jax.Array  # () bool: a new attractor found no free slot
     rounds: jax.Array  # () int32 rounds run
+    att_cloud: jax.Array  # (V, A, Q, dim) the cloud of each attractor of boxes (NaN elsewhere)
+    table: CellTable  # box key (row-mixed) -> slot of the value's table
+    hit_att: jax.Array  # (L,) int32 slot of the lane's run of box hits (-1 none)
+    hits: jax.Array  # (L,) int32 length of the run
+    misses: jax.Array  # (L,) int32 unregistered boxes in a row within the run
+    tried: jax.Array  # (L,) int32 age at the lane's last candidacy
+    dropped: jax.Array  # () int32 boxes that found no slot in the table
 
 
 # ----------------------------------------------------------------------------- attractor tables
@@ -132,30 +178,38 @@ def table_slots(count: int) -> int:
     return max(8, 1 << max(0, int(count) - 1).bit_length())
 
 
-def seed_tables(attractors, M: int, dim: int):
-    """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,))`` (numpy)
-    of ``V`` values, each holding its value's known cycles ``[(points (k, dim), k)]``
-    first (``A``: :func:`table_slots`); a cycle of period ``-k`` is a repeller (an
-    unstable P-k cycle whose lanes integrate on)."""
+def seed_tables(attractors, M: int, dim: int, Q: int = 1):
+    """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,), clouds
+    (V, A, Q, dim))`` (numpy) of ``V`` values, each holding its value's known attractors
+    ``[(points (k, dim), k)]`` first (``A``: :func:`table_slots`): a P-k cycle; a cycle of
+    period ``-k``, a repeller (an unstable P-k cycle whose lanes integrate on); period 0, an
+    attractor of boxes given by its cloud (at most ``Q`` points kept)."""
     known = [[(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in att] for att in attractors]
-    if any(not 0 < abs(k) <= M for kn in known for _, k in kn):
-        raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M})")
+    if any(not abs(k) <= M for kn in known for _, k in kn):
+        raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M}, 0: of boxes)")
     A = table_slots(max(len(kn) for kn in known))
     V = len(known)
     pts = np.full((V, A, M, dim), np.nan)
     ks = np.zeros((V, A), np.int32)
+    clouds = np.full((V, A, Q, dim), np.nan)
     for v, kn in enumerate(known):
         for a, (p, k) in enumerate(kn):
-            pts[v, a, :abs(k)] = p[:abs(k)]
-            ks[v, a] = k
-    return pts, ks, np.array([len(kn) for kn in known], np.int32)
+            if k == 0:
+                clouds[v, a, :min(Q, len(p))] = p[np.linspace(0, len(p) - 1, min(Q, len(p))).astype(int)]
+                ks[v, a] = aperiodic_mark(M)
+            else:
+                pts[v, a, :abs(k)] = p[:abs(k)]
+                ks[v, a] = k
+    return pts, ks, np.array([len(kn) for kn in known], np.int32), clouds
 
 
 # ----------------------------------------------------------------------------- the state
-def init_pool(L: int, M: int, X, Xrow, att_pts, att_k, n_att, n_real=None) -> PoolState:
+def init_pool(L: int, M: int, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes: Boxes | None = None,
+              n_real=None) -> PoolState:
     """The pool of ``L`` lanes over the queue ``X (n, dim)`` (parameter rows ``Xrow (n,)``),
     its first lanes holding the first cells; ``n_real`` (traced, optional): the queue's
-    real length when ``X`` is padded (the padding never enters a lane)."""
+    real length when ``X`` is padded (the padding never enters a lane). The boxes of the
+    known attractors of boxes (``att_cloud``) enter the box table."""
     n, dim = X.shape
     H = 2 * M + 1
     take = jnp.asarray(min(L, n), jnp.int32)
@@ -171,7 +225,25 @@ def init_pool(L: int, M: int, X, Xrow, att_pts, att_k, n_att, n_real=None) -> Po
         labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32), next_cell=take,
         n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32), att_pts=att_pts, att_k=att_k,
         n_att=jnp.asarray(n_att, jnp.int32), radius=jnp.zeros(att_k.shape[0], jnp.float64), n_active=take,
-        overflow=jnp.asarray(False), rounds=jnp.asarray(0, jnp.int32))
+        overflow=jnp.asarray(False), rounds=jnp.asarray(0, jnp.int32), att_cloud=att_cloud,
+        table=_seeded_table(boxes, att_k, att_cloud, M), hit_att=jnp.full(L, -1, jnp.int32),
+        hits=jnp.zeros(L, jnp.int32), misses=jnp.zeros(L, jnp.int32), tried=jnp.zeros(L, jnp.int32),
+        dropped=jnp.asarray(0, jnp.int32))
+
+
+def _seeded_table(boxes: Boxes | None, att_k, att_cloud, M: int) -> CellTable:
+    """The box table holding the boxes of the seeded attractors of boxes (an empty table of
+    the smallest size when there is no detection by recurrences)."""
+    if boxes is None:
+        return empty_table(64)
+    V, A, Q, dim = att_cloud.shape
+    pts = att_cloud.reshape(V * A * Q, dim).T
+    rows = jnp.repeat(jnp.arange(V, dtype=jnp.int32), A * Q)
+    slot = jnp.tile(jnp.repeat(jnp.arange(A, dtype=jnp.int32), Q), V)
+    mark = jnp.repeat((att_k == aperiodic_mark(M)).reshape(-1), Q)
+    keys = jnp.where(mark, row_keys(boxes.partition, pts, rows, V), -1)
+    table, _ = insert(empty_table(boxes.options.capacity), keys, slot)
+    return table
 
 
 def resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolState:
@@ -179,11 +251,14 @@ def resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolStat
     attractor slots per value."""
     if L is not None:
         s = s._replace(Y=s.Y[:, :L], hist=s.hist[:, :, :L], streak=s.streak[:, :L], cell=s.cell[:L], row=s.row[:L],
-                       age=s.age[:L], n_active=jnp.minimum(s.n_active, L))
+                       age=s.age[:L], hit_att=s.hit_att[:L], hits=s.hits[:L], misses=s.misses[:L],
+                       tried=s.tried[:L], n_active=jnp.minimum(s.n_active, L))
     if A is not None:
         V, A0, M, dim = s.att_pts.shape
+        Q = s.att_cloud.shape[2]
         s = s._replace(att_pts=jnp.concatenate([s.att_pts, jnp.full((V, A - A0, M, dim), jnp.nan)], axis=1),
                        att_k=jnp.concatenate([s.att_k, jnp.zeros((V, A - A0), jnp.int32)], axis=1),
+                       att_cloud=jnp.concatenate([s.att_cloud, jnp.full((V, A - A0, Q, dim), jnp.nan)], axis=1),
                        overflow=jnp.asarray(False))
     return s
 
@@ -205,8 +280,9 @@ def _back(hist, g, start: int, count: int):
     return jax.lax.dynamic_slice_in_dim(hist, top - count + 1, count, axis=0)[::-1]
 
 
-def one_period(system, params, integrator, o: PoolOptions, s: PoolState) -> PoolState:
-    """Every active lane one forcing period on, its point into the ring, its streaks updated."""
+def one_period(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: PoolState) -> PoolState:
+    """Every active lane one forcing period on, its point into the ring, its streaks and
+    its run of box hits updated."""
     H = s.hist.shape[0] // 2
     if s.att_k.shape[0] == 1:  # one parameter set
         Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
@@ -223,7 +299,16 @@ def one_period(system, params, integrator, o: PoolOptions, s: PoolState) -> Pool
     prev = _back(hist, g, 1, o.max_period)  # (M, dim, L): x_(t-1), ..., x_(t-M)
     ok = (_sqdist(Y[None], prev) <= thr[None]) & (age[None] > ks[:, None])  # x_(t-k) is this cell's
     streak = jnp.where(ok, s.streak + 1, 0)
-    return s._replace(Y=Y, hist=hist, streak=streak, age=age, clock=g)
+    s = s._replace(Y=Y, hist=hist, streak=streak, age=age, clock=g)
+    if boxes is None:
+        return s
+
+    def track(s):  # only once an attractor of boxes is known
+        lab = lookup(s.table, row_keys(boxes.partition, s.Y, s.row, s.att_k.shape[0]))
+        hit_att, hits, misses = track_hits(lab, s.hit_att, s.hits, s.misses, boxes.options.max_misses)
+        return s._replace(hit_att=hit_att, hits=hits, misses=misses)
+
+    return jax.lax.cond(jnp.any(s.att_k == aperiodic_mark(o.max_period)), track, lambda s: s, s)
 
 
 # ----------------------------------------------------------------------------- decisions
@@ -234,7 +319,7 @@ def capture_radius(att_pts, att_k, capture: float | None):
     if capture is not None:
         return jnp.asarray(capture, jnp.float64)
     A, M, _ = att_pts.shape
-    valid = (jnp.arange(M, dtype=jnp.int32)[None] < att_k[:, None])  # (A, M)
+    valid = (jnp.arange(M, dtype=jnp.int32)[None] < att_k[:, None]) & (att_k <= M)[:, None]  # (A, M): cycles only
     pts = jnp.where(valid[..., None], att_pts, 0.0)
     scale = 1.0 + jnp.max(jnp.where(valid[..., None], jnp.abs(pts), 0.0))
     d = jnp.sqrt(jnp.sum((pts[:, None, :, None] - pts[None, :, None, :]) ** 2, axis=-1))  # (A, A, M, M)
@@ -293,7 +378,8 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
     they integrate on (an attractor's slot still takes them)."""
     P = s.att_pts[v, a]  # (M, dim)
     repeller = s.att_k[v, a] < 0
-    k = jnp.abs(s.att_k[v, a])
+    cycle = s.att_k[v, a] != aperiodic_mark(o.max_period)  # an attractor of boxes is matched by its boxes
+    k = jnp.where(cycle, jnp.abs(s.att_k[v, a]), 0)
     valid = jnp.arange(o.max_period, dtype=jnp.int32) < k
     dn = jnp.where(valid[:, None], jnp.sqrt(_sqdist(s.Y[None], P[:, :, None])), jnp.inf)  # (M, L)
     m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
@@ -382,12 +468,73 @@ def _refill(s: PoolState, decided, X, Xrow, n) -> PoolState:
     highest = jnp.max(jnp.where(cell >= 0, lane, -1)) + 1  # busy lanes lie below it
     n_active = jnp.where(s.next_cell < n, jnp.maximum(s.n_active, highest), s.n_active).astype(jnp.int32)
     return s._replace(Y=Y, cell=cell, row=row, age=jnp.where(free, 0, s.age),
-                      streak=jnp.where(free[None], 0, s.streak), next_cell=next_cell, n_active=n_active)
+                      streak=jnp.where(free[None], 0, s.streak), next_cell=next_cell, n_active=n_active,
+                      hit_att=jnp.where(free, -1, s.hit_att).astype(jnp.int32),
+                      hits=jnp.where(free, 0, s.hits).astype(jnp.int32),
+                      misses=jnp.where(free, 0, s.misses).astype(jnp.int32),
+                      tried=jnp.where(free, 0, s.tried).astype(jnp.int32))
 
 
-def decide(o: PoolOptions, s: PoolState, X, Xrow, n) -> PoolState:
-    """A round's decisions (see the module): escaped, captured, recurring and timed-out
-    lanes write their cells' labels, new attractors are registered, freed lanes refill."""
+def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes, label):
+    """The round's candidate for a new attractor of boxes (at most one in the pool): the
+    oldest live undecided lane past the transient (and as long since its last try), in no
+    run of box hits, not recurring and not approaching a cycle. Its cloud
+    (:func:`~jaxgear.analysis._recurrence.attractor_cloud`, staged, stopped on a cycle or
+    an escape) is accepted when it recurs in its own boxes; it then joins the attractor of
+    boxes of its value that it overlaps, or takes a new slot; its boxes enter the table and
+    the lane takes the attractor's label (its cloud's periods are charged to it)."""
+    opt, part = boxes.options, boxes.partition
+    M, V = o.max_period, s.att_k.shape[0]
+    mark = aperiodic_mark(M)
+    recent = _back(s.hist, s.clock, 0, 2 * M)  # (2M, dim, L), newest first
+    cand = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
+            & (s.age - s.tried >= opt.transient) & (s.hits == 0) & ~near_cycle_lanes(recent, part.width, M))
+
+    def characterise(c):
+        s, label = c
+        l0 = jnp.argmax(jnp.where(cand, s.age, -1))
+        v0 = s.row[l0]
+        p0 = params if V == 1 else jax.tree.map(lambda a: a[v0], params)
+        P, A, Q = opt.cloud_periods, s.att_k.shape[1], s.att_cloud.shape[2]
+
+        def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
+            flat = jnp.moveaxis(pts, 1, 0).reshape(pts.shape[1], -1)
+            return near_periodic(part, pts, M) | ~jnp.all(jnp.sqrt(_sqdist(flat, 0.0)) <= o.escape_bound)
+
+        cloud, ran = attractor_cloud(system, p0, integrator, s.Y[:, l0], periods=P, lanes=opt.cloud_lanes,
+                                     key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds), stages=CLOUD_STAGES,
+                                     stop=stop)
+        ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (recurrence_share(part, cloud) >= opt.accept_share)
+        second = jnp.moveaxis(cloud[P // 2:], 1, 0).reshape(cloud.shape[1], -1)  # (dim, m)
+        rows = jnp.full(second.shape[1], v0, jnp.int32)
+        box_label = lookup(s.table, row_keys(part, second, rows, V))
+        over = jnp.mean((box_label[None] == jnp.arange(A, dtype=jnp.int32)[:, None]).astype(jnp.float64), axis=1)
+        over = jnp.where(s.att_k[v0] == mark, over, 0.0)  # only attractors of boxes absorb clouds
+        best = jnp.argmax(over).astype(jnp.int32)
+        joins = over[best] >= opt.overlap_share
+        room = s.n_att[v0] < A
+        slot = jnp.where(joins, best, s.n_att[v0]).astype(jnp.int32)
+        step = max(second.shape[1] // Q, 1)
+        pts = jnp.full((Q, second.shape[0]), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
+        new = ok & ~joins & room
+        taken = ok & (joins | room)
+        keys = jnp.where(taken, row_keys(part, second, rows, V), -1)
+        table, dropped = insert(s.table, keys, slot)
+        s = s._replace(
+            att_k=jnp.where(new, s.att_k.at[v0, slot].set(mark), s.att_k),
+            att_cloud=jnp.where(new, s.att_cloud.at[v0, slot].set(pts), s.att_cloud),
+            n_att=s.n_att.at[v0].add(new.astype(jnp.int32)), overflow=s.overflow | (ok & ~joins & ~room),
+            table=table, dropped=s.dropped + dropped, tried=s.tried.at[l0].set(s.age[l0]),
+            age=s.age.at[l0].add(jnp.where(taken, ran, 0)))
+        return s, label.at[l0].set(jnp.where(taken, slot, label[l0])).astype(jnp.int32)
+
+    return jax.lax.cond(jnp.any(cand), characterise, lambda c: c, (s, label))
+
+
+def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: PoolState, X, Xrow, n) -> PoolState:
+    """A round's decisions (see the module): escaped, captured, recurring, box-hitting and
+    timed-out lanes write their cells' labels, new attractors are registered, freed lanes
+    refill."""
     lanes = _lane_status(o, s)
     label = _match_known(o, s, lanes)
     # the capture radius follows its value's table: computed for every value in the
@@ -395,13 +542,17 @@ def decide(o: PoolOptions, s: PoolState, X, Xrow, n) -> PoolState:
     radius = jax.lax.cond(s.rounds == 0, lambda: jax.vmap(lambda p, k: capture_radius(p, k, o.capture_radius))(
         s.att_pts, s.att_k), lambda: s.radius)
     att_pts, att_k, n_att, radius, label, overflow = _register_new(o, s, lanes, label, radius)
+    s = s._replace(att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius, overflow=overflow)
+    if boxes is not None:
+        hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits)
+        label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
+        s, label = _candidate(system, params, integrator, o, boxes, s, lanes, label)
     unres = lanes.live & (label < 0) & (s.age >= o.max_periods)
     decided = lanes.esc | (label >= 0) | unres
     value = jnp.where(lanes.esc, _SINK, jnp.where(unres, _UNRESOLVED, label)).astype(jnp.int32)
     target = jnp.where(decided, s.cell, s.labels.shape[0])  # dropped
     s = s._replace(labels=s.labels.at[target].set(value, mode="drop"), used=s.used.at[target].set(s.age, mode="drop"),
-                   n_done=s.n_done + jnp.sum(decided, dtype=jnp.int32), att_pts=att_pts, att_k=att_k, n_att=n_att,
-                   radius=radius, overflow=overflow, rounds=s.rounds + 1)
+                   n_done=s.n_done + jnp.sum(decided, dtype=jnp.int32), rounds=s.rounds + 1)
     return _refill(s, decided, X, Xrow, n)
 
 
@@ -432,14 +583,16 @@ def compact(s: PoolState) -> PoolState:
             return a.at[..., dst].set(jnp.take(a, src_c, axis=-1), mode="drop")
 
         return s._replace(Y=mv(s.Y), hist=mv(s.hist), streak=mv(s.streak), cell=mv(s.cell), row=mv(s.row),
-                          age=mv(s.age))
+                          age=mv(s.age), hit_att=mv(s.hit_att), hits=mv(s.hits), misses=mv(s.misses),
+                          tried=mv(s.tried))
 
     s = jax.lax.fori_loop(0, (m + K - 1) // K, move, s)
     cell = jnp.where(pos >= c, -1, s.cell).astype(jnp.int32)  # the lanes moved from
     return s._replace(cell=cell, n_active=jnp.minimum(s.n_active, c).astype(jnp.int32))
 
 
-def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, X, Xrow, n, L_min: int, rounds):
+def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: Boxes | None, X, Xrow, n,
+               L_min: int, rounds):
     """At most ``rounds`` rounds (traced: the host sizes its calls by their duration), fewer
     when every cell of the queue ``X[:n]`` is decided, an attractor table overflows or the
     pool can move to ``L_min`` lanes. ``n`` may be traced (a padded block of a sharded
@@ -452,8 +605,8 @@ def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, X, Xrow
 
     def body(c):
         s, r = c
-        s = jax.lax.fori_loop(0, o.round_periods, lambda _, s: one_period(system, params, integrator, o, s), s)
-        s = decide(o, s, X, Xrow, n)
+        s = jax.lax.fori_loop(0, o.round_periods, lambda _, s: one_period(system, params, integrator, o, boxes, s), s)
+        s = decide(system, params, integrator, o, boxes, s, X, Xrow, n)
         # once the queue is empty, the busy lanes are gathered at the front as lanes free up
         busy = jnp.sum(s.cell >= 0, dtype=jnp.int32)
         worth = (s.next_cell >= n) & (busy.astype(jnp.float64) <= COMPACT_BELOW * s.n_active.astype(jnp.float64))

@@ -65,7 +65,7 @@ import numpy as np
 from .._checks import check_int, check_number
 from ..integrate import resolve_integrator
 
-__all__ = ["FinePartition", "partition_from_box", "cell_keys", "CellTable", "empty_table", "lookup", "insert",
+__all__ = ["FinePartition", "partition_from_box", "cell_keys", "row_keys", "CellTable", "empty_table", "lookup", "insert",
            "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "overlap_shares",
            "RecurrenceOptions", "RecurrenceResult", "classify_by_recurrence", "APERIODIC", "INDEX_BITS",
            "MAX_PROBES"]
@@ -167,6 +167,17 @@ def cell_keys(partition: FinePartition, Y):
             h = _mix(h ^ (i[d].astype(jnp.uint64) + _SALTS[d % 64]))
         key = (h >> np.uint64(1)).astype(jnp.int64)
     return jnp.where(ok, key, -1).astype(jnp.int64)
+
+
+def row_keys(partition: FinePartition, Y, rows, n_rows: int):
+    """:func:`cell_keys` of ``Y (dim, L)`` made distinct per parameter row ``rows (L,)``
+    (the values of a sweep in one pool share one table): the box key itself for one row,
+    else a 63-bit hash of (key, row)."""
+    keys = cell_keys(partition, Y)
+    if n_rows == 1:
+        return keys
+    salted = keys.astype(jnp.uint64) ^ ((jnp.asarray(rows).astype(jnp.uint64) + np.uint64(1)) * _SALTS[0])
+    return jnp.where(keys >= 0, (_mix(salted) >> np.uint64(1)).astype(jnp.int64), -1).astype(jnp.int64)
 
 
 # --------------------------------------------------------------------------- table
