@@ -156,7 +156,7 @@ def _tangent_period(system, params, integrator, t0, Y, V):
 
 
 @eqx.filter_jit
-def _lyapunov_kernel(system, params, Y, t0, k, transient, stretches, length, weights, integrator):
+def _lyapunov_kernel(system, params, Y, t0, k, transient, stretches, weights, integrator):
     """The exponents of ``L`` lanes ``Y (dim, L)``: ``(stretches, L, k)`` stretch estimates
     and the final states. Tangent vectors start as the first ``k`` unit vectors; each
     period ``Q R = DP(x) Q`` and ``ln |R_ii|`` is accumulated with the stretch's weight."""
@@ -207,8 +207,9 @@ def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
     (:func:`birkhoff_weights`, Das & Yorke 2018): the exponents of periodic and
     quasi-periodic attractors then converge to round-off within a few hundred periods
     (the plain average converges as ``1/periods``), those of chaotic ones as the plain
-    average does (``1/sqrt(periods)``, with a somewhat larger spread). With
-    ``weighted=False`` each stretch is the plain finite-time exponent.
+    average does (``1/sqrt(periods)``, with about twice the error: for long runs on a
+    chaotic attractor the plain average is the more efficient). With ``weighted=False``
+    each stretch is the plain finite-time exponent.
 
     For a P-k orbit the exponents are ``ln |mu_i| / k`` of its Floquet multipliers ``mu_i``
     (sorted by modulus); a complex pair gives two equal exponents.
@@ -254,7 +255,7 @@ def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
     for start in range(0, n, chunk_size):
         Xc = X[start:start + chunk_size]
         est, Yf = _lyapunov_kernel(system, params, Xc.T, jnp.asarray(t0, jnp.float64), k, transient, stretches,
-                                   length, weights, integrator)
+                                   weights, integrator)
         ests.append(jnp.transpose(est, (1, 0, 2)))  # (L, stretches, k)
         finals.append(Yf.T)
     est = jnp.concatenate(ests, axis=0)

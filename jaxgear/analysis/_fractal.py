@@ -108,7 +108,7 @@ def basin_entropy(labels, box: int = 5, *, ignore: Sequence[int] = ()) -> BasinE
     # (nb_0, box, nb_1, box, ...) -> (boxes, cells per box)
     lab = lab.reshape([v for m in nb for v in (m, box)])
     lab = lab.transpose(list(range(0, 2 * d, 2)) + list(range(1, 2 * d, 2))).reshape(int(np.prod(nb)), box**d)
-    keep = ~np.isin(lab, np.asarray(list(ignore), dtype=lab.dtype)) if len(ignore) else np.ones(lab.shape, bool)
+    keep = ~np.isin(lab, np.asarray(list(ignore), dtype=np.int64)) if len(ignore) else np.ones(lab.shape, bool)
     values, inv = np.unique(lab[keep], return_inverse=True)
     m = len(values)
     rows = np.nonzero(keep)[0]
