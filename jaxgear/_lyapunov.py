@@ -70,7 +70,9 @@ class LyapunovSpectrum(eqx.Module):
 
     Attributes:
         exponents: ``(..., k)`` the ``k`` largest exponents of ``P`` per forcing period
-            (dimensionless: the mean logarithmic stretching per iterate), decreasing.
+            (dimensionless: the mean logarithmic stretching per iterate), in the order of
+            the QR method: decreasing up to their errors (the two equal exponents of a
+            complex pair of multipliers can come out in either order).
         per_time: ``(..., k)`` the same per unit time: ``exponents / T`` (``T`` the forcing
             period in the system's time unit; ``1/tau`` for the gear models).
         errors: ``(..., k)`` standard errors of ``exponents``: the standard deviation of
@@ -133,7 +135,11 @@ def kaplan_yorke(exponents: Float[ArrayLike, "*batch k"]) -> Float[Array, "*batc
     are needed) or an exponent is not finite. The dimension of the attractor of the
     stroboscopic map; the flow's is one more.
     """
-    lam = jnp.asarray(exponents, jnp.float64)
+    return _kaplan_yorke(jnp.asarray(exponents, jnp.float64))
+
+
+@jax.jit
+def _kaplan_yorke(lam):
     k = lam.shape[-1]
     partial = jnp.cumsum(lam, axis=-1)
     j = jnp.sum(jnp.cumprod(partial >= 0.0, axis=-1), axis=-1)  # leading run of non-negative sums

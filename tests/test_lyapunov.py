@@ -263,12 +263,13 @@ def test_paper_p4_exponents_equal_floquet_multipliers():
 
 
 def test_kaplan_yorke_definition():
-    cases = [([0.5, -1.0], 1.5), ([-0.1, -0.2], 0.0), ([0.3, 0.1, -0.8], 2.5), ([0.3, -0.2, -0.4], 2.25),
-             ([0.0, -0.5], 1.0), ([0.1, 0.05], np.nan), ([np.nan, -1.0], np.nan)]
-    for lam, want in cases:
-        np.testing.assert_allclose(float(kaplan_yorke(jnp.array(lam))), want, rtol=1e-14)
-    got = kaplan_yorke(jnp.array([[0.5, -1.0], [-0.1, -0.2]]))
-    np.testing.assert_allclose(got, [1.5, 0.0])
+    # D = j + (l_1 + ... + l_j) / |l_(j+1)|, j the largest index with a non-negative partial sum
+    two = [([0.5, -1.0], 1.5), ([-0.1, -0.2], 0.0), ([0.0, -0.5], 1.0), ([0.1, 0.05], np.nan),
+           ([np.nan, -1.0], np.nan)]
+    three = [([0.3, 0.1, -0.8], 2.5), ([0.3, -0.2, -0.4], 2.25), ([0.2, -0.5, -0.6], 1.4)]
+    for cases in (two, three):
+        got = kaplan_yorke(jnp.array([lam for lam, _ in cases]))
+        np.testing.assert_allclose(got, [want for _, want in cases], rtol=1e-14)
 
 
 def test_birkhoff_weights_super_converge_on_a_rotation():
