@@ -10,7 +10,11 @@
   ``x'' + 2 zeta x' + (1 + epsilon cos(Omega t)) x + beta x^3 = 0`` (a Mathieu-type
   system: ``x = 0`` is a P-1 orbit for every ``Omega``, unstable inside the tongues
   around ``Omega = 2/n``, with a P-2 branch born by period doubling at the edges of
-  the first tongue).
+  the first tongue);
+- :data:`VAN_DER_POL` — the forced van der Pol oscillator
+  ``x'' - mu (1 - x^2) x' + x = F cos(omega t)``: self-excited, so a weak forcing at a
+  frequency far from a low-order resonance leaves it unlocked (quasi-periodic motion on
+  a torus), a strong one locks it (a periodic orbit).
 """
 
 from __future__ import annotations
@@ -23,7 +27,8 @@ import jax.numpy as jnp
 from ._model import backlash
 from ._system import ForcedSystem
 
-__all__ = ["DuffingParams", "DUFFING", "SpurPairParams", "SPUR_PAIR", "ParamDuffingParams", "PARAM_DUFFING"]
+__all__ = ["DuffingParams", "DUFFING", "SpurPairParams", "SPUR_PAIR", "ParamDuffingParams", "PARAM_DUFFING",
+           "VanDerPolParams", "VAN_DER_POL"]
 
 
 def _f64(x):
@@ -131,3 +136,37 @@ the edges of the first tongue, ``(1 - Omega^2/4)^2 = (epsilon^2 - 4 zeta^2 Omega
 i.e. ``Omega_pm ~ 2 sqrt(1 +- sqrt(epsilon^2 - 16 zeta^2)/2)``; the P-2 branch of
 amplitude ``A`` satisfies ``(1 - Omega^2/4 + 3 beta A^2/4)^2 + zeta^2 Omega^2 = epsilon^2/4``.
 """
+
+
+class VanDerPolParams(eqx.Module):
+    """Forced van der Pol parameters of ``x'' - mu (1 - x^2) x' + x = F cos(omega t)``.
+
+    Time scaled by the natural frequency of the linear part, ``x`` by its own unit:
+    ``mu`` the strength of the nonlinear (negative at small amplitude) damping, ``F``
+    the forcing amplitude, ``omega`` the forcing frequency (period ``2 pi / omega``).
+    Without forcing the oscillator has a stable limit cycle of amplitude ``~2`` and
+    frequency ``~1`` (for small ``mu``), whose transverse Floquet exponent is ``~ -mu``
+    per unit time (van der Pol, Phil. Mag. 2, 978, 1926; Guckenheimer & Holmes,
+    Nonlinear Oscillations, Springer 1983, §2.1). A weak forcing (``F`` small) at a
+    frequency whose ratio to 1 is far from every ratio of small integers leaves the
+    motion quasi-periodic; a forcing inside an Arnold tongue locks it. All fields are
+    float64 arrays.
+    """
+
+    mu: Any = eqx.field(converter=_f64, default=0.1)
+    F: Any = eqx.field(converter=_f64, default=0.05)
+    omega: Any = eqx.field(converter=_f64, default=(1.0 + 5.0**0.5) / 2.0)
+
+
+def _van_der_pol_field(t, x, p: VanDerPolParams):
+    return jnp.stack([x[1], p.mu * (1.0 - x[0] ** 2) * x[1] - x[0] + p.F * jnp.cos(p.omega * t)])
+
+
+VAN_DER_POL = ForcedSystem(
+    vector_field=_van_der_pol_field,
+    period=lambda p: 2.0 * jnp.pi / p.omega,
+    state_names=("x", "v"),
+    section_index=1,
+    name="van-der-pol",
+)
+"""Forced van der Pol oscillator, state ``(x, v)``, period ``2 pi / omega``."""
