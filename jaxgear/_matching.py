@@ -5,7 +5,9 @@ orbit at forcing phase 0, in any order and any cyclic shift) and its period ``k`
 (0: no period found — quasi-periodic, chaotic or a slow transient; negative: escaped).
 Two attractors are the same when their periods agree and the symmetric Hausdorff
 distance of their point sets is at most ``tol * (1 + max |x|)`` (state units, ``tol``
-relative); every non-periodic set counts as one, and so does every escape.
+relative); two attractors that repeat no point (period 0: quasi-periodic, chaotic) are the
+same when their point clouds occupy the same boxes (:func:`same_cloud`); every escape
+counts as one.
 
 Used by the global analysis (merging cell-map groups and recurrences of the direct
 method, reducing a period to the minimal one), shooting (deduplicating converged
@@ -24,6 +26,7 @@ __all__ = [
     "pairwise_hausdorff",
     "attractor_scale",
     "same_attractor",
+    "same_cloud",
     "group_attractors",
     "match_attractors",
     "minimal_cycle",
@@ -69,12 +72,36 @@ def same_attractor(A, k_a: int, B, k_b: int, tol: float) -> bool:
     """
     if int(k_a) != int(k_b):
         return False
-    if int(k_a) <= 0:
+    if int(k_a) == 0:
+        return same_cloud(A, B)
+    if int(k_a) < 0:
         return True
     A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
     if not (len(A) and len(B)):
         return False
     return bool(hausdorff(A, B) <= tol * attractor_scale(A, B))
+
+
+CLOUD_BOXES = 32
+"""Boxes per axis across the joint bounding box of two clouds compared by :func:`same_cloud`."""
+
+
+def same_cloud(A, B, share: float = 0.5) -> bool:
+    """Whether the point clouds ``A (m, dim)`` and ``B (n, dim)`` of two attractors that
+    repeat no point (quasi-periodic, chaotic) are one attractor: matched by the boxes they
+    occupy, not by point distance (Datseris & Wagemakers 2022). Boxes divide their joint
+    bounding box into :data:`CLOUD_BOXES` per axis; they are one attractor when at least
+    ``share`` of the boxes of the cloud with fewer boxes lie among the other's."""
+    A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    A, B = A[np.all(np.isfinite(A), axis=1)], B[np.all(np.isfinite(B), axis=1)]
+    if not (len(A) and len(B)):
+        return False
+    lo = np.minimum(A.min(axis=0), B.min(axis=0))
+    ext = np.maximum(A.max(axis=0), B.max(axis=0)) - lo
+    width = np.where(ext > 0, ext, 1.0) / CLOUD_BOXES
+    boxes_a = set(map(tuple, np.floor((A - lo) / width).astype(np.int64)))
+    boxes_b = set(map(tuple, np.floor((B - lo) / width).astype(np.int64)))
+    return len(boxes_a & boxes_b) >= share * min(len(boxes_a), len(boxes_b))
 
 
 def group_attractors(sets: Sequence[tuple[np.ndarray, int]], tol: float) -> np.ndarray:

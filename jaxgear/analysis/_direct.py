@@ -13,10 +13,18 @@ Every cycle found is therefore checked by its largest Floquet multiplier
 (:func:`~jaxgear.analysis._orbits.largest_multipliers`); the cells of an unstable one are
 integrated again from their centres with that cycle as a repeller (lanes that shadow it
 integrate on) until they reach a stable attractor.
+
+Attractors that never repeat a point (quasi-periodic and chaotic ones) are found by
+recurrences on a fine partition of the region (``recurrence``; Datseris & Wagemakers
+2022, :mod:`jaxgear.analysis._recurrence`): a cell is decided once its trajectory keeps
+landing in a known attractor's boxes, and an attractor of boxes is registered when a
+trajectory still undecided after a transient recurs in its own boxes. Such an attractor
+is reported with period 0 and a cloud of its points.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
@@ -24,9 +32,11 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
+from ._lanes import Boxes
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import largest_multipliers, refine_orbits
 from ._pool import PoolOptions, run_pool, run_pools
+from ._recurrence import RecurrenceOptions, partition_from_box
 from ._result import UNRESOLVED
 
 __all__ = ["Direct", "STABLE_BELOW"]
@@ -62,6 +72,9 @@ class Direct(AbstractGlobalMethod):
             of the smallest distance between two known attractors' points, at most 1 % of
             their scale.
         escape_bound: norm beyond which a state counts as escaped (state units).
+        recurrence: the detection of attractors of every type by recurrences on a fine
+            partition (:class:`~jaxgear.analysis.RecurrenceOptions`), or ``None``: periodic
+            attractors only (cells on other attractors stay unresolved).
         integrator, max_period, period_tol, merge_tol, chunk_size: see
             :class:`AbstractGlobalMethod`.
     """
@@ -71,6 +84,7 @@ class Direct(AbstractGlobalMethod):
     max_periods: int = eqx.field(static=True, default=2000)
     capture_radius: float | None = eqx.field(static=True, default=None)
     escape_bound: float = eqx.field(static=True, default=1e6)
+    recurrence: RecurrenceOptions | None = RecurrenceOptions()
 
     def __check_init__(self):
         check_int(self.round_periods, "round_periods", 1)
@@ -88,6 +102,8 @@ class Direct(AbstractGlobalMethod):
         tolerances, batch size) taken from ``method``; ``method`` itself when it is one."""
         if isinstance(method, Direct) and integrator is None:
             return method
+        if isinstance(method, Direct):
+            return dataclasses.replace(method, integrator=integrator)
         return cls(integrator=method.integrator if integrator is None else integrator, max_period=method.max_period,
                    period_tol=method.period_tol, merge_tol=method.merge_tol, chunk_size=method.chunk_size)
 
@@ -96,6 +112,18 @@ class Direct(AbstractGlobalMethod):
         return PoolOptions(max_period=self.max_period, round_periods=self.round_periods, period_tol=self.period_tol,
                            merge_tol=self.merge_tol, max_periods=self.max_periods, escape_bound=self.escape_bound,
                            capture_radius=self.capture_radius, lanes=self.chunk_size, pilot=pilot)
+
+    def boxes(self, X: np.ndarray) -> Boxes | None:
+        """The fine partition of the detection by recurrences over the bounding box of the
+        states ``X (n, dim)`` (an axis on which they do not vary gets the mean width of the
+        others), or ``None`` when it is off."""
+        if self.recurrence is None:
+            return None
+        lo, hi = np.min(X, axis=0), np.max(X, axis=0)
+        ext = hi - lo
+        ext = np.where(ext > 0, ext, ext[ext > 0].mean() if np.any(ext > 0) else 1.0)
+        mid = 0.5 * (lo + hi)
+        return Boxes(self.recurrence, partition_from_box(mid - ext / 2, mid + ext / 2, float(self.recurrence.resolution)))
 
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         labels, atts, mean = self.label_states(system, params, grid.centres(), progress)
@@ -118,22 +146,27 @@ class Direct(AbstractGlobalMethod):
     def label_states_values(self, system, params_list, X: np.ndarray, progress: bool = False, label="direct"):
         """:meth:`label_states` of the same states ``X (n, dim)`` under each parameter set of
         ``params_list``, in one lane pool: a list of its results, one per value."""
+        X = np.asarray(X, np.float64)
+        boxes = self.boxes(X)
         pooled = run_pools(system, params_list, [X] * len(params_list), self.integrator, self.pool_options(),
-                           progress=progress, label=label)
+                           boxes=boxes, progress=progress, label=label)
         out = []
         for params, (labels, atts, used) in zip(params_list, pooled):
             res = self._refined(system, params, atts)
-            labels, res, used = self._stable_only(system, params, np.asarray(X), labels, res, used, progress)
+            labels, res, used = self._stable_only(system, params, X, boxes, labels, res, used, progress)
             out.append((labels, res, float(used.mean()) if len(used) else 0.0))
         return out
 
     def _refined(self, system, params, atts) -> list:
-        """``[(points, k, residual)]`` of the pool's cycles ``[(points, k)]`` (200 periods on)."""
-        refined = refine_orbits(system, params, [(pts[-1], k) for pts, k in atts], self.integrator, settle=200,
-                                max_period=self.max_period)
-        return [(pts, k, r) for (pts, r), (_, k) in zip(refined, atts)]
+        """``[(points, k, residual)]`` of the pool's attractors ``[(points, k)]``: cycles
+        refined 200 periods on, attractors of boxes (``k = 0``) as they are (residual NaN)."""
+        cycles = [i for i, (_, k) in enumerate(atts) if k > 0]
+        refined = dict(zip(cycles, refine_orbits(system, params, [(atts[i][0][-1], atts[i][1]) for i in cycles],
+                                                 self.integrator, settle=200, max_period=self.max_period)))
+        return [(refined[i][0], k, refined[i][1]) if i in refined else (pts, 0, np.nan)
+                for i, (pts, k) in enumerate(atts)]
 
-    def _stable_only(self, system, params, X, labels, res, used, progress: bool):
+    def _stable_only(self, system, params, X, boxes, labels, res, used, progress: bool):
         """Drop the unstable cycles of ``res`` (largest multiplier not below
         :data:`STABLE_BELOW`): their cells are labelled again from their states in ``X``,
         in a pool holding the stable attractors first and every unstable cycle met so far
@@ -143,7 +176,10 @@ class Direct(AbstractGlobalMethod):
         their order, the new ones last, and the periods of both passes in ``used``."""
         repellers = []
         for passes in range(REPELLER_PASSES + 1):
-            mu = largest_multipliers(system, params, [(p, k) for p, k, _ in res], self.integrator, self.max_period)
+            cycles = [i for i, (_, k, _) in enumerate(res) if k > 0]
+            mu = np.zeros(len(res))  # attractors of boxes are attractors by construction
+            mu[cycles] = largest_multipliers(system, params, [res[i][:2] for i in cycles], self.integrator,
+                                             self.max_period)
             bad = np.flatnonzero(~(mu < STABLE_BELOW))
             if not len(bad):
                 break
@@ -165,7 +201,8 @@ class Direct(AbstractGlobalMethod):
             size = max(64, 1 << (len(cells) - 1).bit_length())
             queue = np.concatenate([cells, np.repeat(cells[-1:], size - len(cells))])
             lab, atts, use = run_pool(system, params, X[queue], self.integrator, self.pool_options(pilot=0),
-                                      attractors=seeds, progress=progress, label="direct (off repellers)")
+                                      boxes=boxes, attractors=seeds, progress=progress,
+                                      label="direct (off repellers)")
             lab, use = lab[: len(cells)], use[: len(cells)]
             found = atts[len(seeds):]  # slots after the seeds: cycles met on the way
             labels[cells] = np.where(lab >= len(seeds), lab - len(seeds) + len(res), lab)

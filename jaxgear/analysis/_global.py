@@ -156,7 +156,8 @@ def _merge_same(labels, raw, cycles, method):
     """Reduce each attractor to its minimal period and merge attractors that are the same."""
     reduced = []
     for pts, k, res in raw:
-        pts, k = minimal_cycle(np.asarray(pts), int(k), method.period_tol)
+        if int(k) > 0:  # (an attractor of boxes, period 0, keeps its cloud)
+            pts, k = minimal_cycle(np.asarray(pts), int(k), method.period_tol)
         reduced.append((pts, k, res))
     ids = group_attractors([(p, k) for p, k, _ in reduced], method.merge_tol)
     if np.array_equal(ids, np.arange(len(reduced))):

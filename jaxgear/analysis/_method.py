@@ -115,7 +115,7 @@ class AbstractGlobalMethod(eqx.Module):
         out: dict[str, Any] = {"name": self.name}
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            out[f.name] = v.to_dict() if isinstance(v, AbstractIntegrator) else v
+            out[f.name] = v.to_dict() if hasattr(v, "to_dict") else v
         return out
 
 
@@ -139,6 +139,10 @@ def method_from_dict(d: dict[str, Any]) -> AbstractGlobalMethod:
     cls = METHODS[name]
     fields = {f.name for f in dataclasses.fields(cls)}
     opts = {k: v for k, v in d.items() if k in fields and k != "integrator"}
+    if isinstance(opts.get("recurrence"), dict):
+        from ._recurrence import RecurrenceOptions
+
+        opts["recurrence"] = RecurrenceOptions(**opts["recurrence"])
     if opts.get("capture_radius") == "auto":  # files written when the automatic radius was spelled "auto"
         opts["capture_radius"] = None
     integ = d.get("integrator")

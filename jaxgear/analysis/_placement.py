@@ -42,13 +42,13 @@ MIN_BLOCK_CELLS = 16
 
 # ----------------------------------------------------------------------------- one device
 @functools.partial(jax.jit, static_argnums=(0, 1))
-def _init_one(L: int, M: int, X, Xrow, att_pts, att_k, n_att):
-    return init_pool(L, M, X, Xrow, att_pts, att_k, n_att)
+def _init_one(L: int, M: int, X, Xrow, boxes, att_pts, att_k, n_att, att_cloud):
+    return init_pool(L, M, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes)
 
 
 @functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "L_min"), donate_argnums=(0,))
-def _run_one(s, system, params, integrator, o: PoolOptions, X, Xrow, L_min: int, rounds):
-    return run_rounds(s, system, params, integrator, o, X, Xrow, X.shape[0], L_min, rounds)
+def _run_one(s, system, params, integrator, o: PoolOptions, boxes, X, Xrow, L_min: int, rounds):
+    return run_rounds(s, system, params, integrator, o, boxes, X, Xrow, X.shape[0], L_min, rounds)
 
 
 _resize_one = jax.jit(resize, static_argnames=("L", "A"))
@@ -60,23 +60,24 @@ class OneDevice:
     def __init__(self, device=None):
         self.device = device
 
-    def start(self, params, X_blocks, row_blocks, L: int, M: int, att):
+    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
         """The pool over the one queue block ``X (n, dim)`` (rows ``(n,)``) and the arrays it reads."""
         (X,), (Xrow,) = X_blocks, row_blocks
-        data = put((params, X, Xrow), self.device)
-        return _init_one(L, M, data[1], data[2], *put(att, self.device)), data
+        data = put((params, boxes, X, Xrow), self.device)
+        return _init_one(L, M, data[2], data[3], data[1], *put(att, self.device)), data
 
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
-        params, X, Xrow = data
-        s, info = _run_one(s, system, params, integrator, o, X, Xrow, L_min, rounds)
+        params, boxes, X, Xrow = data
+        s, info = _run_one(s, system, params, integrator, o, boxes, X, Xrow, L_min, rounds)
         return s, np.asarray(info).reshape(1, -1)
 
     def resize(self, s, L=None, A=None):
         return _resize_one(s, L=L, A=A)
 
     def collect(self, s) -> list[tuple]:
-        """``[(labels, used, points, periods, counts)]`` of the one block (numpy)."""
-        return [tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att)))]
+        """``[(labels, used, points, periods, counts, clouds)]`` of the one block (numpy)."""
+        return [tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att,
+                                                             s.att_cloud)))]
 
 
 # ----------------------------------------------------------------------------- a mesh of devices
@@ -102,20 +103,21 @@ def _per_device(mesh, body, replicated=()):
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _init_mesh(mesh, L: int, M: int, X, Xrow, n_real, att_pts, att_k, n_att):
-    def body(X, Xrow, n_real, *att):
-        return _stacked(init_pool(L, M, X[0], Xrow[0], *_local(att), n_real=n_real[0]))
+def _init_mesh(mesh, L: int, M: int, X, Xrow, n_real, boxes, att_pts, att_k, n_att, att_cloud):
+    def body(X, Xrow, n_real, boxes, *att):
+        return _stacked(init_pool(L, M, X[0], Xrow[0], *_local(att), boxes, n_real=n_real[0]))
 
-    return _per_device(mesh, body)(X, Xrow, n_real, att_pts, att_k, n_att)
+    return _per_device(mesh, body, replicated=(3,))(X, Xrow, n_real, boxes, att_pts, att_k, n_att, att_cloud)
 
 
 @functools.partial(jax.jit, static_argnames=("mesh", "system", "integrator", "o", "L_min"), donate_argnums=0)
-def _run_mesh(s, system, params, integrator, o: PoolOptions, X, Xrow, n_real, L_min: int, rounds, mesh):
-    def body(s, params, X, Xrow, n_real, rounds):
-        s, info = run_rounds(_local(s), system, params, integrator, o, X[0], Xrow[0], n_real[0], L_min, rounds)
+def _run_mesh(s, system, params, integrator, o: PoolOptions, boxes, X, Xrow, n_real, L_min: int, rounds, mesh):
+    def body(s, params, boxes, X, Xrow, n_real, rounds):
+        s, info = run_rounds(_local(s), system, params, integrator, o, boxes, X[0], Xrow[0], n_real[0], L_min,
+                             rounds)
         return _stacked((s, info))
 
-    return _per_device(mesh, body, replicated=(1, 5))(s, params, X, Xrow, n_real, rounds)
+    return _per_device(mesh, body, replicated=(1, 2, 6))(s, params, boxes, X, Xrow, n_real, rounds)
 
 
 @functools.partial(jax.jit, static_argnames=("mesh", "L", "A"))
@@ -130,7 +132,7 @@ class DeviceMesh:
     def __init__(self, mesh):
         self.mesh = mesh
 
-    def start(self, params, X_blocks, row_blocks, L: int, M: int, att):
+    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
         """The pools over the blocks ``[X (n_d, dim)]`` (rows ``[(n_d,)]``), padded to one
         shape with copies of each block's last entry (never taken into a lane)."""
         D = len(X_blocks)
@@ -142,23 +144,24 @@ class DeviceMesh:
             return jax.device_put(np.stack([np.concatenate([b, np.repeat(b[-1:], n - len(b), axis=0)])
                                             for b in blocks]), split)
 
-        data = (jax.device_put(params, rep), padded(X_blocks), padded(row_blocks), jax.device_put(n_real, split))
+        data = (jax.device_put(params, rep), jax.device_put(boxes, rep), padded(X_blocks), padded(row_blocks),
+                jax.device_put(n_real, split))
         atts = jax.device_put(tuple(np.broadcast_to(a, (D, *a.shape)) for a in att), split)
         self.n_real = n_real
-        return _init_mesh(self.mesh, L, M, data[1], data[2], data[3], *atts), data
+        return _init_mesh(self.mesh, L, M, data[2], data[3], data[4], data[1], *atts), data
 
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
-        params, X, Xrow, n_real = data
-        s, info = _run_mesh(s, system, params, integrator, o, X, Xrow, n_real, L_min, rounds, self.mesh)
+        params, boxes, X, Xrow, n_real = data
+        s, info = _run_mesh(s, system, params, integrator, o, boxes, X, Xrow, n_real, L_min, rounds, self.mesh)
         return s, np.asarray(info).reshape(-1, 5)
 
     def resize(self, s, L=None, A=None):
         return _resize_mesh(s, self.mesh, L=L, A=A)
 
     def collect(self, s) -> list[tuple]:
-        lab, use, pts, ks, cnt = (np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k,
-                                                                         s.n_att)))
-        return [(lab[d, :m], use[d, :m], pts[d], ks[d], cnt[d]) for d, m in enumerate(self.n_real)]
+        lab, use, pts, ks, cnt, cl = (np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k,
+                                                                             s.n_att, s.att_cloud)))
+        return [(lab[d, :m], use[d, :m], pts[d], ks[d], cnt[d], cl[d]) for d, m in enumerate(self.n_real)]
 
 
 # ----------------------------------------------------------------------------- blocks and processes
@@ -177,13 +180,14 @@ def _my_blocks(n: int):
     return blocks, mine, DeviceMesh(batch_mesh(tuple(devices[:len(mine)])))
 
 
-def run_blocks(drive, X: np.ndarray, rows: np.ndarray, att, merge_tol: float):
+def run_blocks(drive, X: np.ndarray, rows: np.ndarray, att, merge_tol: float, partition=None):
     """Label the queue ``X (n, dim)`` (value rows ``rows (n,)``) in one pool per device of
     every process (``drive(placement, X_blocks, row_blocks) -> [(labels, used, points,
-    periods, counts)]`` runs this process's blocks), starting from the attractor tables
-    ``att = (points (V, A, M, dim), periods (V, A), counts (V,))``. Returns ``(labels
-    (n,), periods used (n,), merged tables)`` as numpy arrays, the whole queue's in every
-    process."""
+    periods, counts, clouds)]`` runs this process's blocks), starting from the attractor
+    tables ``att = (points (V, A, M, dim), periods (V, A), counts (V,), clouds (V, A, Q,
+    dim))``. Returns ``(labels (n,), periods used (n,), merged tables)`` as numpy arrays,
+    the whole queue's in every process. ``partition``: the fine partition of the pool's
+    attractors of boxes (blocks' clouds that share boxes are one attractor)."""
     me, procs = cell_processes()
     blocks, mine, placement = _my_blocks(len(X))
     local = drive(placement, [X[blocks[i][0]:blocks[i][1]] for i in mine],
@@ -191,67 +195,96 @@ def run_blocks(drive, X: np.ndarray, rows: np.ndarray, att, merge_tol: float):
     results = dict(zip(mine, local))
     if procs > 1:
         results = _exchange(blocks, results, me, procs, len(local_devices()))
-    labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], merge_tol)
+    labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], merge_tol,
+                            partition)
     used = np.concatenate([results[i][1] for i in range(len(blocks))])
     return labels, used, tables
 
 
 def _exchange(blocks, local: dict, me: int, P: int, D: int) -> dict:
-    """Every block's ``(labels, used, points, periods, counts)`` in every process, from
-    each process's own blocks (``local``; block ``i`` is process ``i % P``'s slot ``i // P``)."""
+    """Every block's ``(labels, used, points, periods, counts, clouds)`` in every process,
+    from each process's own blocks (``local``; block ``i`` is process ``i % P``'s slot
+    ``i // P``)."""
     longest = max(b - a for a, b in blocks)
     some = next(iter(local.values()), None)
     A = int(allgather(np.array([some[2].shape[1] if some is not None else 0])).max())
     shapes = allgather(np.array(some[2].shape if some is not None else (0, 0, 0, 0)))
     V, _, M, dim = (int(x) for x in shapes.max(axis=0))
+    Q = int(allgather(np.array([some[5].shape[2] if some is not None else 0])).max())
     lab = np.full((D, longest), -9, np.int64)
     use = np.zeros((D, longest), np.int64)
     pts = np.full((D, V, A, M, dim), np.nan)
     ks = np.zeros((D, V, A), np.int32)
     ns = np.zeros((D, V), np.int32)
+    cl = np.full((D, V, A, Q, dim), np.nan)
     for i, r in local.items():
         j = i // P
         lab[j, : len(r[0])], use[j, : len(r[1])] = r[0], r[1]
         pts[j, :, : r[2].shape[1]], ks[j, :, : r[3].shape[1]], ns[j] = r[2], r[3], r[4]
-    lab, use, pts, ks, ns = (allgather(x) for x in (lab, use, pts, ks, ns))
+        cl[j, :, : r[5].shape[1]] = r[5]
+    lab, use, pts, ks, ns, cl = (allgather(x) for x in (lab, use, pts, ks, ns, cl))
     out = {}
     for i, (a, b) in enumerate(blocks):
         p, j = i % P, i // P
-        out[i] = (lab[p, j, : b - a], use[p, j, : b - a], pts[p, j], ks[p, j], ns[p, j])
+        out[i] = (lab[p, j, : b - a], use[p, j, : b - a], pts[p, j], ks[p, j], ns[p, j], cl[p, j])
     return out
 
 
-def _merge(n0, blocks, merge_tol: float):
+def _box_set(partition, cloud) -> set:
+    """The boxes (integer coordinate tuples) of the finite points of ``cloud (Q, dim)``."""
+    lo, width = np.asarray(partition.lo), np.asarray(partition.width)
+    pts = cloud[np.all(np.isfinite(cloud), axis=1)]
+    return set(map(tuple, np.floor((pts - lo) / width).astype(np.int64)))
+
+
+def same_boxes(partition, a, b, share: float = 0.5) -> bool:
+    """Whether the clouds ``a, b (Q, dim)`` are one attractor of boxes: at least ``share`` of
+    the boxes of the smaller lie among the other's."""
+    A, B = _box_set(partition, a), _box_set(partition, b)
+    if not A or not B:
+        return False
+    return len(A & B) >= share * min(len(A), len(B))
+
+
+def _merge(n0, blocks, merge_tol: float, partition=None):
     """Merge the attractor tables of the blocks ``[(rows (n_b,), (labels, used, points,
-    periods, counts))]`` (in queue order), which share their first ``n0[v]`` entries per
-    value: the labels of the whole queue and the merged tables (see the module)."""
+    periods, counts, clouds))]`` (in queue order), which share their first ``n0[v]``
+    entries per value: the labels of the whole queue and the merged tables (see the
+    module). Cycles are the same by their points, attractors of boxes by their boxes."""
     V, _, M, dim = blocks[0][1][2].shape
+    Q = blocks[0][1][5].shape[2]
+    mark = M + 1
     luts = [np.tile(np.arange(r[2].shape[1], dtype=np.int64), (V, 1)) for _, r in blocks]
     tables: list[list] = []
     for v in range(V):
-        reps = [(blocks[0][1][2][v, a], int(blocks[0][1][3][v, a])) for a in range(int(n0[v]))]
+        first = blocks[0][1]
+        reps = [(first[2][v, a], int(first[3][v, a]), first[5][v, a]) for a in range(int(n0[v]))]
         cands, offset = [], 0
-        for b, (rows, (lab, *_, n)) in enumerate(blocks):
+        for b, (rows, (lab, _, _, _, n, _)) in enumerate(blocks):
             for a in range(int(n0[v]), int(n[v])):
                 hit = np.flatnonzero((rows == v) & (lab == a))
                 cands.append((offset + int(hit[0]) if len(hit) else np.inf, b, a))
             offset += len(lab)
         for _, b, a in sorted(cands):
-            pts, k = blocks[b][1][2][v, a], int(blocks[b][1][3][v, a])
-            same = [g for g, (p, kk) in enumerate(reps)  # (a repeller, kk < 0, is never the same)
-                    if kk > 0 and same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
+            pts, k, cloud = blocks[b][1][2][v, a], int(blocks[b][1][3][v, a]), blocks[b][1][5][v, a]
+            if k == mark:
+                same = [g for g, (_, kk, c) in enumerate(reps) if kk == mark and same_boxes(partition, cloud, c)]
+            else:  # (a repeller, kk < 0, is never the same)
+                same = [g for g, (p, kk, _) in enumerate(reps)
+                        if 0 < kk < mark and same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
             if same:
                 luts[b][v, a] = same[0]
             else:
                 luts[b][v, a] = len(reps)
-                reps.append((pts, k))
+                reps.append((pts, k, cloud))
         tables.append(reps)
     A = table_slots(max(len(t) for t in tables))
     pts = np.full((V, A, M, dim), np.nan)
     ks = np.zeros((V, A), np.int32)
+    clouds = np.full((V, A, Q, dim), np.nan)
     for v, reps in enumerate(tables):
-        for a, (p, k) in enumerate(reps):
-            pts[v, a], ks[v, a] = p, k
+        for a, (p, k, c) in enumerate(reps):
+            pts[v, a], ks[v, a], clouds[v, a] = p, k, c
     labels = np.concatenate([np.where(lab >= 0, lut[rows, np.maximum(lab, 0)], lab)
                              for (rows, (lab, *_)), lut in zip(blocks, luts)])
-    return labels, (pts, ks, np.array([len(t) for t in tables], np.int32))
+    return labels, (pts, ks, np.array([len(t) for t in tables], np.int32), clouds)

@@ -26,10 +26,10 @@ import numpy as np
 
 from .._batching import progress_bar
 from ..integrate import stack_params
-from ._lanes import PoolOptions, seed_tables
+from ._lanes import Boxes, PoolOptions, aperiodic_mark, seed_tables
 from ._placement import OneDevice, run_blocks
 
-__all__ = ["PoolOptions", "run_pool", "run_pools", "drive"]
+__all__ = ["PoolOptions", "Boxes", "run_pool", "run_pools", "drive"]
 
 CALL_SECONDS = 0.5
 """Wall time the host aims each call of a pool at (it sizes the next call's rounds by the
@@ -50,12 +50,14 @@ def _next_pool(L: int) -> int:
     return max(TAIL_LANES, L // SHRINK) if L > 2 * TAIL_LANES else L
 
 
-def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: PoolOptions, att, bar) -> list[tuple]:
+def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: PoolOptions, boxes, att,
+          bar) -> list[tuple]:
     """Run the pools of ``placement`` over the queue blocks ``X_blocks`` (one per device;
     value rows ``row_blocks``) from the attractor tables ``att`` until every state is
-    decided: ``[(labels, used, points, periods, counts)]`` per block (numpy)."""
+    decided: ``[(labels, used, points, periods, counts, clouds)]`` per block (numpy)."""
     n = np.array([len(b) for b in X_blocks])
-    s, data = placement.start(params, X_blocks, row_blocks, max(1, min(o.lanes, int(n.max()))), o.max_period, att)
+    s, data = placement.start(params, boxes, X_blocks, row_blocks, max(1, min(o.lanes, int(n.max()))),
+                              o.max_period, att)
     done, rounds = 0, 4
     while True:
         L = s.Y.shape[-1]
@@ -77,8 +79,8 @@ def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: Poo
             s = placement.resize(s, L=L_min)
 
 
-def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *, attractors=(),
-             progress: bool = False, label: str = "direct"):
+def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *, boxes: Boxes | None = None,
+             attractors=(), progress: bool = False, label: str = "direct"):
     """Label the states ``X (n, dim)`` at phase 0 (see the module): ``(labels (n,) with
     attractor slot, SINK or UNRESOLVED; [(points (k, dim) in cycle order, k)]; periods per
     state (n,))``.
@@ -86,14 +88,17 @@ def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *,
     ``attractors``: known ``(points, k)`` cycles (``k <= max_period``) that take the first
     slots, in that order; a period ``-k`` makes the cycle a repeller (an unstable P-k
     cycle: lanes that shadow it are not decided there and integrate on), listed in the
-    returned cycles with its period ``-k``.
+    returned cycles with its period ``-k``; a period ``0`` gives an attractor of boxes by
+    its cloud ``(m, dim)``. ``boxes``: the detection of attractors of boxes (quasi-periodic,
+    chaotic; :class:`~jaxgear.analysis._lanes.Boxes`), or ``None``: cycles only. Attractors
+    of boxes are returned as ``(cloud (m, dim), 0)``.
     """
-    return run_pools(system, [params], [X], integrator, options, attractors=[attractors], progress=progress,
-                     label=label)[0]
+    return run_pools(system, [params], [X], integrator, options, boxes=boxes, attractors=[attractors],
+                     progress=progress, label=label)[0]
 
 
-def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, attractors=None,
-              progress: bool = False, label: str = "direct"):
+def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, boxes: Boxes | None = None,
+              attractors=None, progress: bool = False, label: str = "direct"):
     """:func:`run_pool` for ``V`` parameter sets at once, in one pool: the states
     ``X_list[v] (n_v, dim)`` under the parameters ``params_list[v]`` (one pytree
     structure). ``attractors``: per value, its known cycles. Returns ``[(labels,
@@ -118,7 +123,8 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         rest[first] = False
         orders.append(np.concatenate([first, np.flatnonzero(rest)]))
         n_ps.append(n_p)
-    att = seed_tables(attractors if attractors is not None else [()] * V, o.max_period, dim)
+    Q = boxes.options.max_points if boxes is not None else 1
+    att = seed_tables(attractors if attractors is not None else [()] * V, o.max_period, dim, Q)
     bar = progress_bar(sum(len(X) for X in Xs), label, progress)
     labels = [np.empty(len(X), dtype=np.int64) for X in Xs]
     used = [np.empty(len(X), dtype=np.int64) for X in Xs]
@@ -130,19 +136,32 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         rows = np.concatenate([np.full(len(p), v, np.int32) for v, p in enumerate(parts)])
         # the pool of one value, refilled from the next
         o_phase = dataclasses.replace(o, lanes=max(1, min(o.lanes, max(len(p) for p in parts))))
-        run = functools.partial(drive, system=system, params=params, integrator=integrator, o=o_phase, att=att,
-                                bar=bar)
+        run = functools.partial(drive, system=system, params=params, integrator=integrator, o=o_phase, boxes=boxes,
+                                att=att, bar=bar)
         if phase == 0:  # the pilot, on the first device
             lab, use, *table = run(OneDevice(), [Xp], [rows])[0]
             att = tuple(table)
         else:  # one pool per device over a block of the queue, the attractors merged
-            lab, use, att = run_blocks(run, Xp, rows, att, o.merge_tol)
+            lab, use, att = run_blocks(run, Xp, rows, att, o.merge_tol, None if boxes is None else boxes.partition)
         start = 0
         for v, p in enumerate(parts):
             labels[v][p] = lab[start:start + len(p)]
             used[v][p] = use[start:start + len(p)]
             start += len(p)
     bar.close()
-    att_pts, att_k, n_att = (np.asarray(a) for a in att)
-    return [(labels[v], [(att_pts[v, a, : abs(int(att_k[v, a]))], int(att_k[v, a])) for a in range(int(n_att[v]))],
-             used[v]) for v in range(V)]
+    return [(labels[v], _attractors(att, v, o.max_period), used[v]) for v in range(V)]
+
+
+def _attractors(att, v: int, M: int) -> list:
+    """Value ``v``'s table as ``[(points, k)]``: a cycle's ``k`` points, an attractor of
+    boxes' cloud (its finite points) with period 0."""
+    att_pts, att_k, n_att, clouds = (np.asarray(a) for a in att)
+    out = []
+    for a in range(int(n_att[v])):
+        k = int(att_k[v, a])
+        if k == aperiodic_mark(M):
+            cloud = clouds[v, a]
+            out.append((cloud[np.all(np.isfinite(cloud), axis=1)], 0))
+        else:
+            out.append((att_pts[v, a, : abs(k)], k))
+    return out

@@ -422,6 +422,12 @@ class RecurrenceOptions(eqx.Module):
     capacity: int = eqx.field(static=True, default=2 ** 16)
     max_attractors: int = eqx.field(static=True, default=16)
 
+    def to_dict(self) -> dict:
+        """Every knob as a plain number (JSON-able; ``RecurrenceOptions(**d)`` rebuilds it)."""
+        import dataclasses
+
+        return {f.name: np.asarray(getattr(self, f.name)).item() for f in dataclasses.fields(self)}
+
     def __check_init__(self):
         check_number(float(self.resolution), "resolution", 1, 2 ** (INDEX_BITS - 1))
         check_int(int(self.transient), "transient", 1)
