@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article"]
+__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article",
+           "physical_memory", "check_memory"]
 
 
 def article(word: str) -> str:
@@ -51,8 +53,8 @@ def check_number(value: Any, name: str, minimum: float | None = None, maximum: f
     low = minimum is not None and (v <= minimum if strict_min else v < minimum)
     high = maximum is not None and (v >= maximum if strict_max else v > maximum)
     if low or high:
-        raise ValueError(f"{name}={v:g} is out of range: it must be"
-                         f"{_range_text(minimum, maximum, strict_min, strict_max)[1:] or ' finite'}.")
+        raise ValueError(f"{name}={v:g} is out of range: it must be "
+                         f"{_range_text(minimum, maximum, strict_min, strict_max)[1:] or 'finite'}.")
     return v
 
 
@@ -89,6 +91,40 @@ def check_finite_array(value: Any, name: str, *, ndim: int | None = None, last: 
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} contains NaN or infinite values.")
     return a
+
+
+def physical_memory() -> int:
+    """Bytes of physical memory of this machine (``os.sysconf``; 8 GiB where unknown)."""
+    try:
+        total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        total = 0
+    return total if total > 0 else 8 << 30
+
+
+def _bytes_text(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def check_memory(name: str, value: Any, count: int, unit_bytes: float, what: str) -> int:
+    """``count`` if ``count`` units of ``what`` (cells, values, seeds) at ``unit_bytes``
+    bytes each fit in half of this machine's physical memory (:func:`physical_memory`);
+    otherwise ``ValueError`` naming ``name``, its ``value``, the memory it would need and
+    the largest count that fits (checked before any work: no allocation, no minutes of
+    silence before a failure)."""
+    total = physical_memory()
+    budget = total // 2
+    need = float(count) * float(unit_bytes)
+    if need > budget:
+        most = int(budget // max(float(unit_bytes), 1.0))
+        raise ValueError(f"{name}={_show(value) if not isinstance(value, str) else value}: {count:,} {what} need "
+                         f"about {_bytes_text(need)}, more than half of this machine's memory "
+                         f"({_bytes_text(total)}); at most {most:,} {what} fit.")
+    return count
 
 
 def _range_text(lo, hi, strict_lo: bool = False, strict_hi: bool = False) -> str:

@@ -37,8 +37,20 @@ class Parser(argparse.ArgumentParser):
         super().__init__(*args, **kw)
         self._negative_number_matcher = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
 
+    def _parse_optional(self, arg_string):
+        """A word beginning with ``-`` that names no option of this parser (``-dash``,
+        ``-o``) is a value (``--out -dash``), not an unknown option; alone, it is still
+        refused as an unrecognised argument."""
+        found = super()._parse_optional(arg_string)
+        if found is not None and found[0] is None and arg_string.startswith("-"):
+            return None
+        return found
+
     def error(self, message):
         """One line: what is wrong and where the usage is (not the whole usage text)."""
+        m = re.match(r"argument (--[\w-]+)(?:/[^:]*)?: expected one argument$", message)
+        if m:  # the value is missing, or begins with '-' and is an option's name (--out -h)
+            message += f" (write a value that begins with '-' as {m.group(1)}=-VALUE)"
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
