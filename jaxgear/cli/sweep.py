@@ -51,9 +51,9 @@ SECTION_COUNTS = (20, 12, 24)
 STROBOSCOPIC_COUNTS = (10, 6, 12, 6)
 
 
-def _values(text: str, flag: str = "--values"):
-    """``START:STOP:COUNT`` -> ``COUNT`` evenly spaced values (``ValueError`` with the reason,
-    naming the option ``flag``)."""
+def _range(text: str, flag: str = "--values") -> tuple[float, float, int]:
+    """``START:STOP:COUNT`` -> ``(START, STOP, COUNT)``, checked (``ValueError`` with the
+    reason, naming the option ``flag``); no value is made yet."""
     import numpy as np
 
     parts = text.split(":")
@@ -74,7 +74,7 @@ def _values(text: str, flag: str = "--values"):
     if start == stop:
         raise ValueError(f"{flag}: the range {start:g}:{stop:g} is empty (START = STOP).")
     check_work(flag, text, count, 8 * 8, "values")  # the values and their per-value results, at the least
-    return start, stop, count, np.linspace(start, stop, count)
+    return start, stop, count
 
 
 def add_parser(sub) -> None:
@@ -163,7 +163,7 @@ def run(args) -> int:
             raise ValueError("--distributed runs --kind basins and bifurcation (continuation runs in one process).")
         initialize()
     # every option is checked before any integration and before --out is touched
-    start, stop, count, values = _values(args.values)
+    start, stop, count = _range(args.values)
     check_options(args, OPTIONS)
     if args.kind != "continuation" and start > stop:
         raise ValueError(f"--values={args.values}: START must be < STOP for --kind {args.kind} (the values are "
@@ -175,7 +175,7 @@ def run(args) -> int:
     if args.param2 is not None:
         if args.kind != "basins":
             raise ValueError(f"--param2 makes a basin map: it needs --kind basins (got --kind {args.kind}).")
-        start2, stop2, _, values2 = _values(args.values2, "--values2")
+        start2, stop2, count2 = _range(args.values2, "--values2")
         if start2 > stop2:
             raise ValueError(f"--values2={args.values2}: START must be < STOP.")
     if args.uncertainty_samples is not None and args.kind != "basins":
@@ -191,6 +191,12 @@ def run(args) -> int:
     elif args.kind == "continuation":
         per_step = 8 * REDUCED.dim * (args.period + 4) * 4  # points of the orbit, multipliers, tangent
         check_work("--max-steps", args.max_steps, args.max_steps, per_step, "continuation steps")
+    else:  # the grid as given or the method's default (checked against the method below)
+        counts = args.grid or (STROBOSCOPIC_COUNTS if args.method == "stroboscopic" else SECTION_COUNTS)
+        _check_basins_work(args, counts, count * (1 if args.values2 is None else count2))
+    values = np.linspace(start, stop, count)
+    if args.values2 is not None:
+        values2 = np.linspace(start2, stop2, count2)
     check_output_folder(args.out)
     _, params = resolve_params(args.preset, args.overrides)
     if not params.is_uniform:
@@ -217,7 +223,6 @@ def run(args) -> int:
         check_region(region, f"--region {where}", len(names), names, escape_bound(method),
                      [b for i, b in enumerate(default.base) if i not in default.axes])
         check_counts(counts, f"--grid {where}", len(names), names)
-        _check_basins_work(args, counts, count * (1 if values2 is None else len(values2)))
         grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
         method.check(REDUCED, grid)
         if values2 is None:
