@@ -96,6 +96,7 @@ HUGE_CASES = [
       "--max-steps", "100000000000", "--out", "{out}"], "--max-steps"),
     (["shoot", "--random", "100000000"], "--random=100000000"),
     (["shoot", "--random", "3", "--periods", "1-100000000000"], "--periods"),
+    (["shoot", "--from", "5,0,8,0", "--verify", "100000000000"], "--verify=100000000000"),
     (["analyze", "--grid", "100000,100000,100000", "--out", "{out}"], "--grid=100000,100000,100000"),
     (["analyze", "--max-period", "100000000", "--out", "{out}"], "--max-period=100000000"),
 ]
@@ -131,7 +132,8 @@ def test_ordinary_work_is_not_refused(capsys, monkeypatch):
     """The paper's analysis, a 41-value sweep with 16 starts and a 64-seed search fit a
     machine of 4 GiB: the estimates refuse only what cannot fit."""
     import jaxgear._checks
-    from jaxgear.cli import analyze, shoot, sweep
+    from jaxgear.cli import analyze, sweep
+    from jaxgear.cli.common import check_shoot_work
 
     monkeypatch.setattr(jaxgear._checks, "physical_memory", lambda: 4 * GIB)
     parser = build_parser()
@@ -143,7 +145,7 @@ def test_ordinary_work_is_not_refused(capsys, monkeypatch):
     b = parser.parse_args(["sweep", "--param", "b", "--values", "3:7:41", "--kind", "basins", "--out", "D"])
     sweep._check_basins_work(b, (20, 12, 24), 41)
     r = parser.parse_args(["shoot", "--random", "64", "--periods", "1-8"])
-    shoot._check_work(r, r.periods)
+    check_shoot_work(r, r.periods)
 
 
 def test_cell_grid_refuses_what_it_cannot_number_or_hold(monkeypatch):
@@ -297,7 +299,7 @@ def test_resume_check_of_the_command_line_agrees_with_the_sweep(kind, tmp_path, 
     argv = ["sweep", "--param", "b", "--values", "4:6:3", "--set", "c_sp=0.07", "--quiet", "--no-figures",
             "--out", str(tmp_path / "S")]
     argv += {"bifurcation": ["--starts", "3", "--record", "40", "--direction", "both"],
-             "basins": ["--kind", "basins", "--grid", "3,2,3"],
+             "basins": ["--kind", "basins", "--grid", "3,2,3", "--uncertainty-samples", "7"],
              "basin_map": ["--kind", "basins", "--grid", "3,2,3", "--param2", "Omega", "--values2", "0.8:0.9:2"]}[kind]
     with pytest.raises(_Captured):
         main(argv)
@@ -306,6 +308,8 @@ def test_resume_check_of_the_command_line_agrees_with_the_sweep(kind, tmp_path, 
     cli = json.loads(json.dumps(seen["cli"]))
     assert cli["kind"] == lib["kind"] == kind
     assert {"params", "values" if kind != "basin_map" else "values_x"} <= set(cli)
+    assert {"bifurcation": {"starts", "integrator"}, "basins": {"grid", "method", "uncertainty"},
+            "basin_map": {"grid", "method", "values_y"}}[kind] <= set(cli)
     assert {k: lib[k] for k in cli} == cli
 
 

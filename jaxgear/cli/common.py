@@ -222,3 +222,27 @@ def check_resume(out, now: dict) -> None:
     diff = diff_settings(old, {k: v for k, v in now.items() if k in old})
     if old and diff != "format":
         raise ValueError(mismatch_message(Path(out), saved.get("kind", "?"), diff))
+
+
+SHOT_BYTES = 8 * 8 * (4 + 4 * 4)
+"""Memory estimate of one seed shot for one period (``jaxgear shoot``): about eight
+float64 copies of the state and its 4 x 4 Jacobian (Newton's iterate, step and trial,
+the saved shot)."""
+VERIFY_TRIALS = 4
+"""Perturbed starts of each orbit's check by direct integration (``verify_orbit``'s default)."""
+
+
+def check_shoot_work(args, periods) -> None:
+    """``jaxgear shoot``: the seeds (``--random``, ``--from``) times the periods shot from
+    each, and the periods of ``--verify``, fit in memory (``--seeds-from`` seeds come from
+    a result that was itself held in memory)."""
+    from .._model import REDUCED
+
+    periods = list(periods or [1])
+    per_seed = len(periods) * SHOT_BYTES + 8 * REDUCED.dim * sum(periods)  # + the orbits' points
+    if args.random is not None:
+        check_work("--random", args.random, args.random, per_seed, f"seeds ({len(periods):,} period(s) each)")
+    if args.points:
+        check_work("--from", f"{len(args.points)} points", len(args.points), per_seed, "seeds")
+    if args.verify is not None:  # each check keeps the trajectories of its trials, one point per period
+        check_work("--verify", args.verify, args.verify, VERIFY_TRIALS * REDUCED.dim * 8 * 4, "periods")

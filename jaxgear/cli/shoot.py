@@ -20,10 +20,12 @@ import numpy as np
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
 from .common import (
+    SHOT_BYTES,
     add_param_options,
     check_options,
     check_point,
     check_region,
+    check_shoot_work,
     check_work,
     parse_point,
     parse_ranges,
@@ -109,29 +111,10 @@ def _parse_periods(text: str) -> list[int]:
     if not 1 <= a <= b:
         raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2, got {text!r}")
     try:
-        check_work("--periods", text, b - a + 1, PER_SEED_PERIOD_BYTES, "periods per seed")
+        check_work("--periods", text, b - a + 1, SHOT_BYTES, "periods per seed")
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return list(range(a, b + 1))
-
-
-PER_SEED_PERIOD_BYTES = 8 * 8 * (4 + 4 * 4)
-"""Memory estimate of one seed shot for one period: about eight float64 copies of the
-state and its 4 x 4 Jacobian (Newton's iterate, step and trial, the saved shot)."""
-
-
-def _check_work(args, periods) -> None:
-    """The seeds times the periods shot from each fit in memory (``--seeds-from`` seeds
-    are counted when the result is read)."""
-    from .._model import REDUCED
-
-    periods = list(periods or [1])
-    per_seed = len(periods) * PER_SEED_PERIOD_BYTES + 8 * REDUCED.dim * sum(periods)  # + the orbits' points
-    if args.random is not None:
-        check_work("--random", args.random, args.random, per_seed,
-                   f"seeds ({len(periods):,} period(s) each)")
-    if args.points:
-        check_work("--from", f"{len(args.points)} points", len(args.points), per_seed, "seeds")
 
 
 # Settings of a --periods search, chosen by measurement (benchmarks/shooting.py, table in
@@ -202,7 +185,7 @@ def run(args) -> int:
         if periods is not None:
             raise ValueError("give either --period (repeatable) or --periods K1-K2, not both.")
         periods = args.periods
-    _check_work(args, periods)
+    check_shoot_work(args, periods)
     if not (args.points or args.seeds_from or args.random is not None):
         raise ValueError("give seeds: --from, --seeds-from or --random N.")
     if args.random is not None and (args.points or (args.seeds_from and args.periods is None)):

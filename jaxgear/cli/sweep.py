@@ -233,8 +233,8 @@ def run(args) -> int:
             check_values(REDUCED, params, (args.param, args.param2),
                          np.stack(np.meshgrid(values, values2), axis=-1).reshape(-1, 2))
     if args.kind != "continuation" and not args.restart:  # a sweep of other settings in --out: refused now
-        check_resume(args.out, _resume_settings(args, params, values, values2,
-                                                grid if args.kind == "basins" else None))
+        check_resume(args.out, _resume_settings(args, params, values, values2, integ,
+                                                *((grid, method) if args.kind == "basins" else (None, None))))
     head = f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values)"
     if values2 is not None:
         head += f" x {args.param2} = {values2[0]:g} .. {values2[-1]:g} ({len(values2)} values)"
@@ -303,24 +303,29 @@ def _check_basins_work(args, counts, n_values: int) -> None:
                + (" in one pool" if args.one_pool else "") + (" (both parameters)" if args.values2 else ""))
 
 
-def _resume_settings(args, params, values, values2, grid) -> dict:
+def _resume_settings(args, params, values, values2, integ, grid, method) -> dict:
     """The settings of the sweep this command would resume that the command line decides
     alone (as the sweep functions record them in the manifest of --out), for
     :func:`~jaxgear.cli.common.check_resume`; the sweep functions compare every setting
     again when they open the folder."""
     from .._model import REDUCED
     from .._params import params_to_dict
+    from ..sweep._basins import uncertainty_setting
 
     s = {"system": REDUCED.name, "params": params_to_dict(params)}
     if args.kind == "bifurcation":
         s.update(kind="bifurcation", param=args.param, values=values.tolist(), starts=_starts(args).tolist(),
                  transient=int(args.transient), record=int(args.record), direction=args.direction,
-                 max_period=int(args.max_period))
-    elif values2 is None:
-        s.update(kind="basins", param=args.param, values=values.tolist(), grid=grid.to_dict())
+                 max_period=int(args.max_period), integrator=integ.to_dict())
+        return s
+    s.update(grid=grid.to_dict(), method=method.to_dict())
+    if args.uncertainty_samples is not None:
+        s.update(uncertainty_setting(args.uncertainty_samples))
+    if values2 is None:
+        s.update(kind="basins", param=args.param, values=values.tolist())
     else:
         s.update(kind="basin_map", param_x=args.param, values_x=values.tolist(), param_y=args.param2,
-                 values_y=values2.tolist(), grid=grid.to_dict())
+                 values_y=values2.tolist())
     return s
 
 
