@@ -252,7 +252,7 @@ def test_resume_with_another_grid_or_set_names_the_fields(tmp_path, capsys, no_w
     line, = err.strip().splitlines()
     diff = line.split("differing: ")[1].split(");")[0]
     assert diff == "grid.counts: [4, 4, 4] saved vs [3, 3, 3] now; params.c_sp: 0.05 saved vs 0.07 now", line
-    assert "--restart" in line
+    assert line.endswith("or restart (--restart) to discard it.")
     assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "parts"]  # untouched
 
 

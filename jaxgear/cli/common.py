@@ -221,7 +221,7 @@ def check_resume(out, now: dict) -> None:
     old = {k: v for k, v in saved["settings"].items() if k in now}
     diff = diff_settings(old, {k: v for k, v in now.items() if k in old})
     if old and diff != "format":
-        raise ValueError(mismatch_message(Path(out), saved.get("kind", "?"), diff))
+        raise ValueError(mismatch_message(Path(out), saved.get("kind", "?"), diff, "--restart"))
 
 
 SHOT_BYTES = 8 * 8 * (4 + 4 * 4)

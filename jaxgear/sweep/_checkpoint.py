@@ -173,11 +173,11 @@ def _save_part(path: Path, arrays: dict) -> None:
     atomic_write(path, write)
 
 
-def mismatch_message(folder, kind, diff: str) -> str:
+def mismatch_message(folder, kind, diff: str, restart: str = "restart=True, --restart") -> str:
     """The refusal to resume the ``kind`` sweep saved in ``folder`` with other settings
-    (``diff``: :func:`diff_settings`)."""
+    (``diff``: :func:`diff_settings`; ``restart``: how to discard it)."""
     return (f"{folder} holds {article(str(kind))} sweep with other settings (differing: {diff}); resume it with "
-            "the same settings, use another output folder, or restart (restart=True, --restart) to discard it.")
+            f"the same settings, use another output folder, or restart ({restart}) to discard it.")
 
 
 def _show_json(value) -> str:
