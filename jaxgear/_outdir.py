@@ -49,7 +49,7 @@ _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 OWNER_FILE = ".jaxgear-owner"
 """Lock file of a staging folder: its owner's pid, ``flock``-ed while the owner runs."""
-_PID = re.compile(r"\.run-(\d+)-")
+_PID = re.compile(r"\.run-(\d+)-[a-z0-9_]+(?:\.old)?$")  # the last .run-PID-XXXXXXXX of the name
 
 
 def _pid_alive(pid: int) -> bool:
@@ -130,10 +130,14 @@ def check_output_folder(path, name: str = "--out") -> Path:
     if not os.access(anc, os.W_OK | os.X_OK):
         raise ValueError(f"{name}={str(p)!r} is not writable ({anc} does not allow writing).")
     try:  # permissions are not all (/proc, a read-only mount): try a folder there, removed at once
-        os.rmdir(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}probe-{os.getpid()}-", dir=anc))
+        probe = tempfile.mkdtemp(prefix=f"{TMP_PREFIX}probe-{os.getpid()}-", dir=anc)
     except OSError as exc:
         raise ValueError(f"{name}={str(p)!r} cannot be written: no folder can be made in {anc} "
                          f"({exc.strerror or exc}).") from None
+    try:
+        os.rmdir(probe)
+    except OSError:  # already removed (another run's clean-up of --out)
+        pass
     return p
 
 
