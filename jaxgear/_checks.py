@@ -127,11 +127,18 @@ def check_memory(name: str, value: Any, count: int, unit_bytes: float, what: str
     return count
 
 
+def _bound(x) -> str:
+    """A bound as written: integers in full (2147483647, not 2.14748e+09)."""
+    if isinstance(x, numbers.Integral) and not isinstance(x, bool):
+        return str(int(x))
+    return f"{x:g}"
+
+
 def _range_text(lo, hi, strict_lo: bool = False, strict_hi: bool = False) -> str:
     if lo is not None and hi is not None:
-        return f" in {'(' if strict_lo else '['}{lo:g}, {hi:g}{')' if strict_hi else ']'}"
+        return f" in {'(' if strict_lo else '['}{_bound(lo)}, {_bound(hi)}{')' if strict_hi else ']'}"
     if lo is not None:
-        return f" {'>' if strict_lo else '>='} {lo:g}"
+        return f" {'>' if strict_lo else '>='} {_bound(lo)}"
     if hi is not None:
-        return f" {'<' if strict_hi else '<='} {hi:g}"
+        return f" {'<' if strict_hi else '<='} {_bound(hi)}"
     return ""

@@ -80,16 +80,22 @@ def parse_counts(text: str) -> tuple[int, ...]:
     return vals
 
 
+INT_MAX = 2**31 - 1
+"""Largest value of an integer option (counts, steps, periods, seeds): the compiled
+kernels count their loops and draw their seeds in 32-bit integers."""
+
+
 def check_options(args, spec) -> None:
     """Check numeric options before any work: ``spec`` rows ``(dest, flag, kind, minimum)``
-    with ``kind`` ``int`` or ``float`` (``float`` minimums are exclusive); options left
-    unset (``None``) are skipped. ``ValueError`` names the option, its value and the range."""
+    with ``kind`` ``int`` (at most :data:`INT_MAX`) or ``float`` (``float`` minimums are
+    exclusive); options left unset (``None``) are skipped. ``ValueError`` names the
+    option, its value and the range."""
     for dest, flag, kind, minimum in spec:
         value = getattr(args, dest, None)
         if value is None:
             continue
         if kind is int:
-            check_int(value, flag, minimum)
+            check_int(value, flag, minimum, INT_MAX)
         else:
             check_number(value, flag, minimum, strict_min=minimum is not None)
 

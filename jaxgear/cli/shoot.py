@@ -20,6 +20,7 @@ import numpy as np
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
 from .common import (
+    INT_MAX,
     SHOT_BYTES,
     add_param_options,
     check_options,
@@ -108,8 +109,8 @@ def _parse_periods(text: str) -> list[int]:
         a, b = int(lo), int(hi or lo)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
-    if not 1 <= a <= b:
-        raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2, got {text!r}")
+    if not 1 <= a <= b <= INT_MAX:
+        raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2 <= {INT_MAX}, got {text!r}")
     try:
         check_work("--periods", text, b - a + 1, SHOT_BYTES, "periods per seed")
     except ValueError as exc:
@@ -173,7 +174,7 @@ def run(args) -> int:
     check_options(args, OPTIONS)
     periods = args.period
     for k in periods or ():
-        check_int(k, "--period", 1)
+        check_int(k, "--period", 1, INT_MAX)
     if args.points:
         for pt in args.points:
             check_point(pt, "--from", REDUCED.dim)
