@@ -94,12 +94,23 @@ def check_finite_array(value: Any, name: str, *, ndim: int | None = None, last: 
 
 
 def physical_memory() -> int:
-    """Bytes of physical memory of this machine (``os.sysconf``; 8 GiB where unknown)."""
+    """Bytes of memory this process may use: the machine's physical memory
+    (``os.sysconf``; 8 GiB where unknown), or the smaller limit of its control group
+    (a container's ``memory.max``)."""
     try:
         total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
     except (AttributeError, ValueError, OSError):
         total = 0
-    return total if total > 0 else 8 << 30
+    total = total if total > 0 else 8 << 30
+    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            with open(limit) as f:
+                value = f.read().strip()
+        except OSError:
+            continue
+        if value.isdigit() and 0 < int(value) < total:
+            total = int(value)
+    return total
 
 
 def _bytes_text(n: float) -> str:
