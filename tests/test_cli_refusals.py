@@ -354,3 +354,16 @@ def test_sweep_label_uncertainty_only_over_values_with_resolved_cells():
     unmeasured = SimpleNamespace(uncertainty_step=np.full(3, np.nan), uncertainty_start=np.full(3, np.nan),
                                  unresolved_share=np.zeros(3))
     assert shares_uncertainty_line(unmeasured) == ""
+
+
+def test_region_check_uses_the_farthest_corner_of_the_box():
+    """The farthest corner of [-1, 1]^2 lies at sqrt(2) = 1.414; with a fixed third
+    coordinate 1 at sqrt(3) = 1.732: a bound of 1.5 lies between the two."""
+    from jaxgear.cli.common import check_region
+
+    box = ((-1.0, 1.0), (-0.5, 1.0))
+    check_region(box, "--region", 2, ("x", "y"), escape_bound=1.5)
+    with pytest.raises(ValueError, match=r"reaches \|x\| = 1.73, beyond the escape bound 1.5"):
+        check_region(box, "--region", 2, ("x", "y"), escape_bound=1.5, base=(1.0,))
+    with pytest.raises(ValueError, match="the box -1e\\+300:1e\\+300,-0.5:1 reaches"):  # no overflow
+        check_region(((-1e300, 1e300), (-0.5, 1.0)), "--region", 2, ("x", "y"), escape_bound=1e6)

@@ -118,7 +118,7 @@ def check_region(region, flag: str, n_axes: int, names, escape_bound: float | No
     if escape_bound is not None:
         far = math.hypot(*(max(abs(lo), abs(hi)) for lo, hi in region), *base)
         if not far <= escape_bound:
-            raise ValueError(f"{flag}={','.join(f'{lo:g}:{hi:g}' for lo, hi in region)} reaches |x| = {far:.3g}, "
+            raise ValueError(f"{flag}: the box {','.join(f'{lo:g}:{hi:g}' for lo, hi in region)} reaches |x| = {far:.3g}, "
                              f"beyond the escape bound {escape_bound:g} (a state farther out counts as escaped): "
                              f"keep the box within |x| <= {escape_bound:g}.")
 
