@@ -10,6 +10,7 @@ state outside the box or non-finite goes.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -18,6 +19,8 @@ __all__ = ["CellGrid", "PAPER_REGION"]
 
 PAPER_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0))
 """The paper's studied region D (eq. 10) over x1, x2, x3."""
+MAX_CELLS = 2**62
+"""Most cells a grid may have: cell numbers (and the sink, one more) are int64."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +55,10 @@ class CellGrid:
                 raise ValueError(f"CellGrid: axis {a} needs finite bounds with upper > lower, got [{lo}, {hi}].")
             if int(n) != n or n < 1:
                 raise ValueError(f"CellGrid: axis {a} needs a positive integer number of cells, got {n}.")
+        if math.prod(int(n) for n in self.counts) > MAX_CELLS:
+            raise ValueError(f"CellGrid: counts {tuple(int(n) for n in self.counts)} give "
+                             f"{math.prod(int(n) for n in self.counts):.3g} cells; at most {MAX_CELLS:.3g} can be "
+                             "numbered.")
         if not np.all(np.isfinite(self.base)):
             raise ValueError("CellGrid: base state must be finite.")
         if self.names and len(self.names) != dim:
@@ -95,7 +102,7 @@ class CellGrid:
     @property
     def n_cells(self) -> int:
         """Number of regular cells; the sink cell is numbered ``n_cells``."""
-        return int(np.prod(self.counts))
+        return math.prod(int(n) for n in self.counts)
 
     @property
     def sink(self) -> int:
@@ -116,7 +123,16 @@ class CellGrid:
         return lo + h * (np.arange(self.counts[j]) + 0.5)
 
     def centres(self, cells: np.ndarray | None = None) -> np.ndarray:
-        """Full states ``(n, dim)`` at the centres of ``cells`` (default: all, in index order)."""
+        """Full states ``(n, dim)`` at the centres of ``cells`` (default: all, in index order).
+
+        ``ValueError`` naming the grid's counts when the centres of every cell would not
+        fit in memory (:func:`jaxgear._checks.check_memory`), before anything is allocated.
+        """
+        if cells is None:
+            from ._checks import check_memory
+
+            check_memory("CellGrid counts", self.counts, self.n_cells, 8 * (self.dim + len(self.axes) + 1),
+                         "cell centres")
         cells = np.arange(self.n_cells) if cells is None else np.asarray(cells)
         multi = np.unravel_index(cells, self.counts)
         out = np.tile(np.asarray(self.base, dtype=float), (cells.size, 1))

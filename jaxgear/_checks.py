@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from collections.abc import Iterable
 from typing import Any
 
 import jax
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article"]
+__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article",
+           "physical_memory", "check_memory"]
 
 
 def article(word: str) -> str:
@@ -52,8 +54,8 @@ def check_number(value: Any, name: str, minimum: float | None = None, maximum: f
     low = minimum is not None and (v <= minimum if strict_min else v < minimum)
     high = maximum is not None and (v >= maximum if strict_max else v > maximum)
     if low or high:
-        raise ValueError(f"{name}={v:g} is out of range: it must be"
-                         f"{_range_text(minimum, maximum, strict_min, strict_max)[1:] or ' finite'}.")
+        raise ValueError(f"{name}={v:g} is out of range: it must be "
+                         f"{_range_text(minimum, maximum, strict_min, strict_max)[1:] or 'finite'}.")
     return v
 
 
@@ -92,13 +94,65 @@ def check_finite_array(value: Any, name: str, *, ndim: int | None = None, last: 
     return a
 
 
+def physical_memory() -> int:
+    """Bytes of memory this process may use: the machine's physical memory
+    (``os.sysconf``; 8 GiB where unknown), or the smaller limit of its control group
+    (a container's ``memory.max``)."""
+    try:
+        total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        total = 0
+    total = total if total > 0 else 8 << 30
+    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            with open(limit) as f:
+                value = f.read().strip()
+        except OSError:
+            continue
+        if value.isdigit() and 0 < int(value) < total:
+            total = int(value)
+    return total
+
+
+def _bytes_text(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def check_memory(name: str, value: Any, count: int, unit_bytes: float, what: str) -> int:
+    """``count`` if ``count`` units of ``what`` (cells, values, seeds) at ``unit_bytes``
+    bytes each fit in half of this machine's physical memory (:func:`physical_memory`);
+    otherwise ``ValueError`` naming ``name``, its ``value``, the memory it would need and
+    the largest count that fits (checked before any work: no allocation, no minutes of
+    silence before a failure)."""
+    total = physical_memory()
+    budget = total // 2
+    need = float(count) * float(unit_bytes)
+    if need > budget:
+        most = int(budget // max(float(unit_bytes), 1.0))
+        raise ValueError(f"{name}={_show(value) if not isinstance(value, str) else value}: {count:,} {what} need "
+                         f"about {_bytes_text(need)}, more than half of this machine's memory "
+                         f"({_bytes_text(total)}); at most {most:,} {what} fit.")
+    return count
+
+
+def _bound(x) -> str:
+    """A bound as written: integers in full (2147483647, not 2.14748e+09)."""
+    if isinstance(x, numbers.Integral) and not isinstance(x, bool):
+        return str(int(x))
+    return f"{x:g}"
+
+
 def _range_text(lo, hi, strict_lo: bool = False, strict_hi: bool = False) -> str:
     if lo is not None and hi is not None:
-        return f" in {'(' if strict_lo else '['}{lo:g}, {hi:g}{')' if strict_hi else ']'}"
+        return f" in {'(' if strict_lo else '['}{_bound(lo)}, {_bound(hi)}{')' if strict_hi else ']'}"
     if lo is not None:
-        return f" {'>' if strict_lo else '>='} {lo:g}"
+        return f" {'>' if strict_lo else '>='} {_bound(lo)}"
     if hi is not None:
-        return f" {'<' if strict_hi else '<='} {hi:g}"
+        return f" {'<' if strict_hi else '<='} {_bound(hi)}"
     return ""
 
 

@@ -17,7 +17,11 @@ point, or its parent folder is not writable) the files are moved in one by one, 
 atomically, and the command's stale files are removed afterwards: every file is whole,
 but a kill during those few renames can leave a mix.
 
-One run per output folder at a time.
+Several runs may share one output folder: each staging folder is named with its owner's
+process id and holds a lock file (``.jaxgear-owner``, the pid, locked with ``flock``
+while the run lasts), and the start-up clean-up removes only staging folders whose owner
+is gone (the lock is free, or without a lock file the pid is not alive). Each run swaps
+in its own whole result; the last to finish wins.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import ctypes
 import errno
 import fnmatch
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Iterable
@@ -35,14 +40,83 @@ from ._io import TMP_PREFIX, remove_stale_temporaries
 
 __all__ = ["OutputFolder", "check_output_folder"]
 
+try:
+    import fcntl
+except ImportError:  # not POSIX: the pid alone tells whether the owner runs
+    fcntl = None
+
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
+OWNER_FILE = ".jaxgear-owner"
+"""Lock file of a staging folder: its owner's pid, ``flock``-ed while the owner runs."""
+_PID = re.compile(r"\.run-(\d+)-[a-z0-9_]+(?:\.old)?$")  # the last .run-PID-XXXXXXXX of the name
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (``os.kill(pid, 0)``; one of another user counts)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def owner_alive(folder: Path) -> bool:
+    """Whether the run that made the staging folder ``folder`` still runs: its lock file
+    is locked, or, without a lock file (a folder just made, or where ``flock`` is missing),
+    the pid in its name is alive. Folders of neither kind (older versions) have no owner."""
+    lock = Path(folder) / OWNER_FILE
+    if fcntl is not None:
+        try:
+            fd = os.open(lock, os.O_RDONLY)
+        except FileNotFoundError:
+            fd = None
+        except OSError:  # unreadable: not ours to judge, keep it
+            return True
+        if fd is not None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except OSError as exc:
+                return exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES)
+            finally:
+                os.close(fd)  # closing releases the probe's own lock
+            return False
+    m = _PID.search(Path(folder).name)
+    if m is None and lock.is_file():
+        try:
+            m = re.match(r"\s*(\d+)", lock.read_text())
+        except OSError:
+            return True
+    return m is not None and _pid_alive(int(m.group(1)))
+
+
+def _take_lock(folder: Path):
+    """Write this process's pid into ``folder``'s lock file and lock it (the descriptor,
+    to be closed when the run ends; ``None`` where ``flock`` is missing)."""
+    fd = os.open(folder / OWNER_FILE, os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        os.write(fd, f"{os.getpid()}\n".encode())
+        if fcntl is None:
+            os.close(fd)
+            return None
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
 
 
 def check_output_folder(path, name: str = "--out") -> Path:
     """``path`` as a ``Path`` if it can be an output folder: not an existing file, and
-    its nearest existing ancestor is a writable folder (``ValueError`` naming ``name``
-    otherwise). Nothing is created."""
+    its nearest existing ancestor is a folder where a folder can be made (``ValueError``
+    naming ``name`` otherwise). Nothing is left behind (an empty probe folder is made and
+    removed at once)."""
     if not isinstance(path, (str, os.PathLike)) or not str(path).strip():
         raise ValueError(f"{name}={path!r} must name a folder.")
     p = Path(path)
@@ -55,6 +129,15 @@ def check_output_folder(path, name: str = "--out") -> Path:
         raise ValueError(f"{name}={str(p)!r}: {anc} is a file, so the folder cannot be created.")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise ValueError(f"{name}={str(p)!r} is not writable ({anc} does not allow writing).")
+    try:  # permissions are not all (/proc, a read-only mount): try a folder there, removed at once
+        probe = tempfile.mkdtemp(prefix=f"{TMP_PREFIX}probe-{os.getpid()}-", dir=anc)
+    except OSError as exc:
+        raise ValueError(f"{name}={str(p)!r} cannot be written: no folder can be made in {anc} "
+                         f"({exc.strerror or exc}).") from None
+    try:
+        os.rmdir(probe)
+    except OSError:  # already removed (another run's clean-up of --out)
+        pass
     return p
 
 
@@ -116,6 +199,7 @@ class OutputFolder:
         self.create = create
         self.work: Path | None = None
         self.swap = False
+        self._lock = None
 
     # ---------------------------------------------------------------- helpers
     def _prefix(self) -> str:
@@ -138,11 +222,12 @@ class OutputFolder:
         parent = self.path.parent
         if not parent.is_dir():
             return
-        olds = sorted(p for p in parent.glob(f"{self._prefix()}*.old") if p.is_dir())
+        olds = sorted(p for p in parent.glob(f"{self._prefix()}*.old") if p.is_dir() and not owner_alive(p))
         if olds and not self.path.exists():
             os.rename(olds[-1], self.path)
         for p in parent.glob(f"{self._prefix()}*"):
-            shutil.rmtree(p, ignore_errors=True)
+            if not owner_alive(p):  # a running run's staging folder is left to it
+                shutil.rmtree(p, ignore_errors=True)
 
     # ---------------------------------------------------------------- protocol
     def __enter__(self) -> Path:
@@ -159,11 +244,13 @@ class OutputFolder:
             if folder.is_dir() and not folder.is_symlink():
                 remove_stale_temporaries(folder)
                 for p in folder.glob(f"{TMP_PREFIX}*"):
-                    shutil.rmtree(p, ignore_errors=True)
+                    if p.is_dir() and not owner_alive(p):
+                        shutil.rmtree(p, ignore_errors=True)
         host = self.path.parent if self.swap else self.path
         host.mkdir(parents=True, exist_ok=True)
-        try:
-            self.work = Path(tempfile.mkdtemp(prefix=self._prefix(), dir=host))
+        try:  # the pid in the name marks the folder as taken until the lock file is in place
+            self.work = Path(tempfile.mkdtemp(prefix=f"{self._prefix()}{os.getpid()}-", dir=host))
+            self._lock = _take_lock(self.work)
         except OSError as exc:
             raise ValueError(f"--out={str(self.path)!r} is not writable ({exc.strerror}).") from None
         mode = (os.stat(self.path).st_mode & 0o7777) if self.path.is_dir() else 0o777 & ~_umask()
@@ -171,14 +258,22 @@ class OutputFolder:
         return self.work
 
     def __exit__(self, kind, exc, tb) -> bool:
-        if kind is not None:
-            shutil.rmtree(self.work, ignore_errors=True)
+        try:
+            if kind is not None:
+                shutil.rmtree(self.work, ignore_errors=True)
+                return False
+            # the lock file is not part of the result; the pid in the name keeps the folder
+            # this run's until the swap
+            (self.work / OWNER_FILE).unlink(missing_ok=True)
+            if self.swap:
+                self._commit_swap()
+            else:
+                self._commit_in_place()
             return False
-        if self.swap:
-            self._commit_swap()
-        else:
-            self._commit_in_place()
-        return False
+        finally:
+            if self._lock is not None:
+                os.close(self._lock)
+                self._lock = None
 
     def _commit_swap(self) -> None:
         work, path = self.work, self.path

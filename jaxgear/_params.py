@@ -57,6 +57,9 @@ PARAM_NAMES = (
 )
 """Canonical names of the numeric dimensionless parameters (model document §4), in the
 order they are written out."""
+MAX_MAGNITUDE = 1e12
+"""Largest magnitude of a dimensionless parameter: the model's terms (products of two
+parameters and the state, ``Omega**2`` times an error amplitude) stay finite below it."""
 # Names that may hold one value per planet (arrays of length N).
 PER_PLANET_NAMES = (
     "mu_p", "kappa_sp_mean", "kappa_sp_amp", "kappa_rp_mean", "kappa_rp_amp",
@@ -164,6 +167,9 @@ class GearParams(eqx.Module):
         for name, v in leaves.items():
             a = np.asarray(v)
             require(bool(np.all(np.isfinite(a))), name, a, "must be finite (no NaN or inf)")
+            require(bool(np.all(np.abs(a) <= MAX_MAGNITUDE)), name, a,
+                    f"its magnitude must be <= {MAX_MAGNITUDE:g} (a dimensionless parameter; larger values "
+                    "overflow the model's terms)")
             if name in PER_PLANET_NAMES:
                 require(a.ndim == 0 or a.shape[-1:] == (self.N,) or a.ndim > 1, name, a,
                          f"a scalar or one value per planet (shape ({self.N},))")

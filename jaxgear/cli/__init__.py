@@ -25,17 +25,32 @@ COMMANDS = (
 
 
 class Parser(argparse.ArgumentParser):
-    """``argparse`` parser that takes a value beginning with ``-`` and a digit or a dot
-    (``--region -25:25,...``, ``--from -5,0,8,0``, ``--values -0.1:0.1:3``,
-    ``--tol -inf``) as the option's value, not as an unknown option: no option of
-    jaxgear starts with a digit. Sub-command parsers inherit the class."""
+    """``argparse`` parser that takes a value beginning with ``-`` (``--region -25:25,...``,
+    ``--from -5,0,8,0``, ``--values -0.1:0.1:3``, ``--tol -inf``, ``--out -dash``) as the
+    option's value, not as an unknown option, unless it names an option of the command
+    (``--out -h``: the message says to write ``--out=-h``). Sub-command parsers inherit
+    the class."""
 
     def __init__(self, *args, **kw):
         super().__init__(*args, **kw)
         self._negative_number_matcher = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
 
+    def _parse_optional(self, arg_string):
+        """A word beginning with ``-`` that names no option of this parser (``-dash``,
+        ``-o``) is a value (``--out -dash``), not an unknown option; alone, it is still
+        refused as an unrecognised argument."""
+        found = super()._parse_optional(arg_string)
+        # Python < 3.12.7: None or one (action, ...) tuple; later: None or a list of them
+        options = found if isinstance(found, list) else [found] if found is not None else []
+        if options and all(o[0] is None for o in options) and arg_string.startswith("-"):
+            return None
+        return found
+
     def error(self, message):
         """One line: what is wrong and where the usage is (not the whole usage text)."""
+        m = re.match(r"argument (--[\w-]+)(?:/[^:]*)?: expected one argument$", message)
+        if m:  # the value is missing, or begins with '-' and is an option's name (--out -h)
+            message += f" (write a value that begins with '-' as {m.group(1)}=-VALUE)"
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

@@ -14,7 +14,18 @@ from pathlib import Path
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from .common import add_param_options, check_counts, check_options, check_region, parse_counts, parse_ranges
+from .common import (
+    add_param_options,
+    cell_bytes,
+    check_counts,
+    check_options,
+    check_region,
+    check_work,
+    escape_bound,
+    parse_counts,
+    parse_ranges,
+    with_uncertainty_line,
+)
 
 OWNED = ("result.nc", "summary.json", "compare.json", "domains.png", "shares.png", "domains_3d.png",
          "attractors.png")
@@ -73,7 +84,7 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-OPTIONS = (("mapping_steps", "--mapping-steps", int, 0), ("steps_per_period", "--steps-per-period", int, 1),
+OPTIONS = (("mapping_steps", "--mapping-steps", int, 1), ("steps_per_period", "--steps-per-period", int, 1),
            ("max_period", "--max-period", int, 1), ("chunk_size", "--chunk-size", int, 1),
            ("uncertainty_samples", "--uncertainty-samples", int, 0), ("compare", "--compare", int, 1))
 
@@ -107,6 +118,21 @@ def run(args) -> int:
     return _run_checked(args)
 
 
+def _check_work(args, method, counts) -> None:
+    """The cells (and a lane's history of states) fit in memory, before anything is
+    allocated."""
+    import math
+
+    from .._model import REDUCED
+
+    n_cells = math.prod(counts)
+    check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(REDUCED.dim), "cells")
+    if hasattr(method, "round_periods"):  # the lane pool: every lane keeps a ring of its last 2 K + 1 states
+        lanes = min(int(method.chunk_size), n_cells)  # and a streak per period k <= K (K = --max-period)
+        check_work("--max-period", method.max_period, int(method.max_period),
+                   2 * lanes * (2 * REDUCED.dim * 8 + 8), f"periods of history in each of {lanes:,} lanes")
+
+
 def _run_checked(args) -> int:
     from .._cells import CellGrid
     from .._model import REDUCED
@@ -123,8 +149,10 @@ def _run_checked(args) -> int:
     counts = args.grid or default.counts
     n_axes = len(default.axes)
     where = f"(--method {args.method} grids {', '.join(default.axis_names)})"
-    check_region(region, f"--region {where}", n_axes, default.axis_names)
+    check_region(region, f"--region {where}", n_axes, default.axis_names, escape_bound(method),
+                 [b for i, b in enumerate(default.base) if i not in default.axes])
     check_counts(counts, f"--grid {where}", n_axes, default.axis_names)
+    _check_work(args, method, counts)
     grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
     method.check(REDUCED, grid)
 
@@ -159,7 +187,7 @@ def _analyze(args, params, grid, method, out: Path | None) -> list[str]:
                             uncertainty=args.uncertainty_samples)
     result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
     print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
-    print(result.table())
+    print(with_uncertainty_line(result.table(), result))
     written = []
     if out is not None:
         result.save(out / "result.nc")

@@ -3,19 +3,45 @@
 from __future__ import annotations
 
 import argparse
+import math
 
-from .._checks import check_int, check_number
+from .._checks import check_int, check_memory, check_number
 
 
 def add_param_options(p: argparse.ArgumentParser) -> None:
     """``--preset`` and repeatable ``--set NAME=VALUE``."""
     p.add_argument("--preset", default="paper", help="gear-set preset (default: paper, the set of paper §4.1)")
     p.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="NAME=VALUE",
+        "--set", dest="overrides", action=SetOnce, default=[], metavar="NAME=VALUE",
         help="override a parameter: a physical GearSet field (face_width=0.03, input_rpm=3000, "
         "k_sp_amp=2e8, ...) or a canonical dimensionless name (Omega=0.9, b_sp=4, "
-        "kappa_sp_amp=0.3, ...); per-planet values as comma lists; repeatable",
+        "kappa_sp_amp=0.3, ...); per-planet values as comma lists; repeatable, each parameter once",
     )
+
+
+def _set_fields(item: str) -> set[str]:
+    """The parameter fields a ``--set NAME=VALUE`` item sets (an alias sets several)."""
+    from .._params import PARAM_ALIASES
+
+    name = item.split("=", 1)[0].strip().removeprefix("dimless.")
+    return set(PARAM_ALIASES.get(name, (name,))) if "=" in item and name else set()
+
+
+class SetOnce(argparse.Action):
+    """``--set NAME=VALUE``, repeatable, each parameter at most once: a second value for
+    a parameter (directly or through an alias: ``b`` sets ``b_sp`` and ``b_rp``) is
+    refused instead of silently replacing the first."""
+
+    def __call__(self, parser, namespace, value, option_string=None):
+        items = list(getattr(namespace, self.dest, None) or [])
+        new = _set_fields(value)
+        for old in items:
+            both = sorted(_set_fields(old) & new)
+            if both:
+                raise argparse.ArgumentError(
+                    self, f"{', '.join(both)} is set twice ({old.strip()} and {value.strip()}); give each "
+                    "parameter once")
+        setattr(namespace, self.dest, [*items, value])
 
 
 def parse_ranges(text: str) -> tuple[tuple[float, float], ...]:
@@ -54,29 +80,47 @@ def parse_counts(text: str) -> tuple[int, ...]:
     return vals
 
 
+INT_MAX = 2**31 - 1
+"""Largest value of an integer option (counts, steps, periods, seeds): the compiled
+kernels count their loops and draw their seeds in 32-bit integers."""
+
+
 def check_options(args, spec) -> None:
     """Check numeric options before any work: ``spec`` rows ``(dest, flag, kind, minimum)``
-    with ``kind`` ``int`` or ``float`` (``float`` minimums are exclusive); options left
-    unset (``None``) are skipped. ``ValueError`` names the option, its value and the range."""
+    with ``kind`` ``int`` (at most :data:`INT_MAX`) or ``float`` (``float`` minimums are
+    exclusive); options left unset (``None``) are skipped. ``ValueError`` names the
+    option, its value and the range."""
     for dest, flag, kind, minimum in spec:
         value = getattr(args, dest, None)
         if value is None:
             continue
         if kind is int:
-            check_int(value, flag, minimum)
+            check_int(value, flag, minimum, INT_MAX)
         else:
             check_number(value, flag, minimum, strict_min=minimum is not None)
 
 
-def check_region(region, flag: str, n_axes: int, names) -> None:
-    """``--region`` ranges: ``n_axes`` of them, finite, ``LO < HI``."""
-    import math
+ESCAPE_BOUND = 1e6
+"""Norm of the state beyond which the analyses and sweeps count a motion as escaped (the
+default ``escape_bound`` of :class:`jaxgear.Direct` and of the sweeps)."""
 
+
+def check_region(region, flag: str, n_axes: int, names, escape_bound: float | None = None, base=()) -> None:
+    """``--region`` ranges: ``n_axes`` of them, finite, ``LO < HI``; with ``escape_bound``,
+    the farthest corner of the box (with the fixed coordinates ``base``) lies within it,
+    since a start beyond the bound counts as escaped at once (every such cell would go
+    to the sink)."""
     if len(region) != n_axes:
         raise ValueError(f"{flag} needs {n_axes} LO:HI ranges ({', '.join(names)}), got {len(region)}.")
     for name, (lo, hi) in zip(names, region):
         if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
             raise ValueError(f"{flag}: the range of {name} is {lo:g}:{hi:g}; it must be finite with LO < HI.")
+    if escape_bound is not None:
+        far = math.hypot(*(max(abs(lo), abs(hi)) for lo, hi in region), *base)
+        if not far <= escape_bound:
+            raise ValueError(f"{flag}: the box {','.join(f'{lo:g}:{hi:g}' for lo, hi in region)} reaches |x| = {far:.3g}, "
+                             f"beyond the escape bound {escape_bound:g} (a state farther out counts as escaped): "
+                             f"keep the box within |x| <= {escape_bound:g}.")
 
 
 def check_point(point, flag: str, dim: int) -> None:
@@ -95,3 +139,116 @@ def check_counts(counts, flag: str, n_axes: int, names) -> None:
     if len(counts) != n_axes:
         raise ValueError(f"{flag} needs {n_axes} counts ({', '.join(names)}), got {len(counts)}: "
                          f"{','.join(map(str, counts))}.")
+
+
+def check_work(flag: str, value, count: int, unit_bytes: float, what: str) -> None:
+    """Refuse before any work an option whose ``count`` units of ``what`` (values, seeds,
+    cells) would need about ``count * unit_bytes`` bytes, more than the machine can hold
+    (:func:`jaxgear._checks.check_memory`); the message names ``flag``, its ``value``
+    and the largest count that fits."""
+    check_memory(flag, value, count, unit_bytes, what)
+
+
+def cell_bytes(dim: int) -> int:
+    """Memory estimate per cell of an analysis of a ``dim``-dimensional state: about eight
+    float64 states (the centre, its image or lane state, the pool's lane buffers, the
+    labels and the result's arrays)."""
+    return 64 * int(dim)
+
+
+def escape_bound(method) -> float:
+    """The escape bound of an analysis method (:data:`ESCAPE_BOUND` where it has none)."""
+    bound = getattr(method, "escape_bound", None)
+    return ESCAPE_BOUND if bound is None else float(bound)
+
+
+NOT_MEASURED = "label uncertainty: not measured: no resolved cells"
+"""Printed instead of a label uncertainty where no cell was resolved (0 % would read as
+certainty: the sampled cells stay unresolved with any step)."""
+
+
+def shares_uncertainty_line(result, where: str = "values") -> str:
+    """The label-uncertainty line of a basin sweep or map over the ``where`` (values,
+    points) with resolved cells only; :data:`NOT_MEASURED` where none has any; "" where
+    none was measured."""
+    import numpy as np
+
+    step = np.asarray(result.uncertainty_step, dtype=float).reshape(-1)
+    start = np.asarray(result.uncertainty_start, dtype=float).reshape(-1)
+    unresolved = np.asarray(result.unresolved_share, dtype=float).reshape(-1)
+    measured = np.isfinite(step)
+    if not measured.any():
+        return ""
+    ok = measured & (unresolved < 1.0)
+    if not ok.any():
+        return NOT_MEASURED
+    line = (f"label uncertainty: at most {100 * step[ok].max():.1f} % of the sampled cells change label with a "
+            f"refined step, {100 * start[ok].max():.1f} % when their start moves (mean {100 * step[ok].mean():.1f} "
+            f"% and {100 * start[ok].mean():.1f} % over the {int(ok.sum())} {where} with resolved cells)")
+    skipped = int((measured & ~ok).sum())
+    return line + (f"; not measured at {skipped} {where}: no resolved cells" if skipped else "")
+
+
+def with_uncertainty_line(text: str, result, where: str = "values") -> str:
+    """``text``, a result's table that may end in its label-uncertainty line, with that
+    line replaced: for a :class:`~jaxgear.GlobalResult` without resolved cells (every
+    cell unresolved) by :data:`NOT_MEASURED`; for a basin sweep or map by
+    :func:`shares_uncertainty_line`."""
+    if hasattr(result, "uncertainty_note"):  # a basin sweep or map: one measurement per value
+        note = result.uncertainty_note(where)
+        if not note or not text.endswith("\n" + note):
+            return text
+        return text[: len(text) - len(note)] + shares_uncertainty_line(result, where)
+    from ..analysis._result import describe_uncertainty
+
+    note = describe_uncertainty(getattr(result, "uncertainty", None) or {})
+    if note and int(result.n_unresolved) >= int(result.n_cells) and text.endswith(note):
+        return text[: len(text) - len(note)] + NOT_MEASURED
+    return text
+
+
+def check_resume(out, now: dict) -> None:
+    """Refuse, before the command's header, to resume the sweep saved in ``out`` (its
+    ``manifest.json``) when one of the settings in ``now`` differs from the saved one;
+    the message names every differing field with both values. Settings not in ``now``,
+    and a missing or unreadable manifest, are left to the sweep functions."""
+    import json
+    from pathlib import Path
+
+    from ..sweep._checkpoint import diff_settings, mismatch_message
+
+    man = Path(out) / "manifest.json"
+    try:
+        saved = json.loads(man.read_text())
+    except (OSError, ValueError):
+        return
+    if not isinstance(saved, dict) or not isinstance(saved.get("settings"), dict):
+        return
+    old = {k: v for k, v in saved["settings"].items() if k in now}
+    diff = diff_settings(old, {k: v for k, v in now.items() if k in old})
+    if old and diff != "format":
+        raise ValueError(mismatch_message(Path(out), saved.get("kind", "?"), diff, "--restart"))
+
+
+SHOT_BYTES = 8 * 8 * (4 + 4 * 4)
+"""Memory estimate of one seed shot for one period (``jaxgear shoot``): about eight
+float64 copies of the state and its 4 x 4 Jacobian (Newton's iterate, step and trial,
+the saved shot)."""
+VERIFY_TRIALS = 4
+"""Perturbed starts of each orbit's check by direct integration (``verify_orbit``'s default)."""
+
+
+def check_shoot_work(args, periods) -> None:
+    """``jaxgear shoot``: the seeds (``--random``, ``--from``) times the periods shot from
+    each, and the periods of ``--verify``, fit in memory (``--seeds-from`` seeds come from
+    a result that was itself held in memory)."""
+    from .._model import REDUCED
+
+    periods = list(periods or [1])
+    per_seed = len(periods) * SHOT_BYTES + 8 * REDUCED.dim * sum(periods)  # + the orbits' points
+    if args.random is not None:
+        check_work("--random", args.random, args.random, per_seed, f"seeds ({len(periods):,} period(s) each)")
+    if args.points:
+        check_work("--from", f"{len(args.points)} points", len(args.points), per_seed, "seeds")
+    if args.verify is not None:  # each check keeps the trajectories of its trials, one point per period
+        check_work("--verify", args.verify, args.verify, VERIFY_TRIALS * REDUCED.dim * 8 * 4, "periods")

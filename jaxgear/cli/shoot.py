@@ -19,7 +19,18 @@ import numpy as np
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from .common import add_param_options, check_options, check_point, check_region, parse_point, parse_ranges
+from .common import (
+    INT_MAX,
+    SHOT_BYTES,
+    add_param_options,
+    check_options,
+    check_point,
+    check_region,
+    check_shoot_work,
+    check_work,
+    parse_point,
+    parse_ranges,
+)
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
 DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
@@ -89,14 +100,21 @@ def add_parser(sub) -> None:
 
 
 def _parse_periods(text: str) -> list[int]:
-    """``"1-8"`` -> ``[1, ..., 8]``; ``"4"`` -> ``[4]``."""
+    """``"1-8"`` -> ``[1, ..., 8]``; ``"4"`` -> ``[4]`` (``argparse.ArgumentTypeError``, a
+    one-line refusal naming ``--periods``, for anything else)."""
+    import argparse
+
     try:
         lo, _, hi = text.partition("-")
         a, b = int(lo), int(hi or lo)
     except ValueError:
-        raise ValueError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
-    if not 1 <= a <= b:
-        raise ValueError(f"--periods needs 1 <= K1 <= K2, got {text!r}")
+        raise argparse.ArgumentTypeError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
+    if not 1 <= a <= b <= INT_MAX:
+        raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2 <= {INT_MAX}, got {text!r}")
+    try:
+        check_work("--periods", text, b - a + 1, SHOT_BYTES, "periods per seed")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return list(range(a, b + 1))
 
 
@@ -116,9 +134,14 @@ SEARCH_DEFAULTS = dict(solver="damped-newton", segments=1, deflation_rounds=0, t
 
 def _load_seeds(path: str):
     from .._io import load
+    from .._model import REDUCED
     from ..shooting import seeds_from_result
 
     result = load(path, expected="GlobalResult")
+    system = getattr(result, "system", None)
+    if system and system != REDUCED.name:  # "" in files written before the name was saved
+        raise ValueError(f"--seeds-from {path} holds a result of another system ({system!r}); jaxgear shoot "
+                         f"shoots on the gear model ({REDUCED.name!r}): give a result of jaxgear analyze.")
     return result, seeds_from_result(result)
 
 
@@ -151,7 +174,7 @@ def run(args) -> int:
     check_options(args, OPTIONS)
     periods = args.period
     for k in periods or ():
-        check_int(k, "--period", 1)
+        check_int(k, "--period", 1, INT_MAX)
     if args.points:
         for pt in args.points:
             check_point(pt, "--from", REDUCED.dim)
@@ -163,6 +186,7 @@ def run(args) -> int:
         if periods is not None:
             raise ValueError("give either --period (repeatable) or --periods K1-K2, not both.")
         periods = args.periods
+    check_shoot_work(args, periods)
     if not (args.points or args.seeds_from or args.random is not None):
         raise ValueError("give seeds: --from, --seeds-from or --random N.")
     if args.random is not None and (args.points or (args.seeds_from and args.periods is None)):

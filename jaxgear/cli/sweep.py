@@ -18,14 +18,21 @@ from pathlib import Path
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
 from .common import (
+    ESCAPE_BOUND,
     add_param_options,
+    cell_bytes,
     check_counts,
     check_options,
     check_point,
     check_region,
+    check_resume,
+    check_work,
+    escape_bound,
     parse_counts,
     parse_point,
     parse_ranges,
+    shares_uncertainty_line,
+    with_uncertainty_line,
 )
 
 KINDS = ("bifurcation", "basins", "continuation")
@@ -44,9 +51,9 @@ SECTION_COUNTS = (20, 12, 24)
 STROBOSCOPIC_COUNTS = (10, 6, 12, 6)
 
 
-def _values(text: str, flag: str = "--values"):
-    """``START:STOP:COUNT`` -> ``COUNT`` evenly spaced values (``ValueError`` with the reason,
-    naming the option ``flag``)."""
+def _range(text: str, flag: str = "--values") -> tuple[float, float, int]:
+    """``START:STOP:COUNT`` -> ``(START, STOP, COUNT)``, checked (``ValueError`` with the
+    reason, naming the option ``flag``); no value is made yet."""
     import numpy as np
 
     parts = text.split(":")
@@ -66,7 +73,8 @@ def _values(text: str, flag: str = "--values"):
         raise ValueError(f"{flag}: COUNT must be >= 2 (got {count}); a sweep needs at least two values.")
     if start == stop:
         raise ValueError(f"{flag}: the range {start:g}:{stop:g} is empty (START = STOP).")
-    return start, stop, count, np.linspace(start, stop, count)
+    check_work(flag, text, count, 8 * 8, "values")  # the values and their per-value results, at the least
+    return start, stop, count
 
 
 def add_parser(sub) -> None:
@@ -155,7 +163,7 @@ def run(args) -> int:
             raise ValueError("--distributed runs --kind basins and bifurcation (continuation runs in one process).")
         initialize()
     # every option is checked before any integration and before --out is touched
-    start, stop, count, values = _values(args.values)
+    start, stop, count = _range(args.values)
     check_options(args, OPTIONS)
     if args.kind != "continuation" and start > stop:
         raise ValueError(f"--values={args.values}: START must be < STOP for --kind {args.kind} (the values are "
@@ -167,7 +175,7 @@ def run(args) -> int:
     if args.param2 is not None:
         if args.kind != "basins":
             raise ValueError(f"--param2 makes a basin map: it needs --kind basins (got --kind {args.kind}).")
-        start2, stop2, _, values2 = _values(args.values2, "--values2")
+        start2, stop2, count2 = _range(args.values2, "--values2")
         if start2 > stop2:
             raise ValueError(f"--values2={args.values2}: START must be < STOP.")
     if args.uncertainty_samples is not None and args.kind != "basins":
@@ -177,7 +185,18 @@ def run(args) -> int:
         check_point(pt, "--from", REDUCED.dim)
     xyz = REDUCED.state_names[:3]
     if args.kind == "bifurcation" and args.region is not None:
-        check_region(args.region, "--region (the box of the starts)", 3, xyz)
+        check_region(args.region, "--region (the box of the starts)", 3, xyz, ESCAPE_BOUND)
+    if args.kind == "bifurcation":
+        _check_bifurcation_work(args, count)
+    elif args.kind == "continuation":
+        per_step = 8 * REDUCED.dim * (args.period + 4) * 4  # points of the orbit, multipliers, tangent
+        check_work("--max-steps", args.max_steps, args.max_steps, per_step, "continuation steps")
+    else:  # the grid as given or the method's default (checked against the method below)
+        counts = args.grid or (STROBOSCOPIC_COUNTS if args.method == "stroboscopic" else SECTION_COUNTS)
+        _check_basins_work(args, counts, count * (1 if args.values2 is None else count2))
+    values = np.linspace(start, stop, count)
+    if args.values2 is not None:
+        values2 = np.linspace(start2, stop2, count2)
     check_output_folder(args.out)
     _, params = resolve_params(args.preset, args.overrides)
     if not params.is_uniform:
@@ -201,7 +220,8 @@ def run(args) -> int:
         where = f"(--method {args.method} grids {', '.join(names)})"
         region = args.region or tuple(zip(default.lower, default.upper))
         counts = args.grid or (STROBOSCOPIC_COUNTS if len(names) == 4 else SECTION_COUNTS)
-        check_region(region, f"--region {where}", len(names), names)
+        check_region(region, f"--region {where}", len(names), names, escape_bound(method),
+                     [b for i, b in enumerate(default.base) if i not in default.axes])
         check_counts(counts, f"--grid {where}", len(names), names)
         grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
         method.check(REDUCED, grid)
@@ -212,6 +232,9 @@ def run(args) -> int:
                 raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
             check_values(REDUCED, params, (args.param, args.param2),
                          np.stack(np.meshgrid(values, values2), axis=-1).reshape(-1, 2))
+    if args.kind != "continuation" and not args.restart:  # a sweep of other settings in --out: refused now
+        check_resume(args.out, _resume_settings(args, params, values, values2, integ,
+                                                *((grid, method) if args.kind == "basins" else (None, None))))
     head = f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values)"
     if values2 is not None:
         head += f" x {args.param2} = {values2[0]:g} .. {values2[-1]:g} ({len(values2)} values)"
@@ -240,6 +263,70 @@ def run(args) -> int:
                            method if args.kind == "basins" else None, values2)
     print(f"\nwrote {', '.join(files)} to {args.out}/")
     return 0
+
+
+def _check_bifurcation_work(args, count: int) -> None:
+    """The points a bifurcation sweep keeps (values x starts x record x directions) fit in
+    memory."""
+    from .._model import REDUCED
+
+    n_dirs = {"independent": 1, "up": 1, "down": 1, "both": 2, "all": 3}[args.direction]
+    starts = len(args.points) if args.points else (16 if args.starts is None else args.starts)
+    point = 8 * REDUCED.dim * n_dirs  # one recorded point of one start at one value, every direction
+    flag, value = ("--from", f"{starts} points") if args.points else ("--starts", starts)
+    checks = {  # option: (its count over a typical one, the check with the others as given)
+        "--values": (count / 41, lambda: check_work(
+            "--values", args.values, count, point * starts * args.record,
+            f"values ({starts:,} starts x {args.record:,} recorded points x {n_dirs} direction(s))")),
+        flag: (starts / 16, lambda: check_work(flag, value, starts, point * count * args.record,
+                                               f"starts ({count:,} values x {args.record:,} recorded points)")),
+        "--record": (args.record / 64, lambda: check_work(
+            "--record", args.record, args.record, point * count * starts,
+            f"recorded points ({count:,} values x {starts:,} starts)")),
+    }
+    for _, check in sorted(checks.values(), key=lambda c: -c[0]):  # the most unusual count is named
+        check()
+
+
+def _check_basins_work(args, counts, n_values: int) -> None:
+    """The cells of one analysis, and the labels kept for every value (every cell of every
+    value at once with --one-pool), fit in memory."""
+    import math
+
+    from .._model import REDUCED
+
+    n_cells = math.prod(counts)
+    check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(REDUCED.dim), "cells per value")
+    per_value = n_cells * (cell_bytes(REDUCED.dim) if args.one_pool else 16)
+    flag, text = ("--values2", args.values2) if args.values2 is not None else ("--values", args.values)
+    check_work(flag, text, n_values, per_value, f"values of {n_cells:,} cells"
+               + (" in one pool" if args.one_pool else "") + (" (both parameters)" if args.values2 else ""))
+
+
+def _resume_settings(args, params, values, values2, integ, grid, method) -> dict:
+    """The settings of the sweep this command would resume that the command line decides
+    alone (as the sweep functions record them in the manifest of --out), for
+    :func:`~jaxgear.cli.common.check_resume`; the sweep functions compare every setting
+    again when they open the folder."""
+    from .._model import REDUCED
+    from .._params import params_to_dict
+    from ..sweep._basins import uncertainty_setting
+
+    s = {"system": REDUCED.name, "params": params_to_dict(params)}
+    if args.kind == "bifurcation":
+        s.update(kind="bifurcation", param=args.param, values=values.tolist(), starts=_starts(args).tolist(),
+                 transient=int(args.transient), record=int(args.record), direction=args.direction,
+                 max_period=int(args.max_period), integrator=integ.to_dict())
+        return s
+    s.update(grid=grid.to_dict(), method=method.to_dict())
+    if args.uncertainty_samples is not None:
+        s.update(uncertainty_setting(args.uncertainty_samples))
+    if values2 is None:
+        s.update(kind="basins", param=args.param, values=values.tolist())
+    else:
+        s.update(kind="basin_map", param_x=args.param, values_x=values.tolist(), param_y=args.param2,
+                 values_y=values2.tolist())
+    return s
 
 
 def _starts(args):
@@ -310,16 +397,16 @@ def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, 
         if values2 is None:
             print(result.shares_table())
             print()
-            print(result.table())
-            if result.uncertainty_note():
-                print(result.uncertainty_note())
+            print(with_uncertainty_line(result.table(), result))
+            if shares_uncertainty_line(result):
+                print(shares_uncertainty_line(result))
             name = "basins.nc"
             if not args.no_figures:
                 from ..plotting import plot_basin_shares
 
                 figs = {"shares.png": plot_basin_shares(result)}
         else:
-            print(result.table())
+            print(with_uncertainty_line(result.table(), result, "points"))
             name = "basin_map.nc"
             if not args.no_figures:
                 from ..plotting import plot_basin_map

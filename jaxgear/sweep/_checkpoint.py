@@ -13,7 +13,8 @@ import numpy as np
 from .._checks import article
 from .._io import atomic_write
 
-__all__ = ["Checkpoint", "diff_settings", "open_shared_checkpoint", "checkpoint_on_zero", "shared_block"]
+__all__ = ["Checkpoint", "diff_settings", "mismatch_message", "open_shared_checkpoint", "checkpoint_on_zero",
+           "shared_block"]
 
 
 def _hash(settings: Mapping) -> str:
@@ -45,10 +46,8 @@ class Checkpoint:
                 restart = True
             if old.get("hash") != key:
                 if not restart:
-                    diff = diff_settings(old.get("settings", {}), settings)
-                    raise ValueError(f"{self.dir} holds {article(str(old.get('kind', '?')))} sweep with other settings "
-                                     f"(differing: {diff}); resume it with the same settings, use another "
-                                     "output folder, or restart (restart=True, --restart) to discard it.")
+                    raise ValueError(mismatch_message(self.dir, old.get("kind", "?"),
+                                                      diff_settings(old.get("settings", {}), settings)))
                 shutil.rmtree(self.parts, ignore_errors=True)
         elif self.parts.exists() and restart:
             shutil.rmtree(self.parts, ignore_errors=True)
@@ -174,17 +173,57 @@ def _save_part(path: Path, arrays: dict) -> None:
     atomic_write(path, write)
 
 
+def mismatch_message(folder, kind, diff: str, restart: str = "restart=True, --restart") -> str:
+    """The refusal to resume the ``kind`` sweep saved in ``folder`` with other settings
+    (``diff``: :func:`diff_settings`; ``restart``: how to discard it)."""
+    return (f"{folder} holds {article(str(kind))} sweep with other settings (differing: {diff}); resume it with "
+            f"the same settings, use another output folder, or restart ({restart}) to discard it.")
+
+
+def _show_json(value) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _diff(a, b, where: str, out: list) -> None:
+    """Append ``where: A saved vs B now`` for every leaf where ``a`` and ``b`` differ:
+    dictionaries are compared key by key and lists of one length item by item (so the
+    field that differs is named, not cut off), unless the whole value is short."""
+    if a == b:
+        return
+    whole = f"{where}: {_show_json(a)} saved vs {_show_json(b)} now"
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            if k not in a or k not in b:
+                out.append(f"{where}.{k}: {_show_json(a.get(k)) if k in a else '(none)'} saved vs "
+                           f"{_show_json(b.get(k)) if k in b else '(none)'} now")
+            else:
+                _diff(a[k], b[k], f"{where}.{k}", out)
+    elif (isinstance(a, list) and isinstance(b, list) and len(a) == len(b)
+          and len(json.dumps(a)) + len(json.dumps(b)) > 80):
+        items: list[str] = []
+        for i, (x, y) in enumerate(zip(a, b)):
+            _diff(x, y, f"{where}[{i}]", items)
+        if len(items) > 3:  # many entries (a range of values): how many, and the first
+            items = [f"{where}: {sum(x != y for x, y in zip(a, b))} of {len(a)} entries differ, first "
+                     + items[0]]
+        out.extend(items)
+    elif isinstance(a, list) and isinstance(b, list) and len(a) != len(b) and len(json.dumps(a)) > 80:
+        out.append(f"{where}: {len(a)} entries saved vs {len(b)} now")
+    else:
+        out.append(whole)
+
+
 def diff_settings(a: Mapping, b: Mapping) -> str:
     """The settings that differ between ``a`` (saved) and ``b`` (now), compared as JSON
-    (so a tuple now and the list it was saved as are equal)."""
+    (so a tuple now and the list it was saved as are equal): every differing field by its
+    path (``grid.counts``, ``params.c_sp``, ``values[3]``) with both values."""
     a, b = (json.loads(json.dumps(x, sort_keys=True)) for x in (a, b))
-    keys = sorted(set(a) | set(b))
-    out = []
-    for k in keys:
-        if a.get(k) != b.get(k):
-            va, vb = json.dumps(a.get(k)), json.dumps(b.get(k))
-            short = lambda s: s if len(s) <= 40 else s[:37] + "..."
-            out.append(f"{k}: {short(va)} saved vs {short(vb)} now")
+    out: list[str] = []
+    for k in sorted(set(a) | set(b)):
+        if k not in a or k not in b:
+            out.append(f"{k}: {_show_json(a.get(k)) if k in a else '(none)'} saved vs "
+                       f"{_show_json(b.get(k)) if k in b else '(none)'} now")
+        else:
+            _diff(a[k], b[k], k, out)
     return "; ".join(out) or "format"
-
-
