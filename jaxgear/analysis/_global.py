@@ -16,6 +16,7 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_bool, check_int
+from .._lyapunov import classify_attractor, lyapunov_spectrum
 from .._matching import group_attractors, minimal_cycle
 from .._params import params_to_dict
 from .._system import ForcedSystem, check_system
@@ -176,6 +177,31 @@ def _section_index(system, method):
     return method.section_index if method.section_index is not None else system.section_index
 
 
+LYAPUNOV_PERIODS = 200
+"""Forcing periods over which each attractor's Lyapunov exponents are measured
+(:func:`attractor_exponents`; weighted Birkhoff averages converge fast on cycles and tori,
+and the error estimate says how far a chaotic attractor's value is known)."""
+LYAPUNOV_STRETCHES = 4
+"""Independent stretches of those periods (the spread of their estimates is the error)."""
+
+
+def attractor_exponents(system, params, attractors, integrator, n_exponents: int = 2):
+    """Type and Lyapunov exponents of each attractor ``(points, period)`` (a cycle's points,
+    or the cloud of an attractor of boxes): the exponents of the stroboscopic map from its
+    first point (:func:`~jaxgear.lyapunov_spectrum`, :data:`LYAPUNOV_PERIODS` periods in
+    :data:`LYAPUNOV_STRETCHES` stretches, all attractors in one batch) and its
+    :class:`~jaxgear.AttractorType` (:func:`~jaxgear.classify_attractor`; a cycle is
+    periodic). Returns ``(types (A,), [(exponents, errors, kaplan_yorke)])``."""
+    if not attractors:
+        return np.zeros(0, np.int32), []
+    x0 = np.stack([np.asarray(p, np.float64)[0] for p, _ in attractors])
+    sp = lyapunov_spectrum(system, params, x0, n_exponents=min(int(n_exponents), system.dim),
+                           periods=LYAPUNOV_PERIODS, transient=0, stretches=LYAPUNOV_STRETCHES, integrator=integrator)
+    kinds = classify_attractor(sp, period=np.array([max(int(k), 0) for _, k in attractors]))
+    exps, errs, ky = (np.asarray(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
+    return np.asarray(kinds), [(exps[i], errs[i], ky[i]) for i in range(len(attractors))]
+
+
 def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime) -> GlobalResult:
     """Attractors sorted by decreasing share (ids renumbered 0..A-1) and the result object."""
     n = grid.n_cells
@@ -191,6 +217,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     periodic = [old for old in order if raw[old][1] > 0]
     mus = dict(zip(periodic, largest_multipliers(system, params, [(raw[old][0], raw[old][1]) for old in periodic],
                                                  method.integrator, method.max_period)))
+    kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator)
     for new, old in enumerate(order):
         pts, per, res = raw[old]
         sec = secs[new]
@@ -198,7 +225,9 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
                                     section_points=np.asarray(sec, dtype=float), cell_count=int(counts[old]),
                                     share=float(counts[old]) / n, residual=float(res),
                                     periodic_cells=np.asarray(cycles[old], dtype=np.int64),
-                                    multiplier=float(mus.get(old, np.nan))))
+                                    multiplier=float(mus.get(old, np.nan)), kind=int(kinds[new]),
+                                    exponents=spectra[new][0], exponent_errors=spectra[new][1],
+                                    kaplan_yorke=float(spectra[new][2])))
     return GlobalResult(
         labels=out_labels.reshape(grid.counts).astype(np.int64), attractors=tuple(attractors), grid=grid,
         method=method.name, settings=method.to_dict(), params=params_to_dict(params), system=system.name,

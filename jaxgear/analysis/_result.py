@@ -10,6 +10,7 @@ import numpy as np
 from .._cells import CellGrid
 from .._codec import array_field, items_field, later_field, result_type
 from .._format import format_table
+from .._lyapunov import AttractorType
 
 __all__ = ["Attractor", "GlobalResult", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
 
@@ -30,9 +31,10 @@ class Attractor:
 
     Attributes:
         id: its label in :attr:`GlobalResult.labels`.
-        period: k of P-k on the stroboscopic map (minimal); 0 when no period <= the
-            detection limit was found (quasi-periodic, chaotic or a very slow transient).
-        points: ``(k, dim)`` stroboscopic points (state at phase 0 of k successive periods).
+        period: k of P-k on the stroboscopic map (minimal); 0 for an attractor that repeats
+            no point (quasi-periodic or chaotic: found by recurrences on a fine partition).
+        points: ``(k, dim)`` stroboscopic points (state at phase 0 of k successive
+            periods); for period 0 a cloud of a few thousand points on the attractor.
         section_points: ``(m, dim)`` crossings of Σ over the k periods (empty when the
             method has no section).
         cell_count: cells in its domain of attraction (including its periodic cells).
@@ -43,6 +45,14 @@ class Attractor:
             cycle is asymptotically stable when it is below 1), from central differences
             of the k-fold stroboscopic map at its first point; NaN for period 0 (and in
             files written before it was recorded).
+        kind: its :class:`~jaxgear.AttractorType` (periodic, quasi-periodic, chaotic), from
+            its period and Lyapunov exponents (-1, unknown, where not measured).
+        exponents: ``(n,)`` its largest Lyapunov exponents of the stroboscopic map, per
+            forcing period (:func:`~jaxgear.lyapunov_spectrum`; NaN where not measured);
+            per unit time they are these divided by the forcing period.
+        exponent_errors: ``(n,)`` their standard errors (spread over independent stretches).
+        kaplan_yorke: the Kaplan-Yorke dimension of the attractor of the map (0 for a
+            stable cycle; NaN where not measured).
     """
 
     id: int
@@ -54,19 +64,49 @@ class Attractor:
     residual: float = float("nan")
     periodic_cells: np.ndarray = array_field(("cycle_cell",), default_factory=lambda: np.zeros(0, np.int64))
     multiplier: float = later_field(float("nan"))
+    kind: int = later_field(-1)
+    exponents: np.ndarray = array_field(("exponent",), later=True, default_factory=lambda: np.zeros(0))
+    exponent_errors: np.ndarray = array_field(("exponent",), later=True, default_factory=lambda: np.zeros(0))
+    kaplan_yorke: float = later_field(float("nan"))
+
+    @property
+    def type(self) -> AttractorType:
+        """Its :class:`~jaxgear.AttractorType`."""
+        return AttractorType(int(self.kind))
+
+    @property
+    def largest_exponent(self) -> float:
+        """Its largest Lyapunov exponent per forcing period (NaN where not measured)."""
+        return float(self.exponents[0]) if len(self.exponents) else float("nan")
 
     @property
     def label(self) -> str:
-        """``"P-k"``, or ``"non-periodic"`` for period 0."""
-        return f"P-{self.period}" if self.period > 0 else "non-periodic"
+        """``"P-k"``, ``"quasi-periodic"`` or ``"chaotic"`` (``"aperiodic"`` for period 0
+        of unknown type)."""
+        if self.period > 0:
+            return f"P-{self.period}"
+        return {AttractorType.CHAOTIC: "chaotic", AttractorType.QUASI_PERIODIC: "quasi-periodic"}.get(
+            self.type, "aperiodic")
 
     def summary(self) -> dict[str, Any]:
         """JSON-able description (points as lists)."""
-        return dict(id=self.id, period=self.period, label=self.label, cell_count=self.cell_count,
+        return dict(id=self.id, period=self.period, label=self.label, type=self.type.name.lower(),
+                    exponents=np.asarray(self.exponents).tolist(),
+                    exponent_errors=np.asarray(self.exponent_errors).tolist(), kaplan_yorke=self.kaplan_yorke,
+                    cell_count=self.cell_count,
                     share=self.share, residual=self.residual, multiplier=self.multiplier,
                     points=np.asarray(self.points).tolist(),
                     section_points=np.asarray(self.section_points).tolist(),
                     n_periodic_cells=int(len(self.periodic_cells)))
+
+
+def _exponent_text(a: Attractor) -> str:
+    """``lambda_1 +- error`` per forcing period, ``-`` where not measured."""
+    lam = a.largest_exponent
+    if not np.isfinite(lam):
+        return "-"
+    err = float(a.exponent_errors[0]) if len(a.exponent_errors) else float("nan")
+    return f"{lam:+.4f}" + (f" +- {err:.1e}" if np.isfinite(err) else "")
 
 
 def describe_uncertainty(u: dict) -> str:
@@ -146,15 +186,16 @@ class GlobalResult:
         for a in self.attractors:
             p = np.asarray(a.points)[0] if len(a.points) else np.full(len(self.state_names), np.nan)
             rows.append((a.id, a.label, a.cell_count, f"{100 * a.share:.2f} %",
-                         "[" + ", ".join(f"{v:.4f}" for v in p) + "]", f"{a.residual:.1e}",
-                         "-" if np.isnan(a.multiplier) else f"{a.multiplier:.4f}"))
+                         "[" + ", ".join(f"{v:.4f}" for v in p) + "]",
+                         "-" if np.isnan(a.residual) else f"{a.residual:.1e}",
+                         "-" if np.isnan(a.multiplier) else f"{a.multiplier:.4f}", _exponent_text(a)))
         rows.append(("sink", "-", self.n_sink, f"{100 * self.n_sink / self.n_cells:.2f} %",
-                     "left the region/blew up", "", ""))
+                     "left the region/blew up", "", "", ""))
         if self.n_unresolved:
             rows.append(("unresolved", "-", self.n_unresolved, f"{100 * self.n_unresolved / self.n_cells:.2f} %",
-                         "fate not decided", "", ""))
-        head = ("id", "period", "cells", "share", "stroboscopic point (" + ", ".join(self.state_names) + ")",
-                "residual", "max |mu|")
+                         "fate not decided", "", "", ""))
+        head = ("id", "type", "cells", "share", "stroboscopic point (" + ", ".join(self.state_names) + ")",
+                "residual", "max |mu|", "lambda_1 /period")
         note = describe_uncertainty(self.uncertainty)
         return format_table(rows, head) + ("\n" + note if note else "")
 

@@ -66,14 +66,17 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
     dX = np.zeros_like(X)
     dX[:, list(grid.axes)] = rng.uniform(-1.0, 1.0, (S, len(grid.axes))) * perturbation * grid.cell_size
     refs = [np.asarray(labels).reshape(-1)[cells] for labels in labels_list]
-    knowns = [[(np.asarray(a.points), int(a.period)) for a in atts if 0 < int(a.period) <= direct.max_period]
+    # every attractor is known to the pools: cycles by their points, attractors of boxes
+    # (period 0) by their clouds, in the partition the analysis used
+    knowns = [[(np.asarray(a.points), int(a.period)) for a in atts if 0 <= int(a.period) <= direct.max_period]
               for atts in attractors_list]
-    idss = [np.array([a.id for a in atts if 0 < int(a.period) <= direct.max_period], dtype=np.int64)
+    idss = [np.array([a.id for a in atts if 0 <= int(a.period) <= direct.max_period], dtype=np.int64)
             for atts in attractors_list]
+    boxes = direct.boxes(grid.centres())
 
     def relabel(X, integrator, name):
         pooled = run_pools(system, params_list, [X] * len(params_list), integrator, direct.pool_options(pilot=0),
-                           attractors=knowns, progress=progress, label=name)
+                           boxes=boxes, attractors=knowns, progress=progress, label=name)
         outs = []
         for (lab, _, _), ids in zip(pooled, idss):
             out = lab.copy()
