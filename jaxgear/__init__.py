@@ -51,6 +51,8 @@ from ._examples import (
     SpurPairParams as SpurPairParams,
     PARAM_DUFFING as PARAM_DUFFING,
     ParamDuffingParams as ParamDuffingParams,
+    VAN_DER_POL as VAN_DER_POL,
+    VanDerPolParams as VanDerPolParams,
 )
 from .integrate import (
     AbstractIntegrator as AbstractIntegrator,
@@ -67,6 +69,13 @@ from ._poincare import (
     sample_trajectory as sample_trajectory,
 )
 from ._cells import CellGrid as CellGrid, PAPER_REGION as PAPER_REGION
+from ._lyapunov import (
+    AttractorType as AttractorType,
+    LyapunovSpectrum as LyapunovSpectrum,
+    lyapunov_spectrum as lyapunov_spectrum,
+    classify_attractor as classify_attractor,
+    kaplan_yorke as kaplan_yorke,
+)
 from .analysis import (
     AbstractGlobalMethod as AbstractGlobalMethod,
     Direct as Direct,
@@ -84,6 +93,13 @@ from .analysis import (
     GlobalResult as GlobalResult,
     SINK as SINK,
     UNRESOLVED as UNRESOLVED,
+    RecurrenceOptions as RecurrenceOptions,
+    PoolOptions as PoolOptions,
+    basin_entropy as basin_entropy,
+    BasinEntropy as BasinEntropy,
+    uncertainty_exponent as uncertainty_exponent,
+    UncertaintyExponent as UncertaintyExponent,
+    uncertain_fraction as uncertain_fraction,
 )
 from .shooting import (
     periodic_orbit as periodic_orbit,

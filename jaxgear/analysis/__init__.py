@@ -10,6 +10,8 @@
 - :mod:`._diagnostics` — warnings when a result looks unreliable;
 - :mod:`._compare` — agreement with direct integration on a sample of cells;
 - :mod:`._uncertainty` — :func:`label_uncertainty`, how far a result's labels can be trusted;
+- :mod:`._recurrence` — attractors of every type by recurrences on a fine partition;
+- :mod:`._fractal` — basin entropy and the uncertainty exponent of a basin map;
 - :mod:`._lanes`, :mod:`._placement`, :mod:`._pool` — the direct method's device-resident lane
   pool: its device program, where it runs, and its host driver.
 """
@@ -26,8 +28,10 @@ from ._global import (
 )
 from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
+from ._fractal import BasinEntropy, UncertaintyExponent, basin_entropy, uncertain_fraction, uncertainty_exponent
 from ._orbits import detect_period
 from ._pool import PoolOptions
+from ._recurrence import RecurrenceOptions, RecurrenceResult, classify_by_recurrence
 from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
@@ -36,4 +40,6 @@ __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCel
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
            "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty", "DEFAULT_SAMPLES",
-           "with_label_uncertainty", "PoolOptions"]
+           "with_label_uncertainty", "PoolOptions", "RecurrenceOptions", "RecurrenceResult",
+           "classify_by_recurrence", "basin_entropy", "BasinEntropy", "uncertainty_exponent", "UncertaintyExponent",
+           "uncertain_fraction"]
