@@ -19,6 +19,7 @@
 from ._cellmap import PoincareCellMap, StroboscopicCellMap, cell_images
 from ._compare import compare_with_direct
 from ._direct import Direct
+from ._fractal import BasinEntropy, UncertaintyExponent, basin_entropy, uncertain_fraction, uncertainty_exponent
 from ._global import (
                       DEFAULT_METHOD,
                       analyze_global,
@@ -28,7 +29,6 @@ from ._global import (
 )
 from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
-from ._fractal import BasinEntropy, UncertaintyExponent, basin_entropy, uncertain_fraction, uncertainty_exponent
 from ._orbits import detect_period
 from ._pool import PoolOptions
 from ._recurrence import RecurrenceOptions, RecurrenceResult, classify_by_recurrence
