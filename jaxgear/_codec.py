@@ -17,8 +17,9 @@ decide how they are stored, from their type annotations and their ``metadata``:
   JSON attribute; ``custom_field(encode, decode)`` converts values that are not
   JSON-able (a user's parameter pytree).
 
-Every file carries ``jaxgear_type`` (the class name, what :func:`jaxgear.load`
-dispatches on), ``jaxgear_format`` (:data:`FORMAT`) and a ``jaxgear_schema`` attribute
+A result type registers itself where it is defined (``@result_type`` on the class);
+this module imports no result module. Every file carries ``jaxgear_type`` (the class
+name, what :func:`jaxgear.load` dispatches on), ``jaxgear_format`` (:data:`FORMAT`) and a ``jaxgear_schema`` attribute
 with what the annotations cannot say (``None`` fields, dictionary keys, lengths). A
 result type may add labelled coordinates (grid-cell centres, parameter values, state
 names) with a ``_coords()`` method; they are written for readers and ignored on load.
@@ -35,13 +36,16 @@ import typing
 from collections.abc import Callable
 from typing import Any
 
+import jax
 import numpy as np
+
+from ._checks import article
 
 __all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
            "RESULT_TYPES"]
 
 FORMAT = 2
-"""Layout version written into every file (files of jaxgear 0.1 have none)."""
+"""Layout version written into every file (files of jaxgear 0.1 have none and are not read)."""
 
 RESULT_TYPES: dict[str, type] = {}
 """Registered result types by class name."""
@@ -93,8 +97,6 @@ def _strip_optional(hint):
 
 
 def _is_array_hint(hint) -> bool:
-    import jax
-
     hint = _strip_optional(hint)
     return hint is np.ndarray or hint is jax.Array
 
@@ -399,8 +401,6 @@ def from_dataset(ds, expected: str | None = None):
     """Rebuild the result stored in ``ds`` (written by :func:`to_dataset`)."""
     kind = str(ds.attrs.get("jaxgear_type", ""))
     if expected is not None and kind != expected:
-        from ._checks import article
-
         raise ValueError(f"the file holds {article(kind) if kind else 'a file of another kind'}, "
                          f"not {article(expected)}; "
                          "open it with jaxgear.load(path).")

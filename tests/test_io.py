@@ -3,6 +3,7 @@ metadata equal), ``jaxgear.load`` dispatches on the file's type, files open as l
 arrays with xarray, and every plotting function draws from a loaded result without
 integrating anything (the integration kernels are replaced by functions that raise)."""
 
+import ast
 import dataclasses
 import json
 import warnings
@@ -209,60 +210,60 @@ def test_save_overwrites_atomically(duffing_results, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["r.nc"]
 
 
+def test_summary_json(duffing_results, tmp_path):
+    """``summary.json``: everything but the per-cell labels, strict JSON, shares summing to 1."""
+    r = duffing_results["direct"]
+    s = json.loads(r.write_summary(tmp_path / "summary.json").read_text())
+    assert "labels" not in s and s["method"] == "direct" and s["n_cells"] == 30
+    assert abs(sum(s["shares"].values()) - 1) < 1e-12
+    assert [a["period"] for a in s["attractors"]] == [1, 1]
+    assert [a["cell_count"] for a in s["attractors"]] == [int(np.sum(r.labels == a.id)) for a in r.attractors]
+
+
 # ---------------------------------------------------------------- jaxgear.load
-LEGACY = Path(__file__).parent / "data" / "v0.1"
+def _registered_in_source() -> set[str]:
+    """Names of the classes decorated ``@result_type`` anywhere in the package source."""
+    names = set()
+    for path in Path(jg.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef) and any(
+                    (d.id if isinstance(d, ast.Name) else getattr(d, "attr", None)) == "result_type"
+                    for d in node.decorator_list):
+                names.add(node.name)
+    return names
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in LEGACY.glob("*.nc")))
-def test_files_of_version_0_1_still_load(name, tmp_path):
-    """Result files written by jaxgear 0.1 (the layout before the codec) load into today's
-    types with the values they held (recorded when they were written)."""
-    expected = json.loads((LEGACY / "expected.json").read_text())[name]
-    r = jg.load(LEGACY / name)
-    assert type(r).__name__ == expected["type"]
-    if expected["type"] == "GlobalResult":
-        assert np.asarray(r.labels).ravel().tolist() == expected["labels"]
-        assert [a.period for a in r.attractors] == expected["periods"]
-        assert [a.share for a in r.attractors] == expected["shares"]
-        assert [np.asarray(a.points).tolist() for a in r.attractors] == expected["points"]
-        assert r.method == expected["method"] and r.params == expected["params"]
-    elif expected["type"] == "OrbitSearch":
-        assert [o.period for o in r.orbits] == expected["periods"]
-        assert [o.points.tolist() for o in r.orbits] == expected["points"]
-        assert [np.abs(o.multipliers).tolist() for o in r.orbits] == expected["mult_abs"]
-        assert {str(k): np.asarray(v.status).tolist() for k, v in r.shots.items()} == expected["status"]
-    elif expected["type"] == "BifurcationDiagram":
-        assert r.period.tolist() == expected["period"] and r.values.tolist() == expected["values"]
-        assert list(r.directions) == expected["directions"]
-    elif expected["type"] == "BasinSweep":
-        assert r.shares.tolist() == expected["shares"] and r.labels.ravel().tolist() == expected["labels"]
-    elif expected["type"] == "ParameterMap":
-        assert r.period.tolist() == expected["period"] and r.n_attractors.tolist() == expected["n_attractors"]
-    elif expected["type"] == "Branch":
-        assert r.values.tolist() == expected["values"] and r.status == expected["status"]
-        assert [b.kind for b in r.bifurcations] == expected["kinds"]
-    elif expected["type"] == "DesignResult":
-        assert r.status == expected["status"] and r.history["objective"].tolist() == expected["objective"]
-        assert float(r.params.kappa) == expected["kappa"] and r.orbit.points.tolist() == expected["orbit_points"]
-    # a file of the old layout saves again in today's and round-trips exactly
-    assert_same(jg.load(r.save(tmp_path / name)), r)
-
-
-def test_every_result_type_round_trips_through_the_codec(tmp_path):
-    """Each registered result type, built with fields of every kind the codec handles
-    (None arrays, empty tuples, nested records, complex numbers, dicts of arrays), saves and
-    loads exactly."""
-    from jaxgear import _registry  # noqa: F401
+def test_every_result_type_is_registered_and_exported():
+    """Each class the source decorates with ``@result_type`` is known to the codec once
+    ``jaxgear`` is imported (so :func:`jaxgear.load` finds it by the name in the file, the
+    loader importing no result module itself) and exported from the package."""
     from jaxgear._codec import RESULT_TYPES
 
-    assert {"GlobalResult", "OrbitSearch", "BifurcationDiagram", "BasinSweep", "ParameterMap", "Branch",
-            "DesignResult"} <= set(RESULT_TYPES)
+    declared = _registered_in_source()
+    assert {"GlobalResult", "OrbitSearch", "BifurcationDiagram", "BasinSweep", "BasinMap", "ParameterMap",
+            "Branch", "DesignResult"} <= declared
+    assert set(RESULT_TYPES) == declared
     for name, cls in RESULT_TYPES.items():
         assert getattr(jg, name) is cls, f"{name} is not exported from jaxgear"
-    for f in LEGACY.glob("*.nc"):  # one instance of every type, saved and loaded again
-        r = jg.load(f)
-        q = jg.load(r.save(tmp_path / f.name))
-        assert_same(q, r, f.name)
+
+
+def test_files_of_version_0_1_are_refused_with_the_reason(duffing_results, tmp_path):
+    """A file of jaxgear 0.1 (its type recorded, no ``jaxgear_format``; or, older, no type
+    at all but the labels and grid of a global analysis) is refused in one line that says
+    so and what to do; it is not mistaken for another program's file."""
+    with xr.open_dataset(duffing_results["direct"].save(tmp_path / "r.nc"), engine="h5netcdf") as ds:
+        old = ds.load()
+    del old.attrs["jaxgear_format"]
+    old.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
+    with pytest.raises(ValueError, match=r"holds a GlobalResult written by jaxgear 0\.1.*re-run") as info:
+        jg.load(tmp_path / "old.nc")
+    assert "\n" not in str(info.value)
+    older = old.copy()
+    del older.attrs["jaxgear_type"]
+    older.attrs["grid"] = "{}"
+    older.to_netcdf(tmp_path / "older.nc", engine="h5netcdf")
+    with pytest.raises(ValueError, match=r"GlobalResult written by jaxgear 0\.1"):
+        jg.load(tmp_path / "older.nc")
 
 
 def test_load_errors_name_the_problem(duffing_results, tmp_path):

@@ -10,6 +10,7 @@ import numpy as np
 from .._cells import CellGrid
 from .._codec import array_field, items_field, later_field, result_type
 from .._format import format_table
+from .._io import save_result, write_json
 
 __all__ = ["Attractor", "GlobalResult", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
 
@@ -185,12 +186,8 @@ class GlobalResult:
     def save(self, path):
         """Write the result to a netCDF file atomically; reload with :func:`jaxgear.load`,
         open with ``xarray.open_dataset``."""
-        from .._io import save_result
-
         return save_result(self, path)
 
     def write_summary(self, path):
         """Write ``summary.json`` (everything but the per-cell labels; strict JSON)."""
-        from .._io import write_json
-
         return write_json(self.summary(), path)

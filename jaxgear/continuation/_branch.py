@@ -9,6 +9,7 @@ import numpy as np
 
 from .._codec import array_field, items_field, result_type
 from .._format import format_table
+from .._io import save_result
 from .._system import state_index
 
 __all__ = ["Branch", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS"]
@@ -197,8 +198,6 @@ class Branch:
 
     def save(self, path):
         """Write the branch to a netCDF file atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 

@@ -52,6 +52,7 @@ from .._batching import progress_bar
 from .._checks import check_int
 from .._codec import custom_field, result_type
 from .._format import format_table
+from .._io import save_result
 from .._params import get_field, params_from_dict, params_to_dict, params_type_name, set_fields
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
@@ -152,8 +153,6 @@ class DesignResult:
 
     def save(self, path):
         """Write a netCDF file atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 

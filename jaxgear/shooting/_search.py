@@ -15,6 +15,7 @@ from .._checks import check_int, check_number
 from .._codec import array_field, items_field, result_type
 from .._devices import local_devices, shard_rows
 from .._format import format_table
+from .._io import save_result, write_json
 from .._matching import group_attractors, same_attractor
 from .._params import params_to_dict
 from .._poincare import sample_trajectory, stroboscopic_map
@@ -25,6 +26,7 @@ from ..integrate import AbstractIntegrator, resolve_integrator
 from ._floquet import Instability, check_period
 from ._orbit import ShootResult, check_newton_options, check_solver_options, default_solver, shoot_kernel
 from ._solve import check_segments
+from ._verify import verify_orbit
 
 __all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
 
@@ -183,14 +185,10 @@ class OrbitSearch:
 
     def save(self, path):
         """Write the search to a netCDF file atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
     def write_summary(self, path):
         """Write :meth:`summary` as strict JSON."""
-        from .._io import write_json
-
         return write_json(self.summary(), path)
 
 
@@ -395,8 +393,6 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
         ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
             options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
     """
-    from ._verify import verify_orbit
-
     start = time.perf_counter()
     if isinstance(seeds, Mapping):
         groups = {check_period(k): np.asarray(v, dtype=float) for k, v in seeds.items()}

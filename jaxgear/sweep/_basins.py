@@ -23,8 +23,11 @@ from .._checks import check_bool, check_int, check_number
 from .._codec import array_field, result_type
 from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
+from .._io import load, save_result
 from .._matching import match_attractors
+from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
+from .._presets import paper_params
 from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod, analyze_global, analyze_global_values, default_method, method_from_name
@@ -148,8 +151,6 @@ class GlobalShares:
 
     def save(self, path):
         """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
@@ -375,9 +376,6 @@ def resolve_basin_options(system, params, method, grid, match_tol):
     :func:`~jaxgear.basin_map`: ``(system, params, method, grid, match_tol)`` (the reduced
     model and the paper's parameters, the default method and its grid, and 5 % of the
     grid's diagonal when not given)."""
-    from .._model import REDUCED
-    from .._presets import paper_params
-
     if system is None:
         system = REDUCED
     if params is None:
@@ -411,8 +409,6 @@ def analyses_at(system, params_list, grid, method, out, kind: str, settings: dic
     several JAX processes, process ``p`` of ``P`` computes the indices ``i % P == p``
     (``out`` required) and reads the others' parts. A progress bar (``label``) counts
     the finished ones."""
-    from .._io import load
-
     n = len(params_list)
     n_proc, me = process_count(), process_index()
     if n_proc > 1 and out is None:

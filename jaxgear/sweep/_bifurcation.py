@@ -28,7 +28,10 @@ from .._checks import check_bool, check_choice, check_int, check_number
 from .._codec import array_field, result_type
 from .._devices import cell_processes
 from .._format import format_table
+from .._io import save_result
+from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
+from .._presets import paper_params
 from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
@@ -213,16 +216,11 @@ class BifurcationDiagram:
 
     def save(self, path):
         """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
 def check_common(system, params, transient, record, max_period, tol, chunk_size):
     """Defaults (the gear model and the paper preset) and the checks shared by the sweeps."""
-    from .._model import REDUCED
-    from .._presets import paper_params
-
     if system is None:
         system = REDUCED
     if params is None:

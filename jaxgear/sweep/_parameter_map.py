@@ -14,6 +14,7 @@ from .._checks import check_choice
 from .._codec import array_field, result_type
 from .._devices import cell_processes
 from .._format import format_table
+from .._io import save_result
 from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem, check_system
 from .._version import __version__
@@ -110,8 +111,6 @@ class ParameterMap:
 
     def save(self, path):
         """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
