@@ -44,8 +44,10 @@ from ._checks import article
 __all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
            "RESULT_TYPES"]
 
-FORMAT = 2
-"""Layout version written into every file (files of jaxgear 0.1 have none and are not read)."""
+FORMAT = 3
+"""Layout version written into every file: 3 since results hold their method object and
+typed settings (2: the same with settings as dictionaries; files of jaxgear 0.1 have
+none and are not read)."""
 
 RESULT_TYPES: dict[str, type] = {}
 """Registered result types by class name."""

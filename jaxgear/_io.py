@@ -175,7 +175,11 @@ def load(path: str | Path, expected: str | None = None) -> Any:
                              f"{FORMAT}): upgrade jaxgear.")
     try:
         return from_dataset(ds, expected)
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    except (KeyError, TypeError) as exc:
+    except (KeyError, TypeError, ValueError) as exc:
+        if int(fmt) < FORMAT and not (isinstance(exc, ValueError) and "jaxgear.load(path)" in str(exc)):
+            raise NotAResultFile(f"{path} was written by an earlier development version of jaxgear (format {fmt}, "
+                                 f"before typed settings; this one writes {FORMAT}) and cannot be read: re-run "
+                                 "the analysis with this version.") from None
+        if isinstance(exc, ValueError):
+            raise ValueError(f"{path}: {exc}") from None
         raise NotAResultFile(f"not a jaxgear result file: {path} is missing {exc} of its layout.") from None

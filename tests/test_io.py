@@ -102,7 +102,7 @@ def paper_search():
 @pytest.mark.parametrize("method", ["direct", "stroboscopic", "poincare-like"])
 def test_global_result_round_trip_exact(duffing_results, method, tmp_path):
     r = duffing_results[method]
-    assert r.method == method and sorted(a.period for a in r.attractors) == [1, 1]
+    assert r.method.name == method and sorted(a.period for a in r.attractors) == [1, 1]
     path = r.save(tmp_path / "r.nc")
     assert_same(jg.load(path), r)
     assert_same(jg.load(path), r)
@@ -122,7 +122,7 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         np.testing.assert_array_equal(ds["x3"].values, r.grid.axis_centres(2))
         assert list(ds["state"].values) == ["x1", "x2", "x3", "x4"]
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
-        assert ds.attrs["jaxgear_format"] == 2
+        assert ds.attrs["jaxgear_format"] == 3
         for name, v in jg.paper_params().to_dict().items():  # the canonical set, one attribute each
             assert ds.attrs[f"param_{name}"] == v
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
@@ -137,7 +137,7 @@ def test_attractor_multipliers_are_those_of_shooting(duffing_results, paper_resu
     for r, system, params in cases:
         for a in r.attractors:
             mu = np.asarray(jg.floquet_multipliers(system, params, np.asarray(a.points)[0], period=a.period))
-            assert a.multiplier == pytest.approx(np.abs(mu).max(), abs=1e-4), (r.method, a.id)
+            assert a.multiplier == pytest.approx(np.abs(mu).max(), abs=1e-4), (r.method.name, a.id)
             assert a.multiplier < 1
     assert "max |mu|" in paper_result.table()
 
@@ -287,7 +287,7 @@ def test_load_errors_name_the_problem(duffing_results, tmp_path):
     xr.Dataset({"a": ("i", np.arange(3))}).to_netcdf(tmp_path / "foreign.nc", engine="h5netcdf")
     with pytest.raises(ValueError, match="another program"):
         jg.load(tmp_path / "foreign.nc")
-    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": 2}).to_netcdf(tmp_path / "bad.nc",
+    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": 3}).to_netcdf(tmp_path / "bad.nc",
                                                                                   engine="h5netcdf")
     with pytest.raises(ValueError, match="unknown jaxgear_type 'Nonsense'"):
         jg.load(tmp_path / "bad.nc")

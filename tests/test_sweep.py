@@ -349,7 +349,7 @@ def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method
             assert s.multiplier[i, g] == pytest.approx(a.multiplier, rel=1e-6)
         assert np.isnan(s.multiplier[i, ~s.present[i]]).all()
         assert s.sink_share[i] == r.n_sink / r.n_cells and s.unresolved_share[i] == r.n_unresolved / r.n_cells
-        assert s.uncertainty_step[i] == r.uncertainty["step"] and s.uncertainty_start[i] == r.uncertainty["start"]
+        assert s.uncertainty_step[i] == r.uncertainty.step and s.uncertainty_start[i] == r.uncertainty.start
 
 
 def test_basin_sweep_in_one_pool_is_each_value_alone():

@@ -28,12 +28,12 @@ from ._global import (
 from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
 from ._orbits import detect_period
-from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult
+from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult, LabelUncertainty
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
 __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCellMap", "analyze_global",
            "analyze_global_values",
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
-           "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
+           "detect_period", "GlobalResult", "Attractor", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty", "DEFAULT_SAMPLES",
            "with_label_uncertainty", "prepare_label_uncertainty", "prepare_analysis"]

@@ -10,7 +10,6 @@ from .._checks import check_int
 from .._matching import same_attractor
 from ..integrate import AbstractIntegrator
 from ._direct import Direct
-from ._method import method_from_dict
 from ._result import SINK, GlobalResult
 
 __all__ = ["compare_with_direct"]
@@ -45,7 +44,7 @@ def compare_with_direct(result: GlobalResult, system=None, params=None, *, n_sam
     if result.grid.dim != system.dim:
         raise ValueError(f"compare_with_direct: the result's grid has {result.grid.dim} coordinates, "
                          f"the system {system.dim}.")
-    direct = Direct.like(method_from_dict({**dict(result.settings), "name": result.method}), integrator)
+    direct = Direct.like(result.method, integrator)
     rng = np.random.default_rng(seed)
     n = result.n_cells
     cells = rng.choice(n, size=min(n_samples, n), replace=False)

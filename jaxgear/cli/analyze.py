@@ -235,6 +235,7 @@ def _figures(result, out, part: int = 0, parts: int = 1) -> list[str]:
     """Draw the analysis's figures into ``out``; with ``parts`` painters, the share
     ``part`` of them (the list is ordered so that alternate figures split the cost evenly:
     the slices and the 3D view cost the most)."""
+    from ..analysis import PoincareCellMap
     from ..plotting import plot_attractors, plot_domains, plot_domains_3d, plot_shares
 
     out = Path(out)
@@ -243,7 +244,7 @@ def _figures(result, out, part: int = 0, parts: int = 1) -> list[str]:
         figures.append(("domains_3d.png", lambda: plot_domains_3d(result)))
     figures.append(("shares.png", lambda: plot_shares(result)))
     if result.attractors:
-        figures.append(("attractors.png", lambda: plot_attractors(result, section=result.method == "poincare-like")))
+        figures.append(("attractors.png", lambda: plot_attractors(result, section=isinstance(result.method, PoincareCellMap))))
     names = []
     for name, plot in figures[part::parts]:
         save_figure(plot(), out / name, dpi=120)

@@ -475,8 +475,8 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
         out["labels"][i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
         out["sink_share"][i] = r.n_sink / r.n_cells
         out["unresolved_share"][i] = r.n_unresolved / r.n_cells
-        if r.uncertainty:
-            out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty["step"], r.uncertainty["start"]
+        if r.uncertainty is not None:
+            out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty.step, r.uncertainty.start
     return out
 
 
