@@ -42,7 +42,7 @@ import numpy as np
 from ._checks import article
 
 __all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
-           "RESULT_TYPES"]
+           "RESULT_TYPES", "plain"]
 
 FORMAT = 3
 """Layout version written into every file: 3 since results hold their method object and
@@ -82,6 +82,18 @@ def later_field(default, **kw):
 def custom_field(encode: Callable[[Any], Any], decode: Callable[[Any], Any], **kw):
     """A field stored as JSON through ``encode(value) -> JSON-able`` and ``decode(json) -> value``."""
     return dataclasses.field(metadata={"encode": encode, "decode": decode}, **kw)
+
+
+def plain(v):
+    """``v`` as JSON-able values, for summaries: a settings dataclass as a dict of its
+    fields, an object with ``to_dict`` (an integrator, a method) as that, tuples as lists."""
+    if hasattr(v, "to_dict"):
+        return v.to_dict()
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, (tuple, list)):
+        return [plain(x) for x in v]
+    return v
 
 
 # ------------------------------------------------------------------------ helpers
@@ -203,22 +215,19 @@ def _encode_value(w: _Writer, v, hint, meta, path, owner) -> None:
     if "encode" in meta:
         w.attrs[path] = _to_json(meta["encode"](v))
         return
+    if v is None:
+        w.schema[path] = {"none": True}
+        return
     if _is_array_hint(hint):
-        if v is None:
-            w.schema[path] = {"none": True}
-        else:
-            a = np.asarray(v)
-            w.array(path, _dims_for(meta, owner, path, a.ndim), a)
+        a = np.asarray(v)
+        w.array(path, _dims_for(meta, owner, path, a.ndim), a)
         return
     h = _strip_optional(hint)
     if "item_dim" in meta:
         _encode_items(w, tuple(v), typing.get_args(h)[0], meta["item_dim"], path)
         return
     if _is_record(h):
-        if v is None:
-            w.schema[path] = {"none": True}
-        else:
-            _encode_record(w, v, f"{path}__", owner)
+        _encode_record(w, v, f"{path}__", owner)
         return
     if typing.get_origin(h) is dict:
         vt = (typing.get_args(h) + (Any, Any))[1]
@@ -228,7 +237,7 @@ def _encode_value(w: _Writer, v, hint, meta, path, owner) -> None:
             for k, tag in zip(keys, _key_tags(keys)):
                 _encode_value(w, v[k], vt, {}, f"{path}__{tag}", owner)
             return
-    if h in (int, float, str) and v is not None and not isinstance(v, bool):
+    if h in (int, float, str) and not isinstance(v, bool):
         w.attrs[path] = v
         return
     w.attrs[path] = _to_json(v)

@@ -610,7 +610,7 @@ def test_cli_basins(tmp_path, capsys):
     assert "sink" in text and "present" in text and "unc. step" in text and "label uncertainty" in text
     s = load_basin_sweep(out / "basins.nc")
     assert s.labels.shape == (2, 3, 2, 3) and s.fields == ("kappa_sp_amp", "kappa_rp_amp")
-    assert np.isfinite(s.uncertainty_step).all() and s.settings["uncertainty"] == 8
+    assert np.isfinite(s.uncertainty_step).all() and s.uncertainty_samples == 8
     base = ["sweep", "--param", "b", "--values", "4:5:2", "--out", str(tmp_path / "x"), "--quiet"]
     assert main(base + ["--kind", "basins", "--uncertainty-samples", "-1"]) == 2
     assert "--uncertainty-samples" in capsys.readouterr().err
