@@ -8,6 +8,8 @@ import numpy as np
 
 from .._checks import check_int
 from .._matching import same_attractor
+from .._model import REDUCED
+from .._params import GearParams
 from ..integrate import AbstractIntegrator
 from ._direct import Direct
 from ._result import SINK, GlobalResult
@@ -32,9 +34,6 @@ def compare_with_direct(result: GlobalResult, system=None, params=None, *, n_sam
         ``{"n_samples", "agreement" (overall fraction in [0, 1]), "per_attractor": {id:
         {"cells", "agree", "fraction"}}, "direct_only": [{"period", "point" (dim,), "cells"}]}``.
     """
-    from .._model import REDUCED
-    from .._params import GearParams
-
     n_samples = check_int(n_samples, "n_samples", 1)
     system = REDUCED if system is None else system
     if params is None:
