@@ -15,6 +15,8 @@ import xarray as xr
 
 import jaxgear as jg
 from jaxgear import CellGrid
+from jaxgear._codec import RESULT_TYPES, array_field, custom_field, from_dataset, to_dataset
+from jaxgear.integrate import integrator_from_dict
 
 DOUBLE_WELL = jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
 BISTABLE_DUFFING = jg.DuffingParams(delta=0.1, alpha=1.0, beta=1.0, gamma=0.3, omega=1.4)
@@ -220,6 +222,42 @@ def test_summary_json(duffing_results, tmp_path):
     assert [a["cell_count"] for a in s["attractors"]] == [int(np.sum(r.labels == a.id)) for a in r.attractors]
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _Options:
+    stop: float | None = None
+    bounds: tuple[float, float] | None = None
+    note: str | None = None
+    integrator: jg.AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _Holder:
+    values: np.ndarray = array_field(("value",))
+    settings: _Options
+    extra: _Options | None = None
+
+
+def test_typed_settings_round_trip_with_none_and_text(monkeypatch):
+    """A settings record saves field by field: an optional number, pair or text that is
+    None loads as None (not the text 'null'), the text 'null' stays text, an integrator
+    comes back as the same object, a missing record as None."""
+    monkeypatch.setitem(RESULT_TYPES, "_Holder", _Holder)
+    cases = [
+        _Holder(values=np.arange(3.0), settings=_Options(integrator=jg.RK4(64))),
+        _Holder(values=np.arange(2.0), settings=_Options(stop=1.5, bounds=(0.0, 2.0), note="null",
+                                                         integrator=jg.KinkAwareRK4(300)),
+                extra=_Options(note="", integrator=jg.Adaptive())),
+    ]
+    for h in cases:
+        ds = to_dataset(h)
+        q = from_dataset(ds, "_Holder")
+        assert_same(q, h)
+        assert q.settings == h.settings and type(q.settings.integrator) is type(h.settings.integrator)
+    assert cases[0].settings.note is None and from_dataset(to_dataset(cases[0])).settings.note is None
+    assert from_dataset(to_dataset(cases[1])).settings.note == "null"
+    assert "settings__stop" in to_dataset(cases[1]).attrs and "settings__stop" not in to_dataset(cases[0]).attrs
+
+
 # ---------------------------------------------------------------- jaxgear.load
 def _registered_in_source() -> set[str]:
     """Names of the classes decorated ``@result_type`` anywhere in the package source."""
@@ -237,8 +275,6 @@ def test_every_result_type_is_registered_and_exported():
     """Each class the source decorates with ``@result_type`` is known to the codec once
     ``jaxgear`` is imported (so :func:`jaxgear.load` finds it by the name in the file, the
     loader importing no result module itself) and exported from the package."""
-    from jaxgear._codec import RESULT_TYPES
-
     declared = _registered_in_source()
     assert {"GlobalResult", "OrbitSearch", "BifurcationDiagram", "BasinSweep", "BasinMap", "ParameterMap",
             "Branch", "DesignResult"} <= declared
