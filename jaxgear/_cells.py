@@ -15,6 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ._checks import check_int, check_number
+
 __all__ = ["CellGrid", "PAPER_REGION"]
 
 PAPER_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0))
@@ -69,8 +71,6 @@ class CellGrid:
     def box(cls, bounds: Sequence[tuple[float, float]], counts: Sequence[int], *, axes: Sequence[int] | None = None,
             dim: int | None = None, base: Sequence[float] | None = None, names: Sequence[str] = ()) -> CellGrid:
         """A grid from ``bounds=[(lo, hi), ...]`` and ``counts`` over ``axes`` (default: the first ones)."""
-        from ._checks import check_int, check_number
-
         try:
             bounds = [tuple(b) for b in bounds]
             counts = list(counts)

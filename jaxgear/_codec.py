@@ -17,8 +17,9 @@ decide how they are stored, from their type annotations and their ``metadata``:
   JSON attribute; ``custom_field(encode, decode)`` converts values that are not
   JSON-able (a user's parameter pytree).
 
-Every file carries ``jaxgear_type`` (the class name, what :func:`jaxgear.load`
-dispatches on), ``jaxgear_format`` (:data:`FORMAT`) and a ``jaxgear_schema`` attribute
+A result type registers itself where it is defined (``@result_type`` on the class);
+this module imports no result module. Every file carries ``jaxgear_type`` (the class
+name, what :func:`jaxgear.load` dispatches on), ``jaxgear_format`` (:data:`FORMAT`) and a ``jaxgear_schema`` attribute
 with what the annotations cannot say (``None`` fields, dictionary keys, lengths). A
 result type may add labelled coordinates (grid-cell centres, parameter values, state
 names) with a ``_coords()`` method; they are written for readers and ignored on load.
@@ -35,13 +36,18 @@ import typing
 from collections.abc import Callable
 from typing import Any
 
+import jax
 import numpy as np
 
-__all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
-           "RESULT_TYPES"]
+from ._checks import article
 
-FORMAT = 2
-"""Layout version written into every file (files of jaxgear 0.1 have none)."""
+__all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
+           "RESULT_TYPES", "plain"]
+
+FORMAT = 3
+"""Layout version written into every file: 3 since results hold their method object and
+typed settings (2: the same with settings as dictionaries; files of jaxgear 0.1 have
+none and are not read)."""
 
 RESULT_TYPES: dict[str, type] = {}
 """Registered result types by class name."""
@@ -78,6 +84,18 @@ def custom_field(encode: Callable[[Any], Any], decode: Callable[[Any], Any], **k
     return dataclasses.field(metadata={"encode": encode, "decode": decode}, **kw)
 
 
+def plain(v):
+    """``v`` as JSON-able values, for summaries: a settings dataclass as a dict of its
+    fields, an object with ``to_dict`` (an integrator, a method) as that, tuples as lists."""
+    if hasattr(v, "to_dict"):
+        return v.to_dict()
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, (tuple, list)):
+        return [plain(x) for x in v]
+    return v
+
+
 # ------------------------------------------------------------------------ helpers
 def _hints(cls) -> dict[str, Any]:
     return typing.get_type_hints(cls)
@@ -93,8 +111,6 @@ def _strip_optional(hint):
 
 
 def _is_array_hint(hint) -> bool:
-    import jax
-
     hint = _strip_optional(hint)
     return hint is np.ndarray or hint is jax.Array
 
@@ -199,22 +215,19 @@ def _encode_value(w: _Writer, v, hint, meta, path, owner) -> None:
     if "encode" in meta:
         w.attrs[path] = _to_json(meta["encode"](v))
         return
+    if v is None:
+        w.schema[path] = {"none": True}
+        return
     if _is_array_hint(hint):
-        if v is None:
-            w.schema[path] = {"none": True}
-        else:
-            a = np.asarray(v)
-            w.array(path, _dims_for(meta, owner, path, a.ndim), a)
+        a = np.asarray(v)
+        w.array(path, _dims_for(meta, owner, path, a.ndim), a)
         return
     h = _strip_optional(hint)
     if "item_dim" in meta:
         _encode_items(w, tuple(v), typing.get_args(h)[0], meta["item_dim"], path)
         return
     if _is_record(h):
-        if v is None:
-            w.schema[path] = {"none": True}
-        else:
-            _encode_record(w, v, f"{path}__", owner)
+        _encode_record(w, v, f"{path}__", owner)
         return
     if typing.get_origin(h) is dict:
         vt = (typing.get_args(h) + (Any, Any))[1]
@@ -224,7 +237,7 @@ def _encode_value(w: _Writer, v, hint, meta, path, owner) -> None:
             for k, tag in zip(keys, _key_tags(keys)):
                 _encode_value(w, v[k], vt, {}, f"{path}__{tag}", owner)
             return
-    if h in (int, float, str) and v is not None and not isinstance(v, bool):
+    if h in (int, float, str) and not isinstance(v, bool):
         w.attrs[path] = v
         return
     w.attrs[path] = _to_json(v)
@@ -399,8 +412,6 @@ def from_dataset(ds, expected: str | None = None):
     """Rebuild the result stored in ``ds`` (written by :func:`to_dataset`)."""
     kind = str(ds.attrs.get("jaxgear_type", ""))
     if expected is not None and kind != expected:
-        from ._checks import article
-
         raise ValueError(f"the file holds {article(kind) if kind else 'a file of another kind'}, "
                          f"not {article(expected)}; "
                          "open it with jaxgear.load(path).")

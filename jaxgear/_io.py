@@ -1,8 +1,10 @@
 """Saved results and output files: atomic writes, one loader for every result type.
 
 Every result type saves through the one codec of :mod:`jaxgear._codec` to a netCDF-4
-file (``engine="h5netcdf"``) and :func:`load` restores it exactly. Files of jaxgear 0.1
-(written before the codec) are read by :mod:`jaxgear._legacy`.
+file (``engine="h5netcdf"``) and :func:`load` restores it exactly. A result type
+registers itself with the codec where it is defined; this module imports no result
+module (importing any ``jaxgear`` module first runs the package ``__init__``, which
+imports them all, so every type is known before :func:`load` can run).
 
 Every file jaxgear writes (netCDF, JSON, figures, checkpoint parts) is written to a
 temporary file in the target folder and moved onto its name (``os.replace``), so a
@@ -19,6 +21,9 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from ._checks import article
+from ._codec import FORMAT, from_dataset, to_dataset
 
 __all__ = ["load", "save_result", "atomic_write", "write_json", "write_text", "save_figure", "read_dataset",
            "strict_json", "TMP_PREFIX", "remove_stale_temporaries", "NotAResultFile"]
@@ -101,8 +106,6 @@ def save_figure(fig, path: str | Path, **kw) -> Path:
 def save_result(result, path: str | Path) -> Path:
     """Write a result object to a netCDF file atomically through the codec; large arrays
     are compressed."""
-    from ._codec import to_dataset
-
     ds = to_dataset(result)
     for k in ds.data_vars:
         if ds[k].size > 4096 and ds[k].dtype.kind in "biuf":
@@ -147,33 +150,36 @@ def load(path: str | Path, expected: str | None = None) -> Any:
     designs), exactly as it was saved.
 
     Reads ``attrs["jaxgear_type"]`` of the netCDF file and rebuilds the object through the
-    codec (files of jaxgear 0.1 through :mod:`jaxgear._legacy`). ``expected``: a type
-    name the file must hold.
+    codec (the class registered under that name). ``expected``: a type name the file
+    must hold. Files of jaxgear 0.1 (no ``jaxgear_format``) are not read.
 
     Raises:
         ValueError: the path is not a readable jaxgear result file (the message says
             why: missing, a folder, empty, truncated, not netCDF, another program's
             file, an unknown or unexpected result type).
     """
-    from . import _registry  # noqa: F401  (registers every result type with the codec)
-    from ._checks import article
-    from ._codec import FORMAT, from_dataset
-    from ._legacy import legacy_type, load_legacy
-
     ds = read_dataset(path)
     fmt = ds.attrs.get("jaxgear_format")
     if fmt is None:
-        kind = legacy_type(ds, path)
-        if expected is not None and kind != expected:
-            raise ValueError(f"{path} holds {article(kind)}, not {article(expected)}; open it with "
-                             "jaxgear.load(path).")
-        return load_legacy(ds, kind)
+        kind = ds.attrs.get("jaxgear_type")
+        if kind is None and not ("labels" in ds.variables and "grid" in ds.attrs):
+            raise NotAResultFile(f"not a jaxgear result file: {path} is a netCDF file without "
+                                 "attrs['jaxgear_type'] (written by another program: open it with "
+                                 "xarray.open_dataset instead).")
+        kind = str(kind or "GlobalResult")
+        raise NotAResultFile(f"{path} holds {article(kind)} written by jaxgear 0.1, whose files this version no "
+                             "longer reads: re-run the analysis with this version (or load it with jaxgear 0.1 "
+                             "and save the arrays you need with xarray).")
     if int(fmt) > FORMAT:
         raise NotAResultFile(f"{path} was written by a newer jaxgear (format {fmt}, this one reads up to "
                              f"{FORMAT}): upgrade jaxgear.")
     try:
         return from_dataset(ds, expected)
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    except (KeyError, TypeError) as exc:
+    except (KeyError, TypeError, ValueError) as exc:
+        if int(fmt) < FORMAT and not (isinstance(exc, ValueError) and "jaxgear.load(path)" in str(exc)):
+            raise NotAResultFile(f"{path} was written by an earlier development version of jaxgear (format {fmt}, "
+                                 f"before typed settings; this one writes {FORMAT}) and cannot be read: re-run "
+                                 "the analysis with this version.") from None
+        if isinstance(exc, ValueError):
+            raise ValueError(f"{path}: {exc}") from None
         raise NotAResultFile(f"not a jaxgear result file: {path} is missing {exc} of its layout.") from None

@@ -102,7 +102,7 @@ assert direct.n_sink == 0 and direct.n_unresolved == 0
 
 # %%
 for r in (paper_method, direct):
-    print(f"{r.method:>14}: " + ", ".join(f"{a.label} {100 * a.share:.1f} %" for a in r.attractors))
+    print(f"{r.method.name:>14}: " + ", ".join(f"{a.label} {100 * a.share:.1f} %" for a in r.attractors))
 
 # %% [markdown]
 # ## 5. Attractors and their domains (paper Figures 6-8)

@@ -79,7 +79,7 @@ direct = jg.analyze_global(system, p, grid, method=jg.Direct(), progress=False)
 strobe = jg.analyze_global(system, p, grid, method=jg.StroboscopicCellMap(mapping_steps=10), progress=False)
 print(direct.table())
 for r in (direct, strobe):
-    print(f"{r.method:>12}: " + ", ".join(f"{a.label} at x = {a.points[0][0]:+.3f}: {100 * a.share:.1f} %"
+    print(f"{r.method.name:>12}: " + ", ".join(f"{a.label} at x = {a.points[0][0]:+.3f}: {100 * a.share:.1f} %"
                                           for a in r.attractors))
 assert sorted(a.period for a in direct.attractors) == [1, 1]
 assert max(abs(a.share - b.share) for a, b in zip(direct.attractors, strobe.attractors)) < 0.03

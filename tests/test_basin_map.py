@@ -48,8 +48,8 @@ def _assert_point_is(m, iy, ix, r):
         assert m.multiplier[iy, ix, g] == a.multiplier
     assert m.sink_share[iy, ix] == r.n_sink / r.n_cells
     assert m.unresolved_share[iy, ix] == r.n_unresolved / r.n_cells
-    assert m.uncertainty_step[iy, ix] == r.uncertainty["step"]
-    assert m.uncertainty_start[iy, ix] == r.uncertainty["start"]
+    assert m.uncertainty_step[iy, ix] == r.uncertainty.step
+    assert m.uncertainty_start[iy, ix] == r.uncertainty.start
 
 
 def test_every_point_is_the_analysis_there_alone(duffing_map):

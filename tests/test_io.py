@@ -3,6 +3,7 @@ metadata equal), ``jaxgear.load`` dispatches on the file's type, files open as l
 arrays with xarray, and every plotting function draws from a loaded result without
 integrating anything (the integration kernels are replaced by functions that raise)."""
 
+import ast
 import dataclasses
 import json
 import warnings
@@ -14,6 +15,8 @@ import xarray as xr
 
 import jaxgear as jg
 from jaxgear import CellGrid
+from jaxgear._codec import RESULT_TYPES, array_field, custom_field, from_dataset, to_dataset
+from jaxgear.integrate import integrator_from_dict
 
 DOUBLE_WELL = jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
 BISTABLE_DUFFING = jg.DuffingParams(delta=0.1, alpha=1.0, beta=1.0, gamma=0.3, omega=1.4)
@@ -101,7 +104,7 @@ def paper_search():
 @pytest.mark.parametrize("method", ["direct", "stroboscopic", "poincare-like"])
 def test_global_result_round_trip_exact(duffing_results, method, tmp_path):
     r = duffing_results[method]
-    assert r.method == method and sorted(a.period for a in r.attractors) == [1, 1]
+    assert r.method.name == method and sorted(a.period for a in r.attractors) == [1, 1]
     path = r.save(tmp_path / "r.nc")
     assert_same(jg.load(path), r)
     assert_same(jg.load(path), r)
@@ -121,7 +124,7 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         np.testing.assert_array_equal(ds["x3"].values, r.grid.axis_centres(2))
         assert list(ds["state"].values) == ["x1", "x2", "x3", "x4"]
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
-        assert ds.attrs["jaxgear_format"] == 2
+        assert ds.attrs["jaxgear_format"] == 3
         for name, v in jg.paper_params().to_dict().items():  # the canonical set, one attribute each
             assert ds.attrs[f"param_{name}"] == v
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
@@ -136,7 +139,7 @@ def test_attractor_multipliers_are_those_of_shooting(duffing_results, paper_resu
     for r, system, params in cases:
         for a in r.attractors:
             mu = np.asarray(jg.floquet_multipliers(system, params, np.asarray(a.points)[0], period=a.period))
-            assert a.multiplier == pytest.approx(np.abs(mu).max(), abs=1e-4), (r.method, a.id)
+            assert a.multiplier == pytest.approx(np.abs(mu).max(), abs=1e-4), (r.method.name, a.id)
             assert a.multiplier < 1
     assert "max |mu|" in paper_result.table()
 
@@ -209,60 +212,94 @@ def test_save_overwrites_atomically(duffing_results, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["r.nc"]
 
 
+def test_summary_json(duffing_results, tmp_path):
+    """``summary.json``: everything but the per-cell labels, strict JSON, shares summing to 1."""
+    r = duffing_results["direct"]
+    s = json.loads(r.write_summary(tmp_path / "summary.json").read_text())
+    assert "labels" not in s and s["method"] == "direct" and s["n_cells"] == 30
+    assert abs(sum(s["shares"].values()) - 1) < 1e-12
+    assert [a["period"] for a in s["attractors"]] == [1, 1]
+    assert [a["cell_count"] for a in s["attractors"]] == [int(np.sum(r.labels == a.id)) for a in r.attractors]
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _Options:
+    stop: float | None = None
+    bounds: tuple[float, float] | None = None
+    note: str | None = None
+    integrator: jg.AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _Holder:
+    values: np.ndarray = array_field(("value",))
+    settings: _Options
+    extra: _Options | None = None
+
+
+def test_typed_settings_round_trip_with_none_and_text(monkeypatch):
+    """A settings record saves field by field: an optional number, pair or text that is
+    None loads as None (not the text 'null'), the text 'null' stays text, an integrator
+    comes back as the same object, a missing record as None."""
+    monkeypatch.setitem(RESULT_TYPES, "_Holder", _Holder)
+    cases = [
+        _Holder(values=np.arange(3.0), settings=_Options(integrator=jg.RK4(64))),
+        _Holder(values=np.arange(2.0), settings=_Options(stop=1.5, bounds=(0.0, 2.0), note="null",
+                                                         integrator=jg.KinkAwareRK4(300)),
+                extra=_Options(note="", integrator=jg.Adaptive())),
+    ]
+    for h in cases:
+        ds = to_dataset(h)
+        q = from_dataset(ds, "_Holder")
+        assert_same(q, h)
+        assert q.settings == h.settings and type(q.settings.integrator) is type(h.settings.integrator)
+    assert cases[0].settings.note is None and from_dataset(to_dataset(cases[0])).settings.note is None
+    assert from_dataset(to_dataset(cases[1])).settings.note == "null"
+    assert "settings__stop" in to_dataset(cases[1]).attrs and "settings__stop" not in to_dataset(cases[0]).attrs
+
+
 # ---------------------------------------------------------------- jaxgear.load
-LEGACY = Path(__file__).parent / "data" / "v0.1"
+def _registered_in_source() -> set[str]:
+    """Names of the classes decorated ``@result_type`` anywhere in the package source."""
+    names = set()
+    for path in Path(jg.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef) and any(
+                    (d.id if isinstance(d, ast.Name) else getattr(d, "attr", None)) == "result_type"
+                    for d in node.decorator_list):
+                names.add(node.name)
+    return names
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in LEGACY.glob("*.nc")))
-def test_files_of_version_0_1_still_load(name, tmp_path):
-    """Result files written by jaxgear 0.1 (the layout before the codec) load into today's
-    types with the values they held (recorded when they were written)."""
-    expected = json.loads((LEGACY / "expected.json").read_text())[name]
-    r = jg.load(LEGACY / name)
-    assert type(r).__name__ == expected["type"]
-    if expected["type"] == "GlobalResult":
-        assert np.asarray(r.labels).ravel().tolist() == expected["labels"]
-        assert [a.period for a in r.attractors] == expected["periods"]
-        assert [a.share for a in r.attractors] == expected["shares"]
-        assert [np.asarray(a.points).tolist() for a in r.attractors] == expected["points"]
-        assert r.method == expected["method"] and r.params == expected["params"]
-    elif expected["type"] == "OrbitSearch":
-        assert [o.period for o in r.orbits] == expected["periods"]
-        assert [o.points.tolist() for o in r.orbits] == expected["points"]
-        assert [np.abs(o.multipliers).tolist() for o in r.orbits] == expected["mult_abs"]
-        assert {str(k): np.asarray(v.status).tolist() for k, v in r.shots.items()} == expected["status"]
-    elif expected["type"] == "BifurcationDiagram":
-        assert r.period.tolist() == expected["period"] and r.values.tolist() == expected["values"]
-        assert list(r.directions) == expected["directions"]
-    elif expected["type"] == "BasinSweep":
-        assert r.shares.tolist() == expected["shares"] and r.labels.ravel().tolist() == expected["labels"]
-    elif expected["type"] == "ParameterMap":
-        assert r.period.tolist() == expected["period"] and r.n_attractors.tolist() == expected["n_attractors"]
-    elif expected["type"] == "Branch":
-        assert r.values.tolist() == expected["values"] and r.status == expected["status"]
-        assert [b.kind for b in r.bifurcations] == expected["kinds"]
-    elif expected["type"] == "DesignResult":
-        assert r.status == expected["status"] and r.history["objective"].tolist() == expected["objective"]
-        assert float(r.params.kappa) == expected["kappa"] and r.orbit.points.tolist() == expected["orbit_points"]
-    # a file of the old layout saves again in today's and round-trips exactly
-    assert_same(jg.load(r.save(tmp_path / name)), r)
-
-
-def test_every_result_type_round_trips_through_the_codec(tmp_path):
-    """Each registered result type, built with fields of every kind the codec handles
-    (None arrays, empty tuples, nested records, complex numbers, dicts of arrays), saves and
-    loads exactly."""
-    from jaxgear import _registry  # noqa: F401
-    from jaxgear._codec import RESULT_TYPES
-
-    assert {"GlobalResult", "OrbitSearch", "BifurcationDiagram", "BasinSweep", "ParameterMap", "Branch",
-            "DesignResult"} <= set(RESULT_TYPES)
+def test_every_result_type_is_registered_and_exported():
+    """Each class the source decorates with ``@result_type`` is known to the codec once
+    ``jaxgear`` is imported (so :func:`jaxgear.load` finds it by the name in the file, the
+    loader importing no result module itself) and exported from the package."""
+    declared = _registered_in_source()
+    assert {"GlobalResult", "OrbitSearch", "BifurcationDiagram", "BasinSweep", "BasinMap", "ParameterMap",
+            "Branch", "DesignResult"} <= declared
+    assert set(RESULT_TYPES) == declared
     for name, cls in RESULT_TYPES.items():
         assert getattr(jg, name) is cls, f"{name} is not exported from jaxgear"
-    for f in LEGACY.glob("*.nc"):  # one instance of every type, saved and loaded again
-        r = jg.load(f)
-        q = jg.load(r.save(tmp_path / f.name))
-        assert_same(q, r, f.name)
+
+
+def test_files_of_version_0_1_are_refused_with_the_reason(duffing_results, tmp_path):
+    """A file of jaxgear 0.1 (its type recorded, no ``jaxgear_format``; or, older, no type
+    at all but the labels and grid of a global analysis) is refused in one line that says
+    so and what to do; it is not mistaken for another program's file."""
+    with xr.open_dataset(duffing_results["direct"].save(tmp_path / "r.nc"), engine="h5netcdf") as ds:
+        old = ds.load()
+    del old.attrs["jaxgear_format"]
+    old.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
+    with pytest.raises(ValueError, match=r"holds a GlobalResult written by jaxgear 0\.1.*re-run") as info:
+        jg.load(tmp_path / "old.nc")
+    assert "\n" not in str(info.value)
+    older = old.copy()
+    del older.attrs["jaxgear_type"]
+    older.attrs["grid"] = "{}"
+    older.to_netcdf(tmp_path / "older.nc", engine="h5netcdf")
+    with pytest.raises(ValueError, match=r"GlobalResult written by jaxgear 0\.1"):
+        jg.load(tmp_path / "older.nc")
 
 
 def test_load_errors_name_the_problem(duffing_results, tmp_path):
@@ -286,7 +323,7 @@ def test_load_errors_name_the_problem(duffing_results, tmp_path):
     xr.Dataset({"a": ("i", np.arange(3))}).to_netcdf(tmp_path / "foreign.nc", engine="h5netcdf")
     with pytest.raises(ValueError, match="another program"):
         jg.load(tmp_path / "foreign.nc")
-    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": 2}).to_netcdf(tmp_path / "bad.nc",
+    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": 3}).to_netcdf(tmp_path / "bad.nc",
                                                                                   engine="h5netcdf")
     with pytest.raises(ValueError, match="unknown jaxgear_type 'Nonsense'"):
         jg.load(tmp_path / "bad.nc")

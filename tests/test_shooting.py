@@ -334,7 +334,7 @@ def test_find_periodic_orbits_stores_settings_and_trajectories():
     s = jg.find_periodic_orbits(jg.DUFFING, p, np.array([[1.0, 1.1]]), progress=False, trajectory_samples=40)
     o = s.orbits[0]
     assert s.params == {"delta": 0.1, "alpha": 1.0, "beta": 1.0, "gamma": 0.3, "omega": 1.4}
-    assert s.system == "duffing" and s.state_names == ("x", "v") and s.settings["tol"] == 1e-10
+    assert s.system == "duffing" and s.state_names == ("x", "v") and s.settings.tol == 1e-10
     assert o.trajectory.shape == (41, 2) and o.samples_per_period == 40
     # the stored trajectory is the flow: it starts at the orbit point and closes after one period
     # (40 samples of 5 RK4 steps: the 200 steps of the map the orbit is a fixed point of)

@@ -349,7 +349,7 @@ def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method
             assert s.multiplier[i, g] == pytest.approx(a.multiplier, rel=1e-6)
         assert np.isnan(s.multiplier[i, ~s.present[i]]).all()
         assert s.sink_share[i] == r.n_sink / r.n_cells and s.unresolved_share[i] == r.n_unresolved / r.n_cells
-        assert s.uncertainty_step[i] == r.uncertainty["step"] and s.uncertainty_start[i] == r.uncertainty["start"]
+        assert s.uncertainty_step[i] == r.uncertainty.step and s.uncertainty_start[i] == r.uncertainty.start
 
 
 def test_basin_sweep_in_one_pool_is_each_value_alone():
@@ -610,7 +610,7 @@ def test_cli_basins(tmp_path, capsys):
     assert "sink" in text and "present" in text and "unc. step" in text and "label uncertainty" in text
     s = load_basin_sweep(out / "basins.nc")
     assert s.labels.shape == (2, 3, 2, 3) and s.fields == ("kappa_sp_amp", "kappa_rp_amp")
-    assert np.isfinite(s.uncertainty_step).all() and s.settings["uncertainty"] == 8
+    assert np.isfinite(s.uncertainty_step).all() and s.uncertainty_samples == 8
     base = ["sweep", "--param", "b", "--values", "4:5:2", "--out", str(tmp_path / "x"), "--quiet"]
     assert main(base + ["--kind", "basins", "--uncertainty-samples", "-1"]) == 2
     assert "--uncertainty-samples" in capsys.readouterr().err

@@ -32,13 +32,13 @@ from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_
 from ._orbits import detect_period
 from ._pool import PoolOptions
 from ._recurrence import RecurrenceOptions, RecurrenceResult, classify_by_recurrence
-from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult
+from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult, LabelUncertainty
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
 __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCellMap", "analyze_global",
            "analyze_global_values",
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
-           "detect_period", "GlobalResult", "Attractor", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
+           "detect_period", "GlobalResult", "Attractor", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty", "DEFAULT_SAMPLES",
            "with_label_uncertainty", "PoolOptions", "RecurrenceOptions", "RecurrenceResult",
            "classify_by_recurrence", "basin_entropy", "BasinEntropy", "uncertainty_exponent", "UncertaintyExponent",

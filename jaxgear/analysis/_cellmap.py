@@ -25,6 +25,7 @@ from .._cells import PAPER_REGION, CellGrid
 from .._checks import check_choice, check_int
 from .._devices import local_devices, shard_rows
 from .._matching import group_attractors
+from .._model import REDUCED
 from .._poincare import check_section, section_kernel
 from .._status import Status
 from ._graph import analyze_cell_map
@@ -138,8 +139,6 @@ class StroboscopicCellMap(_AbstractCellMap):
     def default_grid(self, system) -> CellGrid:
         """For the gear model: the paper's region D extended by ``x4`` in [-12, 12],
         25 x 15 x 30 x 12 cells."""
-        from .._model import REDUCED
-
         if system is not REDUCED:
             raise ValueError("analyze_global: pass a CellGrid over every coordinate of your system.")
         return CellGrid.box(PAPER_REGION + ((-12.0, 12.0),), (25, 15, 30, 12), axes=(0, 1, 2, 3),

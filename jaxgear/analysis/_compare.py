@@ -8,9 +8,10 @@ import numpy as np
 
 from .._checks import check_int
 from .._matching import same_attractor
+from .._model import REDUCED
+from .._params import GearParams
 from ..integrate import AbstractIntegrator
 from ._direct import Direct
-from ._method import method_from_dict
 from ._result import SINK, GlobalResult
 
 __all__ = ["compare_with_direct"]
@@ -33,9 +34,6 @@ def compare_with_direct(result: GlobalResult, system=None, params=None, *, n_sam
         ``{"n_samples", "agreement" (overall fraction in [0, 1]), "per_attractor": {id:
         {"cells", "agree", "fraction"}}, "direct_only": [{"period", "point" (dim,), "cells"}]}``.
     """
-    from .._model import REDUCED
-    from .._params import GearParams
-
     n_samples = check_int(n_samples, "n_samples", 1)
     system = REDUCED if system is None else system
     if params is None:
@@ -45,7 +43,7 @@ def compare_with_direct(result: GlobalResult, system=None, params=None, *, n_sam
     if result.grid.dim != system.dim:
         raise ValueError(f"compare_with_direct: the result's grid has {result.grid.dim} coordinates, "
                          f"the system {system.dim}.")
-    direct = Direct.like(method_from_dict({**dict(result.settings), "name": result.method}), integrator)
+    direct = Direct.like(result.method, integrator)
     rng = np.random.default_rng(seed)
     n = result.n_cells
     cells = rng.choice(n, size=min(n_samples, n), replace=False)

@@ -7,6 +7,7 @@ import warnings
 import numpy as np
 
 from .._lyapunov import AttractorType
+from ._cellmap import PoincareCellMap, StroboscopicCellMap
 from ._result import GlobalResult
 
 __all__ = ["warn_if_unreliable", "MIN_CELLS"]
@@ -28,9 +29,9 @@ def warn_if_unreliable(r: GlobalResult) -> None:
     - cell methods: an attractor resolved by fewer than ``MIN_CELLS`` cells, or a P-k
       whose k points share cells (stroboscopic) -> refine the grid (more cells).
     """
-    s = r.settings
+    m = r.method
     n = r.n_cells
-    cell_method = r.method in ("poincare-like", "stroboscopic")
+    cell_method = isinstance(m, (PoincareCellMap, StroboscopicCellMap))
     if r.n_sink > 0.2 * n:
         if cell_method:
             warnings.warn(f"{100 * r.n_sink / n:.1f} % of the cells went to the sink (their images left the "
@@ -38,18 +39,18 @@ def warn_if_unreliable(r: GlobalResult) -> None:
                           f"motion.", stacklevel=3)
         else:
             warnings.warn(f"{100 * r.n_sink / n:.1f} % of the cells went to the sink (the motion blew up or "
-                          f"exceeded escape_bound={s.get('escape_bound')}): check for unbounded motion, raise "
-                          f"steps_per_period (now {(s.get('integrator') or {}).get('steps_per_period')}) if the integration blew up, or raise "
+                          f"exceeded escape_bound={getattr(m, 'escape_bound', None)}): check for unbounded motion, raise "
+                          f"steps_per_period (now {getattr(m.integrator, 'steps_per_period', None)}) if the integration blew up, or raise "
                           f"escape_bound.", stacklevel=3)
     if r.n_unresolved > 0.01 * n:
         warnings.warn(f"{r.n_unresolved} cells ({100 * r.n_unresolved / n:.1f} %) were not resolved within "
-                      f"max_periods={s.get('max_periods')} periods: raise max_periods (slow transients), or "
-                      f"max_period (now {s.get('max_period')}) if the motion has a longer period, or period_tol.",
+                      f"max_periods={getattr(m, 'max_periods', None)} periods: raise max_periods (slow transients), or "
+                      f"max_period (now {m.max_period}) if the motion has a longer period, or period_tol.",
                       stacklevel=3)
     g = r.grid
     for a in r.attractors:
         if a.period == 0 and a.type == AttractorType.PERIODIC:
-            warnings.warn(f"attractor {a.id} repeats no point within max_period={s.get('max_period')} periods but its "
+            warnings.warn(f"attractor {a.id} repeats no point within max_period={m.max_period} periods but its "
                           "largest Lyapunov exponent is negative: a cycle of a longer period; raise max_period to "
                           "get its exact points.", stacklevel=3)
         elif a.period == 0 and a.type == AttractorType.UNKNOWN:
@@ -68,7 +69,7 @@ def warn_if_unreliable(r: GlobalResult) -> None:
         if cell_method and a.cell_count < MIN_CELLS:
             warnings.warn(f"attractor {a.id} ({a.label}) was resolved by only {a.cell_count} cell(s): its domain and "
                           f"share are unreliable; refine the grid (more cells per axis, --grid).", stacklevel=3)
-        elif r.method == "stroboscopic" and 0 < len(a.periodic_cells) < a.period:
+        elif isinstance(m, StroboscopicCellMap) and 0 < len(a.periodic_cells) < a.period:
             warnings.warn(f"the {a.period} points of attractor {a.id} ({a.label}) fall into only "
                           f"{len(a.periodic_cells)} cell(s): the cells are too coarse to separate them; refine the "
                           f"grid (more cells per axis, --grid).", stacklevel=3)

@@ -230,7 +230,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
                                     kaplan_yorke=float(spectra[new][2])))
     return GlobalResult(
         labels=out_labels.reshape(grid.counts).astype(np.int64), attractors=tuple(attractors), grid=grid,
-        method=method.name, settings=method.to_dict(), params=params_to_dict(params), system=system.name,
+        method=method, params=params_to_dict(params), system=system.name,
         state_names=tuple(system.state_names), n_sink=int((out_labels == SINK).sum()),
         n_unresolved=int((out_labels == UNRESOLVED).sum()), runtime_s=float(runtime), version=__version__,
         mean_periods=float(mean_periods),

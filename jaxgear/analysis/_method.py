@@ -19,7 +19,9 @@ import numpy as np
 from .._batching import DEFAULT_CHUNK_CELLS
 from .._cells import CellGrid
 from .._checks import check_int, check_number
+from .._model import REDUCED
 from ..integrate import AbstractIntegrator, default_integrator, integrator_from_dict
+from ._recurrence import RecurrenceOptions
 
 __all__ = ["AbstractGlobalMethod", "Classification", "METHODS", "method_from_dict", "method_from_name",
            "register_method"]
@@ -90,8 +92,6 @@ class AbstractGlobalMethod(eqx.Module):
 
     def default_grid(self, system) -> CellGrid:
         """The grid used when none is given (the paper's region D for the gear model)."""
-        from .._model import REDUCED
-
         if system is not REDUCED:
             raise ValueError("analyze_global: pass a CellGrid for your system (CellGrid.box(bounds, counts, ...)).")
         return CellGrid.paper()
@@ -120,19 +120,17 @@ class AbstractGlobalMethod(eqx.Module):
 
 
 def method_from_name(name: str, **options) -> AbstractGlobalMethod:
-    """The method called ``name`` with ``options`` (the others at their defaults)."""
-    from . import _cellmap, _direct  # noqa: F401  (register the methods)
+    """The method called ``name`` with ``options`` (the others at their defaults).
 
+    Methods register themselves where they are defined (:func:`register_method`); the
+    package :mod:`jaxgear.analysis` imports them all before this can run."""
     if name not in METHODS:
         raise ValueError(f"method={name!r} must be one of {', '.join(repr(m) for m in METHODS)}.")
     return METHODS[name](**options)
 
 
 def method_from_dict(d: dict[str, Any]) -> AbstractGlobalMethod:
-    """Rebuild a method from :meth:`AbstractGlobalMethod.to_dict` (or the flat settings of
-    a result written by jaxgear 0.1, given its method name under ``"name"``)."""
-    from . import _cellmap, _direct  # noqa: F401
-
+    """Rebuild a method from :meth:`AbstractGlobalMethod.to_dict`."""
     name = d.get("name")
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: {', '.join(METHODS)}.")
@@ -140,17 +138,7 @@ def method_from_dict(d: dict[str, Any]) -> AbstractGlobalMethod:
     fields = {f.name for f in dataclasses.fields(cls)}
     opts = {k: v for k, v in d.items() if k in fields and k != "integrator"}
     if isinstance(opts.get("recurrence"), dict):
-        from ._recurrence import RecurrenceOptions
-
         opts["recurrence"] = RecurrenceOptions(**opts["recurrence"])
-    if opts.get("capture_radius") == "auto":  # files written when the automatic radius was spelled "auto"
-        opts["capture_radius"] = None
-    integ = d.get("integrator")
-    if isinstance(integ, dict):
-        opts["integrator"] = integrator_from_dict(integ)
-    elif integ is not None or "steps_per_period" in d:  # 0.1 layout: flat integrator settings
-        opts["integrator"] = integrator_from_dict({"type": integ or "RK4",
-                                                   "steps_per_period": d.get("steps_per_period")})
-    if "section_index" in opts and "section_index" in d and name != "poincare-like":
-        opts.pop("section_index")
+    if isinstance(d.get("integrator"), dict):
+        opts["integrator"] = integrator_from_dict(d["integrator"])
     return cls(**opts)

@@ -8,11 +8,14 @@ from typing import Any
 import numpy as np
 
 from .._cells import CellGrid
-from .._codec import array_field, items_field, later_field, result_type
+from .._codec import array_field, custom_field, items_field, later_field, result_type
 from .._format import format_table
+from .._io import save_result, write_json
 from .._lyapunov import AttractorType
+from ..integrate import AbstractFixedStep, AbstractIntegrator, integrator_from_dict
+from ._method import AbstractGlobalMethod, method_from_dict
 
-__all__ = ["Attractor", "GlobalResult", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
+__all__ = ["Attractor", "GlobalResult", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
 
 SINK = -1
 """Label of cells whose orbits leave the region or blow up (Hsu's sink cell; outcome
@@ -109,19 +112,42 @@ def _exponent_text(a: Attractor) -> str:
     return f"{lam:+.4f}" + (f" +- {err:.1e}" if np.isfinite(err) else "")
 
 
-def describe_uncertainty(u: dict) -> str:
-    """One line for the printed table."""
-    if not u:
-        return ""
-    return (f"label uncertainty ({u['samples']} sampled cells): {100 * u['step']:.1f} % change with a "
-            f"{_refined_name(u)}, {100 * u['start']:.1f} % when the start moves by {u['perturbation']:g} cell")
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class LabelUncertainty:
+    """How far a result's labels can be trusted (:func:`~jaxgear.analysis.label_uncertainty`).
+
+    A random sample of cells is labelled again by direct integration, once with a finer
+    integrator and once from starts moved inside their cells; the shares of sampled
+    cells whose label changes bound the labels' error from the integration and from the
+    cell discretisation (paper §3: a cell stands for every state in it).
+
+    Attributes:
+        samples: cells sampled.
+        step: share of them whose label changes with ``refined_integrator``.
+        start: share of them whose label changes when the start moves by up to
+            ``perturbation`` cell sizes along each grid axis.
+        perturbation: the start's largest move, in cell sizes.
+        refined_integrator: the finer integrator (``integrator.refined()`` of the method's).
+    """
+
+    samples: int
+    step: float
+    start: float
+    perturbation: float
+    refined_integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+
+    def describe(self) -> str:
+        """One line for the printed table."""
+        r = self.refined_integrator
+        refined = (f"halved step ({r.steps_per_period} steps/period)" if isinstance(r, AbstractFixedStep)
+                   else "16x smaller integration error")
+        return (f"label uncertainty ({self.samples} sampled cells): {100 * self.step:.1f} % change with a "
+                f"{refined}, {100 * self.start:.1f} % when the start moves by {self.perturbation:g} cell")
 
 
-def _refined_name(u: dict) -> str:
-    r = u.get("refined_integrator", {})
-    if "steps_per_period" in r:
-        return f"halved step ({r['steps_per_period']} steps/period)"
-    return "16x smaller integration error"
+def _uncertainty_summary(u: LabelUncertainty) -> dict[str, Any]:
+    return dict(samples=u.samples, step=u.step, start=u.start, perturbation=u.perturbation,
+                refined_integrator=u.refined_integrator.to_dict())
 
 
 def _grid_dims(r: GlobalResult) -> tuple[str, ...]:
@@ -138,25 +164,23 @@ class GlobalResult:
             ``UNRESOLVED`` (-2) for every cell.
         attractors: tuple of :class:`Attractor`, sorted by decreasing share.
         grid: the :class:`~jaxgear.CellGrid`.
-        method: the method's name (``"direct"``, ``"poincare-like"``, ``"stroboscopic"``).
-        settings: the method object's settings (:meth:`to_dict` of the method, with its
-            integrator), JSON-able: :func:`jaxgear.analysis.method_from_dict` rebuilds it.
+        method: the method object that produced it, with every option and its
+            integrator (a :class:`~jaxgear.Direct`, :class:`~jaxgear.PoincareCellMap`,
+            :class:`~jaxgear.StroboscopicCellMap`, ...; saved as
+            :meth:`~jaxgear.AbstractGlobalMethod.to_dict`, so it can be re-run from its file).
         params: the full canonical parameter set (model document §4 names) as a dict.
         system: the system's name; state_names: its coordinate names.
         n_sink, n_unresolved: cell counts.
         runtime_s: wall time of the analysis; version: jaxgear version.
         mean_periods: mean number of forcing periods integrated per cell.
-        uncertainty: the label uncertainty (:func:`~jaxgear.analysis.label_uncertainty`):
-            ``samples``, ``step`` and ``start`` (shares of sampled cells whose label
-            changes with a halved step / a start moved by ``perturbation`` cells);
-            empty when not measured.
+        uncertainty: the label uncertainty, a :class:`LabelUncertainty`; None when not
+            measured.
     """
 
     labels: np.ndarray = array_field(_grid_dims)
     attractors: tuple[Attractor, ...] = items_field("attractor")
     grid: CellGrid = None  # type: ignore[assignment]
-    method: str = ""
-    settings: dict = dataclasses.field(default_factory=dict)
+    method: AbstractGlobalMethod = custom_field(lambda m: m.to_dict(), method_from_dict)
     params: dict = dataclasses.field(default_factory=dict)
     system: str = ""
     state_names: tuple[str, ...] = ()
@@ -165,7 +189,7 @@ class GlobalResult:
     runtime_s: float = float("nan")
     version: str = ""
     mean_periods: float = float("nan")
-    uncertainty: dict = dataclasses.field(default_factory=dict)
+    uncertainty: LabelUncertainty | None = None
 
     @property
     def n_cells(self) -> int:
@@ -196,17 +220,19 @@ class GlobalResult:
                          "fate not decided", "", "", ""))
         head = ("id", "type", "cells", "share", "stroboscopic point (" + ", ".join(self.state_names) + ")",
                 "residual", "max |mu|", "lambda_1 /period")
-        note = describe_uncertainty(self.uncertainty)
-        return format_table(rows, head) + ("\n" + note if note else "")
+        table = format_table(rows, head)
+        return table if self.uncertainty is None else table + "\n" + self.uncertainty.describe()
 
     def summary(self) -> dict[str, Any]:
         """Everything but the per-cell labels, JSON-able (written as ``summary.json``)."""
         return dict(
-            method=self.method, system=self.system, state_names=list(self.state_names),
-            grid=self.grid.to_dict(), n_cells=self.n_cells, settings=self.settings, params=self.params,
+            method=self.method.name, system=self.system, state_names=list(self.state_names),
+            grid=self.grid.to_dict(), n_cells=self.n_cells, settings=self.method.to_dict(), params=self.params,
             attractors=[a.summary() for a in self.attractors], n_sink=self.n_sink,
             n_unresolved=self.n_unresolved, shares=self.shares, runtime_s=self.runtime_s,
-            mean_periods=self.mean_periods, uncertainty=self.uncertainty, version=self.version,
+            mean_periods=self.mean_periods,
+            uncertainty=None if self.uncertainty is None else _uncertainty_summary(self.uncertainty),
+            version=self.version,
         )
 
     # ------------------------------------------------------------------ I/O
@@ -226,12 +252,8 @@ class GlobalResult:
     def save(self, path):
         """Write the result to a netCDF file atomically; reload with :func:`jaxgear.load`,
         open with ``xarray.open_dataset``."""
-        from .._io import save_result
-
         return save_result(self, path)
 
     def write_summary(self, path):
         """Write ``summary.json`` (everything but the per-cell labels; strict JSON)."""
-        from .._io import write_json
-
         return write_json(self.summary(), path)

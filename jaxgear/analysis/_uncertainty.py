@@ -23,6 +23,7 @@ import numpy as np
 from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._pool import run_pools
+from ._result import LabelUncertainty
 
 __all__ = ["label_uncertainty", "label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
 
@@ -34,10 +35,11 @@ DEFAULT_PERTURBATION = 1e-3
 
 def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attractors, direct, *,
                       samples: int = DEFAULT_SAMPLES, perturbation: float = DEFAULT_PERTURBATION, seed: int = 0,
-                      progress: bool = False) -> dict:
-    """The label uncertainty of a result (see the module): a JSON-able dict with
-    ``samples``, ``step`` and ``start`` (shares of the sampled cells whose label
-    changes), ``perturbation`` (cell widths) and ``refined_integrator``.
+                      progress: bool = False) -> LabelUncertainty:
+    """The label uncertainty of a result (see the module): a
+    :class:`~jaxgear.analysis.LabelUncertainty` with ``samples``, ``step`` and ``start``
+    (shares of the sampled cells whose label changes), ``perturbation`` (cell widths)
+    and ``refined_integrator``.
 
     Args:
         labels: the result's labels (any shape with ``grid.n_cells`` entries): attractor
@@ -52,9 +54,9 @@ def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attrac
 
 def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attractors_list, direct, *,
                         samples: int = DEFAULT_SAMPLES, perturbation: float = DEFAULT_PERTURBATION, seed: int = 0,
-                        progress: bool = False) -> list[dict]:
+                        progress: bool = False) -> list[LabelUncertainty]:
     """:func:`label_uncertainty` of several results on one grid (one per parameter set of
-    ``params_list``), each pool run once for all of them: one dict per result, each
+    ``params_list``), each pool run once for all of them: one per result, each
     equal to :func:`label_uncertainty` of that result alone."""
     check_int(samples, "samples", 1)
     check_number(perturbation, "perturbation", 0)
@@ -89,6 +91,6 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
     fine = direct.integrator.refined()
     steps = relabel(X, fine, "uncertainty: step halved")
     starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
-    return [dict(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
-                 perturbation=float(perturbation), refined_integrator=fine.to_dict())
+    return [LabelUncertainty(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
+                             perturbation=float(perturbation), refined_integrator=fine)
             for step, start, ref in zip(steps, starts, refs)]

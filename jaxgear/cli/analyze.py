@@ -212,6 +212,7 @@ def _analyze(args, params, grid, method, out: Path | None) -> list[str]:
 
 def _figures(result, out) -> list[str]:
     """Draw the analysis's figures into ``out``: the names of the files written."""
+    from ..analysis import PoincareCellMap
     from ..plotting import plot_attractors, plot_domains, plot_domains_3d, plot_shares
 
     out = Path(out)
@@ -220,7 +221,7 @@ def _figures(result, out) -> list[str]:
         figures.append(("domains_3d.png", lambda: plot_domains_3d(result)))
     figures.append(("shares.png", lambda: plot_shares(result)))
     if result.attractors:
-        figures.append(("attractors.png", lambda: plot_attractors(result, section=result.method == "poincare-like")))
+        figures.append(("attractors.png", lambda: plot_attractors(result, section=isinstance(result.method, PoincareCellMap))))
     names = []
     for name, plot in figures:
         save_figure(plot(), out / name, dpi=120)

@@ -199,9 +199,8 @@ def with_uncertainty_line(text: str, result, where: str = "values") -> str:
         if not note or not text.endswith("\n" + note):
             return text
         return text[: len(text) - len(note)] + shares_uncertainty_line(result, where)
-    from ..analysis._result import describe_uncertainty
-
-    note = describe_uncertainty(getattr(result, "uncertainty", None) or {})
+    u = getattr(result, "uncertainty", None)
+    note = u.describe() if u is not None else ""
     if note and int(result.n_unresolved) >= int(result.n_cells) and text.endswith(note):
         return text[: len(text) - len(note)] + NOT_MEASURED
     return text

@@ -274,8 +274,8 @@ def run(args) -> int:
     print("Newton: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
     if search_mode:
         st = search.settings
-        print(f"search: {st['solver']}, {st['segments']} segment(s), {st['deflation_rounds']} deflated round(s), "
-              f"transient {st['transient']} periods, rounds with {st['search_integrator']['type']}; "
+        print(f"search: {st.solver}, {st.segments} segment(s), {st.deflation_rounds} deflated round(s), "
+              f"transient {st.transient} periods, rounds with {st.search_integrator.name}; "
               f"{search.runtime_s:.1f} s")
         print(search.convergence_table())
     if not search.orbits:

@@ -5,7 +5,7 @@
 """
 
 from ._arclength import continue_orbit, switch_branch
-from ._branch import BIFURCATION_KINDS, BRANCH_STATUS, BifurcationPoint, Branch, bifurcation_orbit
+from ._branch import BIFURCATION_KINDS, BRANCH_STATUS, BifurcationPoint, Branch, BranchSettings, bifurcation_orbit
 
-__all__ = ["continue_orbit", "switch_branch", "Branch", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS",
+__all__ = ["continue_orbit", "switch_branch", "Branch", "BranchSettings", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS",
            "bifurcation_orbit"]

@@ -66,7 +66,7 @@ from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
 from ..shooting import periodic_orbit, sorted_eigvals
 from ..shooting._floquet import check_period
-from ._branch import BifurcationPoint, Branch
+from ._branch import BifurcationPoint, Branch, BranchSettings
 
 __all__ = ["continue_orbit", "switch_branch"]
 
@@ -409,12 +409,14 @@ def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds
     )
 
 
-def _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, **extra):
-    return dict(ds=float(ds), ds_min=float(ds_min), ds_max=float(ds_max), max_steps=int(max_steps),
-                stop=None if stop is None else float(stop), bounds=None if bounds is None else list(bounds),
-                max_angle=float(max_angle), tol=float(ctx.tol), max_iter=int(ctx.max_iter),
-                max_norm=float(ctx.max_norm), locate_tol=float(locate_tol), t0=float(ctx.t0), integrator=ctx.integrator.to_dict(),
-                **extra)
+def _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, origin: str = "start",
+              amplitude: float | None = None) -> BranchSettings:
+    return BranchSettings(ds=float(ds), ds_min=float(ds_min), ds_max=float(ds_max), max_steps=int(max_steps),
+                          stop=None if stop is None else float(stop),
+                          bounds=None if bounds is None else (float(bounds[0]), float(bounds[1])),
+                          max_angle=float(max_angle), tol=float(ctx.tol), max_iter=int(ctx.max_iter),
+                          max_norm=float(ctx.max_norm), locate_tol=float(locate_tol), t0=float(ctx.t0),
+                          integrator=ctx.integrator, origin=origin, amplitude=None if amplitude is None else float(amplitude))
 
 
 def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float, period: int = 1,
@@ -515,7 +517,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
     bordered Newton from ``x_PD + amplitude v`` on the hyperplane
     ``v . (x - x_PD) = amplitude`` (the parameter free), then the P-2k branch is
     continued away from the P-k orbit as in :func:`continue_orbit` (with ``period = 2k``).
-    The PD point itself is not part of the returned branch; ``settings["origin"]``
+    The PD point itself is not part of the returned branch; ``settings.origin``
     records it.
 
     Args:
@@ -526,7 +528,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
         stop: end of the new branch in the parameter (optional: without it the branch
             runs until ``bounds`` or ``max_steps``; the doubled branch may go either way).
         amplitude: size of the initial displacement along ``v`` (default ``ds``).
-        ds: arclength step (default ``branch.settings["ds"]``).
+        ds: arclength step (default ``branch.settings.ds``).
         integrator: use the one of ``branch``.
         Other arguments as in :func:`continue_orbit`.
     Returns:
@@ -539,7 +541,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
     if bifurcation.kind != "PD":
         raise ValueError(f"switch_branch starts the doubled branch at a period doubling (kind 'PD'), "
                          f"got kind {bifurcation.kind!r}.")
-    ds = float(branch.settings.get("ds", 0.01)) if ds is None else float(ds)
+    ds = branch.settings.ds if ds is None else float(ds)
     param = branch.param
     integrator = resolve_integrator(integrator)
     k2, p_pd, ds_min, ds_max, bounds = _validate(system, params, param, stop, 2 * branch.period, ds, max_steps,
@@ -547,7 +549,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
     h = ds if amplitude is None else float(amplitude)
     if not (h > 0):
         raise ValueError(f"amplitude={amplitude} must be > 0.")
-    t0 = float(branch.settings.get("t0", 0.0))
+    t0 = branch.settings.t0
     p_pd = float(bifurcation.param_value)
     n = system.dim
     x_pd = np.asarray(bifurcation.point, dtype=float)

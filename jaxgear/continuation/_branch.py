@@ -7,11 +7,13 @@ from typing import Any
 
 import numpy as np
 
-from .._codec import array_field, items_field, result_type
+from .._codec import array_field, custom_field, items_field, plain, result_type
 from .._format import format_table
+from .._io import save_result
 from .._system import state_index
+from ..integrate import AbstractIntegrator, integrator_from_dict
 
-__all__ = ["Branch", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS"]
+__all__ = ["Branch", "BranchSettings", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS"]
 
 BIFURCATION_KINDS = {
     "PD": "period doubling (real multiplier through -1)",
@@ -72,6 +74,43 @@ def _fmt_complex(z) -> str:
     return f"{z.real:.6g}{z.imag:+.6g}j"
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class BranchSettings:
+    """The options a branch was followed with (:func:`continue_orbit`,
+    :func:`switch_branch`).
+
+    Attributes:
+        ds, ds_min, ds_max: arclength step, its smallest and largest value (in ``(x, p)``).
+        max_steps: most continuation steps.
+        stop: the parameter value where the branch was to end (None: no target).
+        bounds: ``(low, high)`` parameter range the branch was kept in (None: none).
+        max_angle: largest angle (radians) between successive tangents.
+        tol, max_iter, max_norm: the corrector's Newton tolerance, iterations and the
+            largest state norm it accepts.
+        locate_tol: tolerance of the bisection locating a bifurcation.
+        t0: forcing phase (time) of the stroboscopic points.
+        integrator: the integrator.
+        origin: ``"start"`` or the period-doubling point the branch was switched from.
+        amplitude: distance from that point to the branch's first orbit (None for ``"start"``).
+    """
+
+    ds: float
+    ds_min: float
+    ds_max: float
+    max_steps: int
+    stop: float | None = None
+    bounds: tuple[float, float] | None = None
+    max_angle: float
+    tol: float
+    max_iter: int
+    max_norm: float
+    locate_tol: float
+    t0: float
+    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+    origin: str = "start"
+    amplitude: float | None = None
+
+
 @result_type
 @dataclasses.dataclass(frozen=True, eq=False, kw_only=True)
 class Branch:
@@ -92,7 +131,8 @@ class Branch:
         period: ``k`` (forcing periods per return of the continued map).
         system: the system's name; state_names: its coordinate names.
         params: the parameter set at the start of the branch (dict of the pytree).
-        settings: step sizes, tolerances, integrator, ``t0``, origin (JSON-able).
+        settings: a :class:`BranchSettings` (step sizes, tolerances, integrator, ``t0``,
+            origin).
     """
 
     param: str
@@ -109,7 +149,7 @@ class Branch:
     system: str = ""
     state_names: tuple[str, ...] = ()
     params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: BranchSettings
     version: str = ""
 
     # ----------------------------------------------------------------- views
@@ -148,7 +188,7 @@ class Branch:
             bifurcations=[dict(kind=b.kind, param_value=float(b.param_value), point=np.asarray(b.point).tolist(),
                                multipliers=[[float(z.real), float(z.imag)] for z in np.asarray(b.multipliers)],
                                index=int(b.index), nonsmooth=bool(b.nonsmooth)) for b in self.bifurcations],
-            settings=self.settings, params=self.params, version=self.version,
+            settings=plain(self.settings), params=self.params, version=self.version,
         )
 
     def table(self, max_rows: int = 30) -> str:
@@ -197,8 +237,6 @@ class Branch:
 
     def save(self, path):
         """Write the branch to a netCDF file atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 

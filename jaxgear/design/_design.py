@@ -52,16 +52,44 @@ from .._batching import progress_bar
 from .._checks import check_int
 from .._codec import custom_field, result_type
 from .._format import format_table
+from .._io import save_result
 from .._params import get_field, params_from_dict, params_to_dict, params_type_name, set_fields
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
+from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ..shooting import Instability, PeriodicOrbit, classify_multipliers, periodic_orbit
 from ..shooting._floquet import check_period
 from ._objectives import OrbitSamples, sample_orbit
 
-__all__ = ["design", "DesignResult"]
+__all__ = ["design", "DesignResult", "DesignSettings"]
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DesignSettings:
+    """The options a design ran with (:func:`design`; their meaning is documented there).
+
+    Attributes:
+        period: k of the P-k orbit; t0: its forcing phase (time) of the stroboscopic points.
+        steps, tol, require_stable, max_shrink, max_jump: the optimisation's steps, its
+            projected-gradient tolerance, whether the orbit must stay stable, the step
+            halvings allowed and the largest relative move of the orbit per step (None: no limit).
+        integrator: the integrator; samples_per_period: orbit samples per period for the objective.
+        shoot_tol: the shooting tolerance.
+        optimizer: ``"adam, lr 0.05 cosine decay"`` (the default) or ``"user"`` (one given).
+    """
+
+    period: int
+    t0: float
+    steps: int
+    tol: float
+    require_stable: bool
+    max_shrink: int
+    max_jump: float | None = None
+    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+    samples_per_period: int
+    shoot_tol: float
+    optimizer: str
 
 
 @result_type
@@ -87,7 +115,7 @@ class DesignResult:
         message: a sentence explaining ``status``.
         initial_params: parameters at the start (a dict of every parameter).
         system: the system's name; state_names: its coordinates.
-        settings: period, t0, steps, tol, integrator, ... (JSON-able).
+        settings: a :class:`DesignSettings` (period, t0, steps, tolerances, integrator, ...).
         version: jaxgear version.
     """
 
@@ -102,7 +130,7 @@ class DesignResult:
     initial_params: dict = dataclasses.field(default_factory=dict)
     system: str = ""
     state_names: tuple[str, ...] = ()
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: DesignSettings
     version: str = ""
 
     @property
@@ -152,8 +180,6 @@ class DesignResult:
 
     def save(self, path):
         """Write a netCDF file atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
@@ -412,9 +438,11 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
     bar.close()
     vals = _values(u, lows_a, highs_a)
     final = set_fields(params, names, [vals[i] for i in range(len(names))])
-    settings = dict(period=k, t0=float(t0), steps=int(steps), tol=float(tol), require_stable=bool(require_stable),
-                    max_shrink=int(max_shrink), max_jump=max_jump, integrator=integrator.to_dict(), samples_per_period=samples,
-                    shoot_tol=float(shoot_tol), optimizer="adam, lr 0.05 cosine decay" if default_opt else "user")
+    settings = DesignSettings(period=k, t0=float(t0), steps=int(steps), tol=float(tol),
+                              require_stable=bool(require_stable), max_shrink=int(max_shrink),
+                              max_jump=None if max_jump is None else float(max_jump), integrator=integrator,
+                              samples_per_period=int(samples), shoot_tol=float(shoot_tol),
+                              optimizer="adam, lr 0.05 cosine decay" if default_opt else "user")
     return DesignResult(
         params=final, orbit=_orbit_of(ev, k), initial_orbit=orbit0,
         history={key: np.asarray(v) for key, v in hist.items()}, free={n: (lo, hi) for n, lo, hi in

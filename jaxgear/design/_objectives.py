@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import check_int
+from .._model import backlash, mesh_excitation
+from .._params import GearParams
 from .._system import ForcedSystem
 from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
 from ..shooting._floquet import check_period
@@ -89,8 +91,6 @@ class MeshForces(NamedTuple):
 
 
 def _gear_layout(params, dim: int) -> str:
-    from .._params import GearParams
-
     if not isinstance(params, GearParams):
         raise ValueError("mesh forces are defined for the gear models (GearParams); for your own system "
                          "compute the force from orbit.states in the objective.")
@@ -114,8 +114,6 @@ def mesh_forces(params, orbit) -> MeshForces:
         orbit: an :class:`OrbitSamples` of the reduced or the N-planet model, or a pair
             ``(times (m,), states (m, dim))``.
     """
-    from .._model import backlash, mesh_excitation
-
     ts, xs = _times_states(orbit)
     layout = _gear_layout(params, xs.shape[-1])
 
@@ -143,8 +141,6 @@ def transmission_error(params, orbit, mesh: str = "sp"):
     displacement the mesh force acts on, in units of ``b_c``): ``X_sp = x1`` for
     ``mesh="sp"``, ``X_rp = x3 - x1 - e_sp - e_rp`` for ``mesh="rp"`` (model document §4).
     """
-    from .._model import mesh_excitation
-
     ts, xs = _times_states(orbit)
     layout = _gear_layout(params, xs.shape[-1])
     if mesh not in ("sp", "rp"):

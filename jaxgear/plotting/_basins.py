@@ -89,7 +89,7 @@ def plot_domains(result: GlobalResult, axis: int | str = -1, values=None, n_slic
     for q in range(len(cuts), nrows * ncols):
         axes[q // ncols][q % ncols].set_visible(False)
     fig.legend(handles=_legend_handles(result), loc="outside right center", fontsize="small")
-    fig.suptitle(f"Domains of attraction ({result.method}, {result.n_cells} cells)")
+    fig.suptitle(f"Domains of attraction ({result.method.name}, {result.n_cells} cells)")
     return fig
 
 
@@ -181,5 +181,5 @@ def plot_shares(result: GlobalResult):
     ax.bar_label(bars, fmt="%.2f %%")
     ax.set_ylabel("share of cells [%]")
     ax.set_ylim(0, 105)
-    ax.set_title(f"Basin shares ({result.method})")
+    ax.set_title(f"Basin shares ({result.method.name})")
     return fig

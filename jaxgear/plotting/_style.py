@@ -6,7 +6,6 @@ import matplotlib
 
 matplotlib.use("Agg", force=False) if not matplotlib.get_backend() else None
 
-import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
 SINK_COLOR = "#d9d9d9"
@@ -33,6 +32,3 @@ def new_figure(**kw):
     fig = Figure(**kw)
     return fig
 
-
-def as_array(x) -> np.ndarray:
-    return np.asarray(x, dtype=float)

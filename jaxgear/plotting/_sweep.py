@@ -153,7 +153,7 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     ax.set_xlabel(sweep.param)
     ax.set_ylabel("share of the grid [%]" if percent else "share of the grid")
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small")
-    ax.set_title(title or f"Basin shares ({sweep.method}, {sweep.grid.n_cells} cells per value)")
+    ax.set_title(title or f"Basin shares ({sweep.method.name}, {sweep.grid.n_cells} cells per value)")
     if multipliers:
         mu = np.asarray(sweep.multiplier, dtype=float)
         for g in range(sweep.n_attractors):
@@ -283,6 +283,6 @@ def plot_basin_map(bmap, attractor: int | str | None = None, *, title: str | Non
     for ax in axes:
         ax.set_xlabel(bmap.param_x)
         ax.set_ylabel(bmap.param_y)
-    fig.suptitle(title or f"Basin shares over {bmap.param_x} x {bmap.param_y} ({bmap.method}, "
+    fig.suptitle(title or f"Basin shares over {bmap.param_x} x {bmap.param_y} ({bmap.method.name}, "
                  f"{bmap.grid.n_cells} cells per point)")
     return fig

@@ -12,21 +12,23 @@ import numpy as np
 
 from .._batching import chunks, pad_rows, progress_bar
 from .._checks import check_int, check_number
-from .._codec import array_field, items_field, result_type
+from .._codec import array_field, custom_field, items_field, plain, result_type
 from .._devices import local_devices, shard_rows
 from .._format import format_table
+from .._io import save_result, write_json
 from .._matching import group_attractors, same_attractor
 from .._params import params_to_dict
 from .._poincare import sample_trajectory, stroboscopic_map
 from .._status import Status, count_statuses
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, resolve_integrator
+from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ._floquet import Instability, check_period
 from ._orbit import ShootResult, check_newton_options, check_solver_options, default_solver, shoot_kernel
 from ._solve import check_segments
+from ._verify import verify_orbit
 
-__all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
+__all__ = ["PeriodicOrbit", "OrbitSearch", "SearchSettings", "find_periodic_orbits", "NEWTON_STATUSES"]
 
 NEWTON_STATUSES = (Status.CONVERGED, Status.NOT_CONVERGED, Status.SINGULAR, Status.DIVERGED)
 """The outcomes a Newton run can have."""
@@ -85,6 +87,48 @@ class PeriodicOrbit:
         }
 
 
+def _integrator_field():
+    return custom_field(lambda i: i.to_dict(), integrator_from_dict)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SearchSettings:
+    """The options an orbit search ran with (:func:`find_periodic_orbits`; their
+    meaning is documented there).
+
+    Attributes:
+        periods: the periods k tried.
+        t0: forcing phase (time) of the stroboscopic points.
+        integrator: the integrator of the shooting; search_integrator: that of the
+            search rounds (transient and seeding).
+        tol, max_iter, max_norm, period_tol, solver, segments: the Newton options.
+        dedup_tol: relative distance under which two converged orbits are the same.
+        chunk_size: seeds shot in one batch; trajectory_samples: points stored per orbit.
+        deflation_rounds, deflation_power, deflation_shift: the deflated rounds.
+        transient: forcing periods integrated from each seed before shooting.
+        verify: periods of the check by direct integration (0: none).
+    """
+
+    periods: tuple[int, ...]
+    t0: float
+    integrator: AbstractIntegrator = _integrator_field()
+    tol: float
+    max_iter: int
+    max_norm: float
+    period_tol: float
+    dedup_tol: float
+    chunk_size: int
+    trajectory_samples: int
+    solver: str
+    segments: int
+    deflation_rounds: int
+    deflation_power: float
+    deflation_shift: float
+    transient: int
+    search_integrator: AbstractIntegrator = _integrator_field()
+    verify: int
+
+
 @result_type
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class OrbitSearch:
@@ -102,7 +146,7 @@ class OrbitSearch:
         system: the system's name; state_names: its coordinate names;
         section_index: its default section coordinate (or ``None``).
         params: the full parameter set as a dict (canonical names for the gear models).
-        settings: the options of the search (tolerances, integrator, ``t0``, ...), JSON-able.
+        settings: the options of the search, a :class:`SearchSettings`.
         version: jaxgear version; runtime_s: wall time of the search (s).
         convergence: per ``k`` (keys ``"1"``, ``"2"``, ...): ``runs`` (seed runs, all
             deflation rounds), ``seeds``, ``converged`` (runs that converged to an orbit of
@@ -123,7 +167,7 @@ class OrbitSearch:
     state_names: tuple[str, ...] = ()
     section_index: int | None = None
     params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: SearchSettings
     version: str = ""
     runtime_s: float = float("nan")
     convergence: dict = dataclasses.field(default_factory=dict)
@@ -165,7 +209,7 @@ class OrbitSearch:
         """Everything but the per-seed arrays and trajectories, JSON-able."""
         return dict(
             jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
-            params=self.params, settings=self.settings, n_seeds=self.n_seeds,
+            params=self.params, settings=plain(self.settings), n_seeds=self.n_seeds,
             status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
             convergence=dict(self.convergence), checks=dict(self.checks),
             runtime_s=self.runtime_s, version=self.version,
@@ -183,14 +227,10 @@ class OrbitSearch:
 
     def save(self, path):
         """Write the search to a netCDF file atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
     def write_summary(self, path):
         """Write :meth:`summary` as strict JSON."""
-        from .._io import write_json
-
         return write_json(self.summary(), path)
 
 
@@ -395,8 +435,6 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
         ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
             options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
     """
-    from ._verify import verify_orbit
-
     start = time.perf_counter()
     if isinstance(seeds, Mapping):
         groups = {check_period(k): np.asarray(v, dtype=float) for k, v in seeds.items()}
@@ -513,13 +551,14 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
                                   consistent=bool(c.kept) == bool(o.stable))
     counts_st = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
                                NEWTON_STATUSES)
-    settings: dict[str, Any] = dict(
-        periods=sorted(groups), t0=float(t0), integrator=integrator.to_dict(), tol=float(tol), max_iter=int(max_iter), max_norm=float(max_norm),
+    settings = SearchSettings(
+        periods=tuple(sorted(groups)), t0=float(t0), integrator=integrator, tol=float(tol), max_iter=int(max_iter),
+        max_norm=float(max_norm),
         period_tol=float(period_tol), dedup_tol=float(dedup_tol), chunk_size=int(chunk_size),
         trajectory_samples=int(trajectory_samples), solver=solver, segments=int(segments),
         deflation_rounds=int(deflation_rounds), deflation_power=float(deflation_power),
         deflation_shift=float(deflation_shift), transient=int(transient),
-        search_integrator=search_int.to_dict(), verify=int(verify),
+        search_integrator=search_int, verify=int(verify),
     )
     params_dict = params_to_dict(params)
     return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts_st, seeds=groups, system=system.name,

@@ -57,7 +57,11 @@ class BasinMap(GlobalShares):
         uncertainty_step, uncertainty_start: ``(ny, nx)`` the label uncertainty of each
             point's analysis (as in :class:`~jaxgear.sweep.BasinSweep`); NaN where not
             measured.
-        grid, method, match_tol, system, state_names, params (base), settings, version.
+        grid: the cell grid of every analysis; method: the global-analysis method object
+            (every option, the integrator); match_tol: the relative distance under which
+            attractors at two values are the same; uncertainty_samples: cells sampled
+            for each label uncertainty (0: none measured).
+        system, state_names, params (the base parameter set), version.
     """
 
     param_x: str
@@ -117,8 +121,9 @@ class BasinMap(GlobalShares):
     def summary(self) -> dict[str, Any]:
         return dict(kind="basin_map", param_x=self.param_x, fields_x=list(self.fields_x),
                     values_x=self.values_x.tolist(), param_y=self.param_y, fields_y=list(self.fields_y),
-                    values_y=self.values_y.tolist(), method=self.method, grid=self.grid.to_dict(),
-                    match_tol=self.match_tol, system=self.system, params=self.params, settings=self.settings,
+                    values_y=self.values_y.tolist(), method=self.method.name, grid=self.grid.to_dict(),
+                    match_tol=self.match_tol, system=self.system, params=self.params,
+                    settings=self.settings_summary(),
                     version=self.version,
                     attractors=[dict(id=g, label=self.attractor_label(g), present_at=int(self.present[..., g].sum()),
                                      max_share=float(self.shares[..., g].max())) for g in range(self.n_attractors)],
@@ -235,12 +240,9 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     arrays = global_arrays(results, match_on_grid(results, ny, nx, match_tol), grid, system.dim)
     bmap = BasinMap(
         param_x=param_x, fields_x=fields_x, values_x=vx, param_y=param_y, fields_y=fields_y, values_y=vy,
-        **{k: a.reshape(ny, nx, *a.shape[1:]) for k, a in arrays.items()}, grid=grid, method=method.name,
-        match_tol=match_tol, system=system.name, state_names=tuple(system.state_names),
-        params=params_to_dict(params),
-        settings={k: v for k, v in settings.items()
-                  if k not in ("values_x", "values_y", "params", "system", "param_x", "param_y", "grid", "match_tol")},
-        version=__version__)
+        **{k: a.reshape(ny, nx, *a.shape[1:]) for k, a in arrays.items()}, grid=grid, method=method,
+        match_tol=match_tol, uncertainty_samples=int(uncertainty), system=system.name,
+        state_names=tuple(system.state_names), params=params_to_dict(params), version=__version__)
     if out is not None and save and process_index() == 0:  # one process writes
         bmap.save(Path(out) / "basin_map.nc")
     return bmap

@@ -20,14 +20,24 @@ import numpy as np
 from .._batching import progress_bar
 from .._cells import CellGrid
 from .._checks import check_bool, check_int, check_number
-from .._codec import array_field, result_type
+from .._codec import array_field, custom_field, result_type
 from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
+from .._io import load, save_result
 from .._matching import match_attractors
+from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
+from .._presets import paper_params
 from .._system import ForcedSystem
 from .._version import __version__
-from ..analysis import AbstractGlobalMethod, analyze_global, analyze_global_values, default_method, method_from_name
+from ..analysis import (
+    AbstractGlobalMethod,
+    analyze_global,
+    analyze_global_values,
+    default_method,
+    method_from_dict,
+    method_from_name,
+)
 from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._bifurcation import read_only
 from ._checkpoint import open_shared_checkpoint
@@ -69,7 +79,7 @@ class GlobalShares:
     """What a basin sweep and a basin map share: per parameter value (the ``...`` axes,
     named by :attr:`value_dims`) the shares ``(..., G)``, periods, multipliers and points
     of global attractors (absent: period -1, share 0, NaN), the sink and unresolved
-    shares, every cell's global label, the label uncertainty, and the common settings.
+    shares, every cell's global label, the label uncertainty, and the common options.
     Fields added after files were first written (``multiplier``, ``uncertainty_step``,
     ``uncertainty_start``) load as NaN from those files."""
 
@@ -84,12 +94,12 @@ class GlobalShares:
     uncertainty_step: np.ndarray | None = array_field(_at(), later=True, default=None)
     uncertainty_start: np.ndarray | None = array_field(_at(), later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
-    method: str = ""
+    method: AbstractGlobalMethod = custom_field(lambda m: m.to_dict(), method_from_dict)
     match_tol: float = 0.0
+    uncertainty_samples: int = DEFAULT_SAMPLES
     system: str = ""
     state_names: tuple[str, ...] = ()
     params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
     version: str = ""
 
     def __post_init__(self):
@@ -139,6 +149,11 @@ class GlobalShares:
         return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "sink_share", "unresolved_share",
                                                         "uncertainty_step", "uncertainty_start")}
 
+    def settings_summary(self) -> dict[str, Any]:
+        """The method's options (its integrator included) and the label-uncertainty
+        samples, JSON-able (the ``settings`` of :meth:`summary`)."""
+        return dict(method=self.method.to_dict(), uncertainty_samples=self.uncertainty_samples)
+
     def _cell_coords(self, coords: dict) -> dict:
         """``coords`` (the parameters') with the attractor, state and cell-centre coordinates."""
         coords.update(attractor=("attractor", np.arange(self.n_attractors)), state=("state", list(self.state_names)))
@@ -148,8 +163,6 @@ class GlobalShares:
 
     def save(self, path):
         """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
@@ -174,7 +187,11 @@ class BasinSweep(GlobalShares):
             cells whose label changes with a refined integration step, and with the start
             moved by 1e-3 cell); NaN where not measured (``uncertainty=0``, or a file
             written before it was recorded).
-        grid, method, match_tol, system, state_names, params (base), settings, version.
+        grid: the cell grid of every analysis; method: the global-analysis method object
+            (every option, the integrator); match_tol: the relative distance under which
+            attractors at two values are the same; uncertainty_samples: cells sampled
+            for each label uncertainty (0: none measured).
+        system, state_names, params (the base parameter set), version.
     """
 
     param: str
@@ -249,8 +266,8 @@ class BasinSweep(GlobalShares):
 
     def summary(self) -> dict[str, Any]:
         return dict(kind="basins", param=self.param, fields=list(self.fields), values=self.values.tolist(),
-                    method=self.method, grid=self.grid.to_dict(), match_tol=self.match_tol, system=self.system,
-                    params=self.params, settings=self.settings, version=self.version,
+                    method=self.method.name, grid=self.grid.to_dict(), match_tol=self.match_tol, system=self.system,
+                    params=self.params, settings=self.settings_summary(), version=self.version,
                     attractors=[dict(id=g, label=self.attractor_label(g),
                                      first=float(self.values[self.present[:, g]][0]),
                                      last=float(self.values[self.present[:, g]][-1]),
@@ -352,11 +369,8 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     me = process_index()
     results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, out, "basins",
                           settings, restart, batched, progress, f"basins {param}", int(uncertainty))
-    sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method.name,
-                             float(match_tol), system, params_to_dict(params),
-                             {k: v for k, v in settings.items()
-                              if k not in ("values", "params", "system", "param", "grid", "match_tol")},
-                             __version__)
+    sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method, float(match_tol),
+                             int(uncertainty), system, params_to_dict(params), __version__)
     if out is not None and save and me == 0:  # one process writes
         sweep.save(Path(out) / "basins.nc")
     return sweep
@@ -375,9 +389,6 @@ def resolve_basin_options(system, params, method, grid, match_tol):
     :func:`~jaxgear.basin_map`: ``(system, params, method, grid, match_tol)`` (the reduced
     model and the paper's parameters, the default method and its grid, and 5 % of the
     grid's diagonal when not given)."""
-    from .._model import REDUCED
-    from .._presets import paper_params
-
     if system is None:
         system = REDUCED
     if params is None:
@@ -411,8 +422,6 @@ def analyses_at(system, params_list, grid, method, out, kind: str, settings: dic
     several JAX processes, process ``p`` of ``P`` computes the indices ``i % P == p``
     (``out`` required) and reads the others' parts. A progress bar (``label``) counts
     the finished ones."""
-    from .._io import load
-
     n = len(params_list)
     n_proc, me = process_count(), process_index()
     if n_proc > 1 and out is None:
@@ -479,13 +488,14 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
         out["labels"][i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)
         out["sink_share"][i] = r.n_sink / r.n_cells
         out["unresolved_share"][i] = r.n_unresolved / r.n_cells
-        if r.uncertainty:
-            out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty["step"], r.uncertainty["start"]
+        if r.uncertainty is not None:
+            out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty.step, r.uncertainty.start
     return out
 
 
-def _assemble_basins(results, param, fields, vals, grid, method, match_tol, system, params_dict, settings, version):
+def _assemble_basins(results, param, fields, vals, grid, method, match_tol, uncertainty_samples, system, params_dict,
+                     version):
     arrays = global_arrays(results, match_across_values(results, match_tol), grid, system.dim)
     return BasinSweep(param=param, fields=tuple(fields), values=vals, **arrays, grid=grid, method=method,
-                      match_tol=match_tol, system=system.name, state_names=tuple(system.state_names),
-                      params=params_dict, settings=settings, version=version)
+                      match_tol=match_tol, uncertainty_samples=uncertainty_samples, system=system.name,
+                      state_names=tuple(system.state_names), params=params_dict, version=version)

@@ -25,19 +25,22 @@ import numpy as np
 
 from .._batching import progress_bar
 from .._checks import check_bool, check_choice, check_int, check_number
-from .._codec import array_field, result_type
+from .._codec import array_field, custom_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
+from .._io import save_result
+from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
+from .._presets import paper_params
 from .._system import ForcedSystem, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, resolve_integrator
+from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import ESCAPED, classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points, sequential_points
 from ._values import check_starts, check_values, coord_name, sorted_values
 
-__all__ = ["BifurcationDiagram", "bifurcation_diagram", "DIRECTIONS", "check_common", "read_only"]
+__all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "DIRECTIONS", "check_common", "read_only"]
 
 DIRECTIONS = ("independent", "up", "down", "both", "all")
 
@@ -47,6 +50,31 @@ def read_only(a) -> np.ndarray:
     a = np.asarray(a)
     a.setflags(write=False)
     return a
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SequenceSettings:
+    """The options of a sweep that follows each start for a number of forcing periods
+    and classifies the recorded stroboscopic points (:func:`bifurcation_diagram`,
+    :func:`~jaxgear.parameter_map`).
+
+    Attributes:
+        transient: forcing periods integrated before recording.
+        record: forcing periods recorded (R stroboscopic points per start).
+        integrator: the integrator.
+        max_period: largest period k detected.
+        tol: relative recurrence tolerance of the period detection.
+        merge_tol: relative distance under which two starts reached the same attractor.
+        escape_bound: a state beyond it (any coordinate, in absolute value) escaped.
+    """
+
+    transient: int
+    record: int
+    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+    max_period: int
+    tol: float
+    merge_tol: float
+    escape_bound: float
 
 
 @result_type
@@ -66,7 +94,7 @@ class BifurcationDiagram:
         attractor: ``(D, V, S)`` id of the distinct attractor reached, numbered per
             (direction, value) in order of first start; -1 escaped.
         system, state_names, params (the base parameter set, canonical names), settings
-        (transient, record, integrator, tolerances, ...), version.
+        (a :class:`SequenceSettings`: transient, record, integrator, tolerances), version.
     """
 
     param: str
@@ -80,7 +108,7 @@ class BifurcationDiagram:
     system: str = ""
     state_names: tuple[str, ...] = ()
     params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: SequenceSettings
     version: str = ""
 
     def __post_init__(self):
@@ -145,7 +173,7 @@ class BifurcationDiagram:
         each value (same periods and point sets within ``merge_tol`` count as equal);
         for ``"up"`` and ``"down"`` this marks the hysteresis."""
         da, db = self._d(a), self._d(b)
-        tol = float(self.settings.get("merge_tol", 1e-3))
+        tol = self.settings.merge_tol
         out = np.zeros(len(self.values), dtype=bool)
         for i in range(len(self.values)):
             A, B = self._attractor_sets(da, i), self._attractor_sets(db, i)
@@ -194,7 +222,7 @@ class BifurcationDiagram:
         return dict(
             kind="bifurcation", param=self.param, fields=list(self.fields), values=self.values.tolist(),
             directions=list(self.directions), n_starts=int(len(self.starts)), system=self.system,
-            state_names=list(self.state_names), params=self.params, settings=self.settings, version=self.version,
+            state_names=list(self.state_names), params=self.params, settings=plain(self.settings), version=self.version,
             transitions={d: self.transitions(d) for d in self.directions},
             hysteresis=(self.values[self.differs()].tolist()
                         if "up" in self.directions and "down" in self.directions else None),
@@ -213,16 +241,11 @@ class BifurcationDiagram:
 
     def save(self, path):
         """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
 def check_common(system, params, transient, record, max_period, tol, chunk_size):
     """Defaults (the gear model and the paper preset) and the checks shared by the sweeps."""
-    from .._model import REDUCED
-    from .._presets import paper_params
-
     if system is None:
         system = REDUCED
     if params is None:
@@ -355,8 +378,10 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     diagram = BifurcationDiagram(
         param=param, fields=param_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
         period=period, attractor=attractor, system=system.name, state_names=tuple(system.state_names),
-        params=params_to_dict(params), settings={k: v for k, v in settings.items()
-                                               if k not in ("values", "starts", "params", "system", "param")},
+        params=params_to_dict(params),
+        settings=SequenceSettings(transient=int(transient), record=int(record), integrator=integrator,
+                                  max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
+                                  escape_bound=float(escape_bound)),
         version=__version__,
     )
     if out is not None and save and cell_processes()[0] == 0:  # one process writes

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .._checks import article
+from .._devices import allgather, cell_processes, process_count, process_index
 from .._io import atomic_write
 
 __all__ = ["Checkpoint", "diff_settings", "mismatch_message", "open_shared_checkpoint", "checkpoint_on_zero",
@@ -95,8 +96,6 @@ def open_shared_checkpoint(out, kind: str, settings: dict, restart: bool = False
     discarding anything. One process: ``Checkpoint(out, kind, settings, restart)``."""
     import time
 
-    from .._devices import process_count, process_index
-
     if out is None or process_count() == 1 or process_index() == 0:
         return Checkpoint(out, kind, settings, restart)
     man, key, t0 = Path(out) / "manifest.json", _hash(settings), time.monotonic()
@@ -116,8 +115,6 @@ def checkpoint_on_zero(out, kind: str, settings: dict, restart: bool = False) ->
     (:func:`shared_block`): process 0 alone opens ``out`` (which need not be shared); the
     others keep nothing. When process 0 cannot open it, every process raises. One process
     (:func:`jaxgear._devices.cell_processes`): ``Checkpoint(out, kind, settings, restart)``."""
-    from .._devices import allgather, cell_processes
-
     me, count = cell_processes()
     if count == 1:
         return Checkpoint(out, kind, settings, restart)
@@ -142,8 +139,6 @@ def shared_block(ck: Checkpoint, part: str, compute, like: Mapping[str, tuple], 
     block split over the processes); otherwise process 0 alone computes the block (a
     sequential one) and sends it. ``like``: ``{name: (shape, dtype)}`` of the arrays.
     One process: the saved part, or ``compute()`` saved."""
-    from .._devices import allgather, cell_processes
-
     me, count = cell_processes()
     z = ck.load(part) if ck.has(part) else None
     if count > 1:

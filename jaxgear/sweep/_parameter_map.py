@@ -11,14 +11,15 @@ import numpy as np
 
 from .._batching import progress_bar
 from .._checks import check_choice
-from .._codec import array_field, result_type
+from .._codec import array_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
+from .._io import save_result
 from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
-from ._bifurcation import check_common, read_only
+from ._bifurcation import SequenceSettings, check_common, read_only
 from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points
@@ -40,6 +41,8 @@ class ParameterMap:
         attractor: ``(ny, nx, S)`` distinct-attractor id per grid point (-1 escaped).
         n_attractors: ``(ny, nx)`` number of distinct attractors reached (escape not counted).
         last_point: ``(ny, nx, S, dim)`` the last recorded stroboscopic point.
+        system, state_names, params (the base parameter set), settings (a
+        :class:`~jaxgear.sweep.SequenceSettings`), version.
     """
 
     param_x: str
@@ -57,7 +60,7 @@ class ParameterMap:
     system: str = ""
     state_names: tuple[str, ...] = ()
     params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: SequenceSettings
     version: str = ""
 
     def __post_init__(self):
@@ -84,7 +87,7 @@ class ParameterMap:
     def summary(self) -> dict[str, Any]:
         return dict(kind="parameter_map", param_x=self.param_x, values_x=self.values_x.tolist(),
                     param_y=self.param_y, values_y=self.values_y.tolist(), quantity=self.quantity,
-                    n_starts=int(len(self.starts)), system=self.system, params=self.params, settings=self.settings,
+                    n_starts=int(len(self.starts)), system=self.system, params=self.params, settings=plain(self.settings),
                     version=self.version,
                     period_counts={period_label(k): int((self.period[:, :, 0] == k).sum())
                                    for k in np.unique(self.period[:, :, 0]).tolist()},
@@ -110,8 +113,6 @@ class ParameterMap:
 
     def save(self, path):
         """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
-        from .._io import save_result
-
         return save_result(self, path)
 
 
@@ -186,8 +187,9 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
         period=period.reshape(ny, nx, S), attractor=attractor.reshape(ny, nx, S),
         n_attractors=n_att.reshape(ny, nx).astype(np.int64), last_point=last.reshape(ny, nx, S, system.dim),
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
-        settings={k: v for k, v in settings.items()
-                  if k not in ("values_x", "values_y", "starts", "params", "system", "param_x", "param_y")},
+        settings=SequenceSettings(transient=int(transient), record=int(record), integrator=integrator,
+                                  max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
+                                  escape_bound=float(escape_bound)),
         version=__version__,
     )
     if out is not None and cell_processes()[0] == 0:  # one process writes
