@@ -15,7 +15,7 @@ from typing import Any
 import jax
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_choice", "check_bool", "article",
+__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article",
            "physical_memory", "check_memory"]
 
 
@@ -77,6 +77,21 @@ def check_bool(value: Any, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name}={_show(value)} must be True or False.")
     return bool(value)
+
+
+def check_finite_array(value: Any, name: str, *, ndim: int | None = None, last: int | None = None) -> np.ndarray:
+    """``value`` as a finite float64 array (``ndim`` dimensions, last axis of length ``last``)."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an array of numbers, got {_show(value)}.") from None
+    if ndim is not None and a.ndim != ndim:
+        raise ValueError(f"{name} must have {ndim} dimension(s), got shape {a.shape}.")
+    if last is not None and (a.ndim == 0 or a.shape[-1] != last):
+        raise ValueError(f"{name} must have shape (..., {last}), got shape {a.shape}.")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains NaN or infinite values.")
+    return a
 
 
 def physical_memory() -> int:
