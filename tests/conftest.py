@@ -1,4 +1,5 @@
 import contextlib
+import functools
 import logging
 
 import jax
@@ -25,6 +26,15 @@ def _strict_dtype_promotion():
             jax.config.update("jax_numpy_dtype_promotion", old)
 
 
+@pytest.fixture(scope="session")
+def jaxgear_cache_dir(tmp_path_factory):
+    """One ``JAXGEAR_CACHE_DIR`` for the commands a test session starts (its compilation
+    cache, the compiled C++ kernel, the kept computations), apart from the user's own
+    cache: the kernel is built with ``g++ -O3`` once per session (per xdist worker), not
+    once per command."""
+    return tmp_path_factory.mktemp("jaxgear-cache")
+
+
 @contextlib.contextmanager
 def count_compilations(name: str):
     """Collect JAX's "Compiling <name> ..." log messages while the block runs (a list that
@@ -47,3 +57,80 @@ def count_compilations(name: str):
     finally:
         jax.config.update("jax_log_compiles", old)
         logger.removeHandler(handler)
+
+
+@pytest.fixture(scope="session")
+def gear_reference():
+    """:func:`reduced_model_reference`, for tests to call."""
+    return reduced_model_reference
+
+
+def reduced_model_reference(p, x0, periods: int, *, t0: float = 0.0, rtol: float = 1e-11, atol: float = 1e-11):
+    """The reduced gear model (model document §4, sine mesh stiffness) integrated by scipy's
+    DOP853 from ``x0`` (shape ``(4,)``) over ``periods`` forcing periods, an independent
+    reference for jaxgear's integrators: written from the equations, not from jaxgear's code.
+
+    The vector field only has kinks, on the four switching surfaces ``x1 = +-b_sp`` and
+    ``X_rp = x3 - x1 - e_sp(t) - e_rp(t) = +-b_rp``. Between them each mesh force uses the
+    smooth branch of its side (extended past the surface), every crossing is located as an
+    event and the integration restarts there on the new branch, so the solver only ever
+    integrates a smooth field and keeps its 8th order. Returns the state at
+    ``t0 + periods * T``."""
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    q = {k: float(v) for k, v in p.to_dict().items() if k != "mesh_shape"}
+    assert p.mesh_shape == "sine", p.mesh_shape
+    W, N = q["Omega"], q["N"]
+    b_sp, b_rp = q["b_sp"], q["b_rp"]
+
+    def excitation(t):
+        a_sp, a_rp = W * t + q["beta_sp"], W * t + q["beta_rp"] + q["gamma_sr"]
+        return (q["kappa_sp_mean"] + q["kappa_sp_amp"] * np.sin(W * t + q["phi_sp"]),
+                q["kappa_rp_mean"] + q["kappa_rp_amp"] * np.sin(W * t + q["phi_rp"]),
+                q["e_sp_amp"] * np.sin(a_sp) + q["e_rp_amp"] * np.sin(a_rp),  # e_sp + e_rp
+                q["e_sp_amp"] * W * np.cos(a_sp) + q["e_rp_amp"] * W * np.cos(a_rp),  # their rate
+                -q["e_sp_amp"] * W * W * np.sin(a_sp))  # e_sp''
+
+    def surfaces(t, x):
+        """The four switching functions and their rates along the motion."""
+        e, de = excitation(t)[2:4]
+        X_rp, V_rp = x[2] - x[0] - e, x[3] - x[1] - de
+        return (np.array([x[0] - b_sp, x[0] + b_sp, X_rp - b_rp, X_rp + b_rp]),
+                np.array([x[1], x[1], V_rp, V_rp]))
+
+    def field(t, x, side):
+        k_sp, k_rp, e, de, dde_sp = excitation(t)
+        X_rp, V_rp = x[2] - x[0] - e, x[3] - x[1] - de
+        f_sp = x[0] - b_sp if side[0] > 0 else (x[0] + b_sp if side[1] < 0 else 0.0)
+        f_rp = X_rp - b_rp if side[2] > 0 else (X_rp + b_rp if side[3] < 0 else 0.0)
+        g_sp = k_sp * f_sp + q["c_sp"] * x[1]
+        g_rp = k_rp * f_rp + q["c_rp"] * V_rp
+        return [x[1],
+                -(N + q["mu_p"]) * g_sp + (q["mu_p"] - N * q["mu_c"]) * g_rp + q["mu_s"] * q["f_D"]
+                + q["mu_c"] * q["f_L"] - dde_sp,
+                x[3],
+                -N * (q["mu_s"] + 2 * q["mu_c"]) * g_sp - 2 * N * q["mu_c"] * g_rp + q["mu_s"] * q["f_D"]
+                + 2 * q["mu_c"] * q["f_L"]]
+
+    t, t_end = float(t0), float(t0) + periods * 2 * np.pi / W
+    x = np.asarray(x0, dtype=float)
+    s, ds = surfaces(t, x)
+    side = np.where(s != 0, np.sign(s), np.sign(ds))
+    for _ in range(10_000):  # switchings (a few per period)
+        events = []
+        for i in range(4):
+            event = lambda t, x, i=i: surfaces(t, x)[0][i]  # noqa: E731
+            event.terminal, event.direction = True, -side[i]  # the next crossing leaves side[i]
+            events.append(event)
+        piece = functools.partial(field, side=side)  # this stretch's branches (side is replaced, not changed)
+        sol = solve_ivp(piece, (t, t_end), x, method="DOP853", rtol=rtol, atol=atol, events=events)
+        assert sol.status in (0, 1), sol.message
+        t, x = sol.t[-1], sol.y[:, -1]
+        if sol.status == 0:
+            return x
+        side = side.copy()
+        for i in range(4):
+            if len(sol.t_events[i]):
+                side[i] = -side[i]
+    raise AssertionError(f"more than 10,000 switchings before t = {t_end}")

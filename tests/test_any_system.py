@@ -56,8 +56,8 @@ def _confirm_by_shooting(system, params, result, integrator, atol):
 def test_duffing_multistable_all_methods_confirmed_by_shooting():
     p = MyDuffing(delta=0.1, beta=1.0, gamma=0.3, omega=1.4)
     grid = jg.CellGrid.box([(-2.5, 2.5), (-2.5, 2.5)], (20, 20), names=MY_DUFFING.state_names)
-    direct = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(integrator=RK), progress=False)
-    strobe = jg.analyze_global(MY_DUFFING, p, grid, method=jg.StroboscopicCellMap(mapping_steps=10, integrator=RK), progress=False)
+    direct = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(integrator=RK), progress=False, uncertainty=0)
+    strobe = jg.analyze_global(MY_DUFFING, p, grid, method=jg.StroboscopicCellMap(mapping_steps=10, integrator=RK), progress=False, uncertainty=0)
     for r in (direct, strobe):
         assert sorted(a.period for a in r.attractors) == [1, 1], r.table()
         assert r.n_unresolved == 0 and r.n_sink == 0
@@ -78,8 +78,8 @@ def test_duffing_multistable_all_methods_confirmed_by_shooting():
     # against direct integration of the same cell centres: within 7 percentage points (the
     # section map restarts each crossing at phase 0, an approximation: docs/model.md §6)
     line = jg.CellGrid.box([(-2.5, 2.5)], (40,), axes=(0,), base=(0.0, 0.0), names=("x", "v"))
-    pl = jg.analyze_global(MY_DUFFING, p, line, method=jg.PoincareCellMap(mapping_steps=10, integrator=RK), progress=False)
-    dl = jg.analyze_global(MY_DUFFING, p, line, method=jg.Direct(integrator=RK), progress=False)
+    pl = jg.analyze_global(MY_DUFFING, p, line, method=jg.PoincareCellMap(mapping_steps=10, integrator=RK), progress=False, uncertainty=0)
+    dl = jg.analyze_global(MY_DUFFING, p, line, method=jg.Direct(integrator=RK), progress=False, uncertainty=0)
     _confirm_by_shooting(MY_DUFFING, p, pl, RK, atol=1e-6)
     a, b = key(pl), key(dl)
     assert a.keys() == b.keys() == d.keys()
@@ -95,7 +95,7 @@ def test_duffing_small_forcing_matches_linear_closed_form():
     d, w, g = 0.1, 1.4, 1e-3
     p = MyDuffing(delta=d, beta=1.0, gamma=g, omega=w)
     grid = jg.CellGrid.box([(-1.0, 1.0), (-1.0, 1.0)], (6, 6))
-    r = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(), progress=False)
+    r = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(), progress=False, uncertainty=0)
     assert len(r.attractors) == 1 and r.attractors[0].period == 1  # no more bistability
     shot = jg.periodic_orbit(MY_DUFFING, p, r.attractors[0].points[0])
     H = 1.0 / (1.0 - w * w + 1j * d * w)
@@ -116,8 +116,8 @@ def test_spur_pair_with_backlash_end_to_end():
     # light damping: a contact orbit and a double-sided impact orbit coexist. No gear code.
     p = jg.SpurPairParams(zeta=0.02, kappa=0.2, b=1.0, f_m=0.1, e_amp=0.2, Omega=0.7)
     grid = jg.CellGrid.box([(-4, 4), (-4, 4)], (16, 16), names=jg.SPUR_PAIR.state_names)
-    direct = jg.analyze_global(jg.SPUR_PAIR, p, grid, method=jg.Direct(), progress=False)
-    strobe = jg.analyze_global(jg.SPUR_PAIR, p, grid, method=jg.StroboscopicCellMap(mapping_steps=20), progress=False)
+    direct = jg.analyze_global(jg.SPUR_PAIR, p, grid, method=jg.Direct(), progress=False, uncertainty=0)
+    strobe = jg.analyze_global(jg.SPUR_PAIR, p, grid, method=jg.StroboscopicCellMap(mapping_steps=20), progress=False, uncertainty=0)
     for r in (direct, strobe):
         # both attractors are P-1 (the direct method once reported the slowly spiralling
         # contact orbit as P-3; the period is now read from its refined points)
@@ -145,7 +145,7 @@ def test_three_dimensional_user_system():
     sys3 = jg.ForcedSystem(f, lambda p: 2 * jnp.pi / 1.4, ("x", "v", "z"), section_index=1, name="duffing+filter")
     p = P3(gamma=0.3, a=2.0)
     grid = jg.CellGrid.box([(-2, 2), (-2, 2), (-1, 1)], (6, 6, 3), names=sys3.state_names)
-    r = jg.analyze_global(sys3, p, grid, method=jg.Direct(integrator=RK), progress=False)
+    r = jg.analyze_global(sys3, p, grid, method=jg.Direct(integrator=RK), progress=False, uncertainty=0)
     assert sorted(a.period for a in r.attractors) == [1, 1] and r.n_sink == 0
     search = _confirm_by_shooting(sys3, p, r, RK, atol=1e-6)
     # the filter only follows x: its multiplier is exp(-a T), the other two those of the Duffing part
@@ -153,7 +153,7 @@ def test_three_dimensional_user_system():
         assert np.min(np.abs(np.abs(o.multipliers) - np.exp(-2.0 * 2 * np.pi / 1.4))) <= 1e-7
     # the poincare-like method: grid over x, z on {v = 0}
     sec = jg.CellGrid.box([(-2, 2), (-1, 1)], (8, 4), axes=(0, 2), base=(0.0, 0.0, 0.0), names=sys3.state_names)
-    rp = jg.analyze_global(sys3, p, sec, method=jg.PoincareCellMap(mapping_steps=10, integrator=RK), progress=False)
+    rp = jg.analyze_global(sys3, p, sec, method=jg.PoincareCellMap(mapping_steps=10, integrator=RK), progress=False, uncertainty=0)
     assert sorted(a.period for a in rp.attractors) == [1, 1]
     assert all(len(a.section_points) and np.all(np.abs(a.section_points[:, 1]) < 1e-10) for a in rp.attractors)
     # the paper's check by direct integration keeps both stable orbits; figures of a 3-D grid
@@ -168,17 +168,38 @@ def test_three_dimensional_user_system():
 
 # --------------------------------------------------------------------------- plots and saved results
 def test_plots_and_saved_result_of_a_user_system(tmp_path):
-    from matplotlib.figure import Figure
-
     from jaxgear import plotting
 
     p = MyDuffing(delta=0.1, beta=1.0, gamma=0.3, omega=1.4)
     grid = jg.CellGrid.box([(-2.5, 2.5), (-2.5, 2.5)], (8, 8), names=MY_DUFFING.state_names)
-    r = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(integrator=RK), progress=False)
-    for fig in (plotting.plot_domains(r), plotting.plot_attractors(r, coords=(0, 1)), plotting.plot_shares(r),
-                plotting.plot_orbit(MY_DUFFING, p, r.attractors[0], samples_per_period=40)):
-        assert isinstance(fig, Figure)
-    assert plotting.plot_domains(r).axes[0].get_xlabel() == "x"
+    r = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(integrator=RK), progress=False, uncertainty=0)
+    assert len(r.attractors) == 2
+    # the domains: one image of the 8 x 8 cells (x across), one colour per attractor's domain
+    ax = plotting.plot_domains(r).axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x", "v") and len(ax.images) == 1
+    image = np.asarray(ax.images[0].get_array())
+    labels = np.asarray(r.labels).reshape(8, 8).T
+    colours = [set(image[labels == a.id].tolist()) for a in r.attractors]
+    assert all(len(c) == 1 for c in colours) and colours[0] != colours[1]
+    # the attractors: each one's section points, named in the legend
+    ax = plotting.plot_attractors(r, coords=(0, 1)).axes[0]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [f"{a.id}: {a.label}" for a in r.attractors]
+    for c, a in zip(ax.collections, r.attractors):
+        np.testing.assert_array_equal(c.get_offsets(), a.section_points)
+    # the shares: a bar per attractor (and the sink) of its share in percent
+    ax = plotting.plot_shares(r).axes[0]
+    heights = [b.get_height() for b in ax.patches]
+    np.testing.assert_allclose(heights[:2], [100 * a.share for a in r.attractors], rtol=1e-12)
+    assert sum(heights) == pytest.approx(100.0) and "%" in ax.get_ylabel()
+    # the orbit: one period sampled 40 times, closing on the attractor's point
+    a = r.attractors[0]
+    ax = plotting.plot_orbit(MY_DUFFING, p, a, samples_per_period=40).axes[0]
+    line = ax.get_lines()[0]
+    xy = np.stack([line.get_xdata(), line.get_ydata()], -1)
+    assert xy.shape == (41, 2)
+    np.testing.assert_allclose(xy[0], a.points[0], atol=1e-12)
+    np.testing.assert_allclose(xy[-1], a.points[0], atol=1e-5)  # P-1: back after one period
+    np.testing.assert_array_equal(ax.collections[0].get_offsets(), a.points)
     path = r.save(tmp_path / "duffing.nc")
     back = jg.load(path)
     assert back.params == r.params and back.system == "my-duffing" and back.state_names == ("x", "v")
@@ -214,8 +235,8 @@ def test_bad_user_systems_fail_clearly(what, system, match):
     x0 = np.zeros(2)
     grid = jg.CellGrid.box([(-1, 1), (-1, 1)], (2, 2))
     calls = [
-        lambda: jg.analyze_global(system, p, grid, method=jg.Direct(), progress=False),
-        lambda: jg.analyze_global(system, p, grid, method=jg.StroboscopicCellMap(), progress=False),
+        lambda: jg.analyze_global(system, p, grid, method=jg.Direct(), progress=False, uncertainty=0),
+        lambda: jg.analyze_global(system, p, grid, method=jg.StroboscopicCellMap(), progress=False, uncertainty=0),
         lambda: jg.periodic_orbit(system, p, x0),
         lambda: jg.find_periodic_orbits(system, p, x0[None]),
         lambda: design(system, p, x0, lambda q, o: jnp.sum(o.states ** 2), free={"delta": (0.0, 1.0)},

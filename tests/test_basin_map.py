@@ -1,7 +1,10 @@
 """Basin shares over two parameters (jaxgear.basin_map).
 
 References that do not come from the map's code:
-- the global analysis at each parameter point alone (analyze_global);
+- the Duffing oscillator integrated by scipy from every cell centre (the label of each
+  cell) and its harmonic balance (how many P-1 motions coexist), written in the tests;
+- the global analysis at each parameter point alone (analyze_global: the map assembles
+  these, ids matched across the grid);
 - a basin sweep along one parameter (a row of the map, whose ids come from the left
   neighbours only, is that sweep);
 - hand-built attractor sets whose global ids are known (the matching over the grid);
@@ -64,13 +67,62 @@ def test_every_point_is_the_analysis_there_alone(duffing_map):
             _assert_point_is(m, iy, ix, r)
 
 
+def _harmonic_balance_amplitudes(delta, alpha, beta, gamma, omega):
+    """Amplitudes A of the one-harmonic solutions x = A cos(omega t - phi) of
+    x'' + delta x' + alpha x + beta x^3 = gamma cos(omega t): the positive roots z = A^2 of
+    z [(alpha - omega^2 + 3/4 beta z)^2 + (delta omega)^2] = gamma^2 (Nayfeh & Mook,
+    Nonlinear Oscillations, §4.1). Three roots: the middle one is the saddle."""
+    a, k = alpha - omega**2, 0.75 * beta
+    z = np.roots([k * k, 2 * a * k, a * a + (delta * omega) ** 2, -gamma**2])
+    return np.sqrt(np.sort(z[(np.abs(z.imag) < 1e-9) & (z.real > 0)].real))
+
+
+def test_every_cell_is_labelled_by_where_its_motion_goes(duffing_map):
+    """An independent reference: scipy integrates the Duffing oscillator from every cell
+    centre at every point of the map (60 forcing periods, all in one call, in the phase
+    omega t), and each cell's label is the global id of the attractor its motion ends on.
+    The number of coexisting attractors is that of the stable one-harmonic motions of
+    harmonic balance (one, or two around a saddle)."""
+    from scipy.integrate import solve_ivp
+
+    m = duffing_map
+    X0 = GRID.centres()
+    n_cells = len(X0)
+    w = np.repeat(np.tile(OMEGA, len(GAMMA)), n_cells)  # (points x cells), gamma major as in the map
+    g = np.repeat(np.repeat(GAMMA, len(OMEGA)), n_cells)
+    n = len(w)
+    d, al, be = DUFF["delta"], DUFF["alpha"], DUFF["beta"]
+
+    def field(phase, y):  # d/d(omega t) of (x, v)
+        x, v = y[:n], y[n:]
+        return np.concatenate([v / w, (g * np.cos(phase) - d * v - al * x - be * x**3) / w])
+
+    periods = 60
+    y0 = np.concatenate([np.tile(X0[:, 0], len(w) // n_cells), np.tile(X0[:, 1], len(w) // n_cells)])
+    sol = solve_ivp(field, (0.0, 2 * np.pi * periods), y0, method="DOP853", rtol=1e-7, atol=1e-9)
+    assert sol.success, sol.message
+    end = np.stack([sol.y[:n, -1], sol.y[n:, -1]], -1).reshape(len(GAMMA), len(OMEGA), n_cells, 2)
+    for iy, gamma in enumerate(GAMMA):
+        for ix, omega in enumerate(OMEGA):
+            amplitudes = _harmonic_balance_amplitudes(d, al, be, gamma, omega)
+            ids = np.flatnonzero(m.present[iy, ix])
+            assert len(ids) == (2 if len(amplitudes) == 3 else 1), (gamma, omega, amplitudes)
+            assert (m.period[iy, ix, ids] == 1).all()
+            dist = np.stack([np.linalg.norm(end[iy, ix][:, None] - m.points[iy, ix, i, :m.n_points[iy, ix, i]][None],
+                                            axis=-1).min(axis=1) for i in ids], axis=1)  # (cells, attractors)
+            assert dist.min(axis=1).max() < 1e-2, (gamma, omega)  # every motion has settled on one of them
+            np.testing.assert_array_equal(m.labels[iy, ix].ravel(), ids[dist.argmin(axis=1)],
+                                          err_msg=f"gamma={gamma}, omega={omega}")
+    assert m.coexisting.tolist() == [[1, 2, 2], [1, 2, 2]]
+
+
 def test_a_row_is_a_basin_sweep(duffing_map):
     """The first row's ids come from left neighbours only: it is the basin sweep along x,
     ids included; the ids of the next row continue those of the first (the P-1 branches
     of the Duffing move little between the two amplitudes)."""
     m = duffing_map
     s = basin_sweep(jg.DUFFING, jg.DuffingParams(**dict(DUFF, gamma=GAMMA[0]), omega=1.3), "omega", OMEGA, GRID,
-                    method=METHOD, progress=False)
+                    method=METHOD, progress=False, uncertainty=0)
     G = s.n_attractors
     np.testing.assert_array_equal(m.labels[0], s.labels)
     np.testing.assert_array_equal(m.shares[0, :, :G], s.shares)
@@ -108,7 +160,7 @@ def test_kill_and_resume(tmp_path, monkeypatch):
 
     p = jg.DuffingParams(**DUFF, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
-    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False, uncertainty=0)
     args = ("omega", [1.3, 1.4], "gamma", [0.25, 0.3], grid)
     basin_map(jg.DUFFING, p, *args, out=tmp_path / "full", **kw)
     real, calls, kill = basins_module._analyze_values, [], [True]

@@ -182,6 +182,7 @@ def assert_same(one: dict, two: dict, what: str):
     assert {k.split("_")[0] for k in one} == set(what.split(","))
 
 
+@pytest.mark.slow
 def test_two_devices_give_the_one_device_results(tmp_path):
     """The direct analysis (cells) and a basin sweep (values x cells) on two forced host
     devices, one lane pool each: the labels, shares and orbits of one device."""
@@ -189,6 +190,7 @@ def test_two_devices_give_the_one_device_results(tmp_path):
     assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
 
 
+@pytest.mark.slow
 def test_two_devices_run_one_sharded_pool(tmp_path):
     """The direct analysis on two forced host devices runs both devices' pools in one
     shard_map program (its state spans both devices; no one-device pool, no other thread
@@ -198,6 +200,7 @@ def test_two_devices_run_one_sharded_pool(tmp_path):
     assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
 
 
+@pytest.mark.slow
 def test_two_devices_shard_the_stateless_maps(tmp_path):
     """Shooting (seeds), the stroboscopic cell map (its cell images and the analysis) and
     an independent bifurcation diagram (values x starts), each batch sharded over two
@@ -267,6 +270,7 @@ def _kill(proc) -> None:
     proc.communicate()
 
 
+@pytest.mark.slow
 def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
     """A basin sweep as two JAX processes (each takes every other value; process 0 writes
     the file): one of them killed (SIGKILL) after its first value, the job stopped, the

@@ -36,7 +36,7 @@ def _run(system, grid, params=None, method="direct", **options):
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
         r = jg.analyze_global(system, params or Params(), grid, jg.analysis.method_from_name(method, **options),
-                              progress=False)
+                              progress=False, uncertainty=0)
     return r, [str(x.message) for x in w]
 
 
@@ -117,9 +117,9 @@ def test_progress_false_silences_cell_mapping(capsys):
     grid = CellGrid.box([(-2, 2)], (40,), names=("x",))
     for method in ("stroboscopic", "direct"):
         capsys.readouterr()
-        jg.analyze_global(BISTABLE, Params(), grid, method=method, progress=True)
+        jg.analyze_global(BISTABLE, Params(), grid, method=method, progress=True, uncertainty=0)
         assert "cell" in capsys.readouterr().err  # tqdm writes its bar to stderr
-        jg.analyze_global(BISTABLE, Params(), grid, method=method, progress=False)
+        jg.analyze_global(BISTABLE, Params(), grid, method=method, progress=False, uncertainty=0)
         out = capsys.readouterr()
         assert out.err == "" and out.out == ""
 

@@ -351,12 +351,17 @@ def test_rectangular_wave_jumps_at_the_declared_time_breaks():
     k = lambda t: np.asarray(jg._model.mesh_excitation(t, p)[:2])  # noqa: E731
     for tb in breaks:  # a jump at every break ...
         assert np.abs(k(tb + 1e-9) - k(tb - 1e-9)).max() > 1e-3
-    mids = 0.5 * (breaks + np.roll(breaks, -1) + np.r_[0, 0, 0, T])  # ... and none between them
-    for a, b in zip(breaks, np.roll(breaks, -1) + np.r_[0, 0, 0, T]):
+    for a, b in zip(breaks, np.roll(breaks, -1) + np.r_[0, 0, 0, T]):  # ... and none between them
         ts = np.linspace(a + 1e-9, b - 1e-9, 50)
         ks = np.stack([k(t) for t in ts])
         assert np.ptp(ks, axis=0).max() < 1e-12
-    assert mids.size == 4
+    # closed form (paper §2.1): double contact, a fraction d = contact_ratio - 1 of the mesh
+    # period, is centred where the sine peaks (Omega t + phi = pi / 2), so each mesh jumps at
+    # Omega t + phi = pi / 2 -+ pi d
+    Om = float(p.Omega)
+    expected = sorted(((math.pi / 2 + s * math.pi * (cr - 1) - phi) / Om) % T
+                      for cr, phi in ((1.4, 0.4), (1.7, 1.1)) for s in (-1, 1))
+    np.testing.assert_allclose(breaks, expected, rtol=0, atol=1e-12 * T)
 
 
 def test_gear_set_contact_ratios_from_the_involute_geometry():

@@ -1,6 +1,7 @@
 """The notebooks: each runs top to bottom on its reduced setting (FULL = False), writes
-nothing into the repository, and matches its paired script (the three heaviest runs are
-``slow``: ``python -m pytest -m slow tests/test_notebooks.py``).
+nothing into the repository, and matches its paired script (the three heaviest runs, and
+the two whose calls test modules check, are ``slow``: ``python -m pytest -m slow
+tests/test_notebooks.py``).
 
 Key numbers are asserted inside the notebooks; a failing assert fails the test. Each
 notebooks/<name>.ipynb (stored without outputs) is paired by jupytext with
@@ -23,10 +24,20 @@ NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 IDS = [p.stem for p in NOTEBOOKS]
 HEAVY = {"01_global_analysis", "02_shooting_and_floquet", "05_design"}
 """Notebooks that take minutes each on the 2-core CI machine even at their reduced size:
-run by ``pytest -m slow`` (with the other heavier checks), so the default suite stays
-near ten minutes; the other notebooks run in the default suite."""
-RUNS = [pytest.param(p, id=p.stem, marks=pytest.mark.slow) if p.stem in HEAVY else pytest.param(p, id=p.stem)
-        for p in NOTEBOOKS]
+run by ``pytest -m slow`` (with the other heavier checks)."""
+COVERED = {
+    # the sweeps (bifurcation diagram up/down, basin sweep, parameter map, basin map, resume):
+    # tests/test_sweep.py and tests/test_basin_map.py check each call on the Duffing oscillator
+    "03_sweeps",
+    # a user system (NamedTuple Duffing, the spur pair with backlash; global analysis, shooting,
+    # the small-forcing linear limit, a bad system's error): tests/test_any_system.py checks
+    # the same calls on the same parameters, tests/test_design.py the gradient of an RMS
+    "06_any_forced_system",
+}
+"""Notebooks whose calls test modules already check (named above): run by ``pytest -m slow``
+too, so that the default suite stays within five minutes on two cores."""
+RUNS = [pytest.param(p, id=p.stem, marks=pytest.mark.slow) if p.stem in HEAVY | COVERED
+        else pytest.param(p, id=p.stem) for p in NOTEBOOKS]
 
 
 def _listing(folder: Path) -> set[Path]:

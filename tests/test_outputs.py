@@ -120,7 +120,7 @@ def test_resume_message_lists_only_what_differs(tmp_path):
 
     settings = {"kind": "basins", "grid": {"counts": (3, 2, 3), "lower": (-1.0, 0.0, 1.0)}, "values": [1.0, 2.0]}
     Checkpoint(tmp_path, "basins", settings)
-    with pytest.raises(ValueError) as exc:
+    with pytest.raises(ValueError, match="values") as exc:
         Checkpoint(tmp_path, "basins", dict(settings, values=[1.0, 3.0]))
     msg = str(exc.value)
     assert "values" in msg and "grid" not in msg, msg
@@ -191,12 +191,14 @@ def _state(out: Path, kind: str):
     return len(d.values)
 
 
-def _kill_runs(tmp_path, old_cmd, new_cmd, kind, kills: int):
+def _kill_runs(tmp_path, cache, old_cmd, new_cmd, kind, kills: int):
     """The old command runs to the end (twice: the second, with a warm compilation cache,
     times a whole run), then the new one is killed ``kills`` times at random moments of
-    such a run; after each kill the folder holds the old result or the new one."""
+    such a run; after each kill the folder holds the old result or the new one. Last, the
+    new command runs to the end: the folder then holds the new result (a kill that only
+    ever left the old one would pass otherwise)."""
     out = tmp_path / "out"
-    env = dict(os.environ, JAXGEAR_CACHE_DIR=str(tmp_path / "cache"))
+    env = dict(os.environ, JAXGEAR_CACHE_DIR=str(cache))
     assert subprocess.run(old_cmd(out), cwd=ROOT, capture_output=True, env=env, timeout=600).returncode == 0
     t = time.perf_counter()
     assert subprocess.run(old_cmd(out), cwd=ROOT, capture_output=True, env=env, timeout=600).returncode == 0
@@ -213,25 +215,29 @@ def _kill_runs(tmp_path, old_cmd, new_cmd, kind, kills: int):
         state = _state(out, kind)
         seen.add(state)
         assert state in (old, _NEW[kind]), state
+    assert old is not None and old != _NEW[kind]  # the two runs are told apart
+    done = subprocess.run(new_cmd(out), cwd=ROOT, capture_output=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr.decode()[-3000:]
+    assert _state(out, kind) == _NEW[kind]
     return seen
 
 
 _NEW = {"analyze": (4, 2, 3), "sweep": 3}
 
 
-def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path):
+def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path, jaxgear_cache_dir):
     def cmd(grid, figures):
         return lambda out: [sys.executable, "-m", "jaxgear", "analyze", "--grid", grid, "--steps-per-period", "40",
                             "--uncertainty-samples", "0", "--quiet", "--out", str(out)] + \
             ([] if figures else ["--no-figures"])
 
-    _kill_runs(tmp_path, cmd("3,2,3", False), cmd("4,2,3", True), "analyze", kills=3)
+    _kill_runs(tmp_path, jaxgear_cache_dir, cmd("3,2,3", False), cmd("4,2,3", True), "analyze", kills=3)
 
 
-def test_sweep_killed_at_random_moments_leaves_a_whole_result(tmp_path):
+def test_sweep_killed_at_random_moments_leaves_a_whole_result(tmp_path, jaxgear_cache_dir):
     def cmd(values, restart):
         return lambda out: [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", values,
                             "--starts", "2", "--transient", "10", "--record", "33", "--steps-per-period", "30",
                             "--quiet", "--no-figures", "--out", str(out)] + (["--restart"] if restart else [])
 
-    _kill_runs(tmp_path, cmd("4:6:2", False), cmd("4:6:3", True), "sweep", kills=3)
+    _kill_runs(tmp_path, jaxgear_cache_dir, cmd("4:6:2", False), cmd("4:6:3", True), "sweep", kills=3)

@@ -183,7 +183,7 @@ def test_basin_sweep_keeps_attractor_identities():
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 12), names=("x", "v"))
     values = np.linspace(1.30, 1.46, 5)
     s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=jg.Direct(integrator=jg.RK4(64), max_period=4),
-                    progress=False)
+                    progress=False, uncertainty=0)
     assert s.n_attractors == 2 and np.all(s.present) and np.all(s.period == 1)
     np.testing.assert_allclose(s.shares.sum(axis=1) + s.sink_share + s.unresolved_share, 1.0)
     # the shares cross (so the per-value results, sorted by share, swap their local ids)
@@ -306,7 +306,7 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
     p = jg.DuffingParams(**DUFF, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
     values = [1.30, 1.35, 1.40, 1.45]
-    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False, uncertainty=0)
     basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "full", **kw)
     real = basins_module._analyze_values
     calls = []
