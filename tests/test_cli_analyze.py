@@ -32,7 +32,7 @@ def test_analyze_writes_result_summary_and_figures(tmp_path, capsys, gear_refere
         np.testing.assert_allclose(image, np.roll(pts, -1, axis=0), rtol=0, atol=1e-6)
     assert json.loads((out / "compare.json").read_text())["agreement"] > 0.9
     # the label uncertainty, measured on every cell of a grid smaller than the default sample
-    assert r.uncertainty["samples"] == 90 and 0 <= r.uncertainty["step"] <= 1 and 0 <= r.uncertainty["start"] <= 1
+    assert r.uncertainty.samples == 90 and 0 <= r.uncertainty.step <= 1 and 0 <= r.uncertainty.start <= 1
     assert "label uncertainty (90 sampled cells)" in text
 
 

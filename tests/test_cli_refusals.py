@@ -35,7 +35,7 @@ def no_work(monkeypatch):
     def forbidden(*a, **k):
         raise AssertionError("the command started working before refusing its input")
 
-    for mod, names in ((jaxgear.analysis, ("analyze_global", "compare_with_direct", "prepare_analysis")),
+    for mod, names in ((jaxgear.analysis, ("analyze_global", "compare_with_direct")),
                        (jaxgear.shooting, ("find_periodic_orbits", "verify_orbit", "seeds_in_box")),
                        (jaxgear.sweep, ("bifurcation_diagram", "basin_sweep", "basin_map")),
                        (jaxgear.continuation, ("continue_orbit",))):
