@@ -23,6 +23,7 @@ from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
+from ._fractal import basin_entropy
 from ._method import AbstractGlobalMethod, method_from_name
 from ._orbits import largest_multipliers, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
@@ -177,6 +178,10 @@ def _section_index(system, method):
     return method.section_index if method.section_index is not None else system.section_index
 
 
+ENTROPY_BOX = 5
+"""Cells per side of the boxes of the basin entropy (Daza et al. 2016 use 5; smaller
+grids use their shortest side)."""
+
 LYAPUNOV_PERIODS = 200
 """Forcing periods over which each attractor's Lyapunov exponents are measured
 (:func:`attractor_exponents`; weighted Birkhoff averages converge fast on cycles and tori,
@@ -234,4 +239,5 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
         state_names=tuple(system.state_names), n_sink=int((out_labels == SINK).sum()),
         n_unresolved=int((out_labels == UNRESOLVED).sum()), runtime_s=float(runtime), version=__version__,
         mean_periods=float(mean_periods),
+        basin_entropy=basin_entropy(out_labels.reshape(grid.counts), box=max(1, min(ENTROPY_BOX, *grid.counts))),
     )

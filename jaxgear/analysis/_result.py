@@ -13,6 +13,7 @@ from .._format import format_table
 from .._io import save_result, write_json
 from .._lyapunov import AttractorType
 from ..integrate import AbstractFixedStep, AbstractIntegrator, integrator_from_dict
+from ._fractal import BasinEntropy
 from ._method import AbstractGlobalMethod, method_from_dict
 
 __all__ = ["Attractor", "GlobalResult", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
@@ -128,6 +129,13 @@ class LabelUncertainty:
             ``perturbation`` cell sizes along each grid axis.
         perturbation: the start's largest move, in cell sizes.
         refined_integrator: the finer integrator (``integrator.refined()`` of the method's).
+        perturbations: the start moves measured (cell sizes, the first is ``perturbation``)
+            and ``start_fractions`` the share of sampled cells whose label changes at each:
+            the uncertain fraction ``f(eps)`` of Grebogi, McDonald, Ott & Yorke (1983).
+        alpha, alpha_error: the uncertainty exponent, ``f(eps) ~ eps**alpha``, from a
+            log-log fit of those fractions (:func:`~jaxgear.uncertainty_exponent`) and its
+            standard error: 1 for a smooth basin boundary, below 1 for a fractal one (NaN
+            when fewer than three fractions are above zero).
     """
 
     samples: int
@@ -135,19 +143,27 @@ class LabelUncertainty:
     start: float
     perturbation: float
     refined_integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+    perturbations: tuple[float, ...] = ()
+    start_fractions: tuple[float, ...] = ()
+    alpha: float = float("nan")
+    alpha_error: float = float("nan")
 
     def describe(self) -> str:
         """One line for the printed table."""
         r = self.refined_integrator
         refined = (f"halved step ({r.steps_per_period} steps/period)" if isinstance(r, AbstractFixedStep)
                    else "16x smaller integration error")
-        return (f"label uncertainty ({self.samples} sampled cells): {100 * self.step:.1f} % change with a "
+        line = (f"label uncertainty ({self.samples} sampled cells): {100 * self.step:.1f} % change with a "
                 f"{refined}, {100 * self.start:.1f} % when the start moves by {self.perturbation:g} cell")
+        if np.isfinite(self.alpha):
+            line += f"\nuncertainty exponent alpha = {self.alpha:.2f} +- {self.alpha_error:.2f} (1: smooth boundary)"
+        return line
 
 
 def _uncertainty_summary(u: LabelUncertainty) -> dict[str, Any]:
     return dict(samples=u.samples, step=u.step, start=u.start, perturbation=u.perturbation,
-                refined_integrator=u.refined_integrator.to_dict())
+                refined_integrator=u.refined_integrator.to_dict(), perturbations=list(u.perturbations),
+                start_fractions=list(u.start_fractions), alpha=u.alpha, alpha_error=u.alpha_error)
 
 
 def _grid_dims(r: GlobalResult) -> tuple[str, ...]:
@@ -175,6 +191,9 @@ class GlobalResult:
         mean_periods: mean number of forcing periods integrated per cell.
         uncertainty: the label uncertainty, a :class:`LabelUncertainty`; None when not
             measured.
+        basin_entropy: the basin entropy ``S_b`` and boundary basin entropy ``S_bb`` of the
+            labels (:func:`~jaxgear.basin_entropy`, boxes of 5 cells a side; Daza et al.,
+            Sci. Rep. 6, 31416, 2016; sink and unresolved cells count as outcomes).
     """
 
     labels: np.ndarray = array_field(_grid_dims)
@@ -190,6 +209,7 @@ class GlobalResult:
     version: str = ""
     mean_periods: float = float("nan")
     uncertainty: LabelUncertainty | None = None
+    basin_entropy: BasinEntropy | None = None
 
     @property
     def n_cells(self) -> int:
@@ -221,6 +241,12 @@ class GlobalResult:
         head = ("id", "type", "cells", "share", "stroboscopic point (" + ", ".join(self.state_names) + ")",
                 "residual", "max |mu|", "lambda_1 /period")
         table = format_table(rows, head)
+        if self.basin_entropy is not None and np.isfinite(self.basin_entropy.S_b):
+            e = self.basin_entropy
+            bb = "no boundary boxes" if not np.isfinite(e.S_bb) else (
+                f"boundary S_bb = {e.S_bb:.3f} ({'above' if e.fractal else 'not above'} log 2: "
+                f"{'a fractal boundary' if e.fractal else 'no proof of a fractal boundary'})")
+            table += f"\nbasin entropy S_b = {e.S_b:.3f} ({e.box}^{len(self.grid.axes)}-cell boxes), {bb}"
         return table if self.uncertainty is None else table + "\n" + self.uncertainty.describe()
 
     def summary(self) -> dict[str, Any]:
@@ -232,6 +258,9 @@ class GlobalResult:
             n_unresolved=self.n_unresolved, shares=self.shares, runtime_s=self.runtime_s,
             mean_periods=self.mean_periods,
             uncertainty=None if self.uncertainty is None else _uncertainty_summary(self.uncertainty),
+            basin_entropy=None if self.basin_entropy is None else dict(
+                S_b=self.basin_entropy.S_b, S_bb=self.basin_entropy.S_bb, box=self.basin_entropy.box,
+                fractal=self.basin_entropy.fractal, n_boundary_boxes=self.basin_entropy.n_boundary_boxes),
             version=self.version,
         )
 

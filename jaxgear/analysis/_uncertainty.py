@@ -13,7 +13,10 @@ result's attractors as the known ones:
   itself reaches against the label the cell map gave it).
 - ``start``: the share whose label changes when the start moves by ``perturbation``
   cell widths (uniformly in that box along the gridded coordinates): the basin-boundary
-  uncertainty at that scale.
+  uncertainty at that scale. The same samples moved by :data:`EXPONENT_SCALES` times
+  that (three decades, one pool) give the uncertain fraction ``f(eps)`` and the
+  uncertainty exponent ``alpha`` of ``f ~ eps**alpha`` (Grebogi, McDonald, Ott & Yorke,
+  Phys. Lett. A 99, 415, 1983): 1 for a smooth basin boundary, below 1 for a fractal one.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
+from ._fractal import uncertainty_exponent
 from ._pool import run_pools
 from ._result import LabelUncertainty
 
@@ -31,6 +35,9 @@ DEFAULT_SAMPLES = 1024
 """Cells sampled for the estimate (the direct method's pilot size: the same compiled pool)."""
 DEFAULT_PERTURBATION = 1e-3
 """Start perturbation, in cell widths."""
+EXPONENT_SCALES = (1.0, 10.0, 100.0, 1000.0)
+"""The start moves of the uncertainty exponent, in multiples of the perturbation (three
+decades: ``1e-3`` to ``1`` cell with the default)."""
 
 
 def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attractors, direct, *,
@@ -65,8 +72,13 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
     rng = np.random.default_rng(seed)
     cells = np.sort(rng.choice(n, size=S, replace=False))
     X = grid.centres(cells)
-    dX = np.zeros_like(X)
-    dX[:, list(grid.axes)] = rng.uniform(-1.0, 1.0, (S, len(grid.axes))) * perturbation * grid.cell_size
+    direction = rng.uniform(-1.0, 1.0, (S, len(grid.axes)))
+    scales = np.asarray(EXPONENT_SCALES) * perturbation  # the first is the perturbation itself
+    moved = []
+    for eps in scales:
+        dX = np.zeros_like(X)
+        dX[:, list(grid.axes)] = direction * eps * grid.cell_size
+        moved.append(X + dX)
     refs = [np.asarray(labels).reshape(-1)[cells] for labels in labels_list]
     # every attractor is known to the pools: cycles by their points, attractors of boxes
     # (period 0) by their clouds, in the partition the analysis used
@@ -76,21 +88,41 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
             for atts in attractors_list]
     boxes = direct.boxes(grid.centres())
 
-    def relabel(X, integrator, name):
-        pooled = run_pools(system, params_list, [X] * len(params_list), integrator, direct.pool_options(pilot=0),
-                           boxes=boxes, attractors=knowns, progress=progress, label=name)
+    def relabel(Xs, integrator, name):
+        """The labels of the states ``Xs[j]`` for every value (one pool for all), in the
+        result's ids: ``outs[j][v]``."""
+        V = len(params_list)
+        pooled = run_pools(system, list(params_list) * len(Xs), [X for X in Xs for _ in range(V)], integrator,
+                           direct.pool_options(pilot=0), boxes=boxes, attractors=knowns * len(Xs),
+                           progress=progress, label=name)
         outs = []
-        for (lab, _, _), ids in zip(pooled, idss):
+        for (lab, _, _), ids in zip(pooled, idss * len(Xs)):
             out = lab.copy()
             seeded = (lab >= 0) & (lab < len(ids))
             out[seeded] = ids[lab[seeded]]
             out[lab >= len(ids)] = np.iinfo(np.int64).max  # an attractor the result does not have
             outs.append(out)
-        return outs
+        return [outs[j * V:(j + 1) * V] for j in range(len(Xs))]
 
     fine = direct.integrator.refined()
-    steps = relabel(X, fine, "uncertainty: step halved")
-    starts = relabel(X + dX, direct.integrator, "uncertainty: start moved")
-    return [LabelUncertainty(samples=S, step=float(np.mean(step != ref)), start=float(np.mean(start != ref)),
-                             perturbation=float(perturbation), refined_integrator=fine)
-            for step, start, ref in zip(steps, starts, refs)]
+    (steps,) = relabel([X], fine, "uncertainty: step halved")
+    starts = relabel(moved, direct.integrator, "uncertainty: start moved")
+    out = []
+    for v, (step, ref) in enumerate(zip(steps, refs)):
+        f = np.array([float(np.mean(starts[j][v] != ref)) for j in range(len(scales))])
+        alpha, alpha_err = _exponent(scales, f, S) if perturbation > 0 else (np.nan, np.nan)
+        out.append(LabelUncertainty(samples=S, step=float(np.mean(step != ref)), start=float(f[0]),
+                                    perturbation=float(perturbation), refined_integrator=fine,
+                                    perturbations=tuple(float(e) for e in scales),
+                                    start_fractions=tuple(float(x) for x in f), alpha=alpha, alpha_error=alpha_err))
+    return out
+
+
+def _exponent(eps: np.ndarray, f: np.ndarray, samples: int) -> tuple[float, float]:
+    """The uncertainty exponent and its error from the fractions ``f`` at the moves ``eps``
+    that changed some label (NaN with fewer than three of them)."""
+    keep = f > 0
+    if keep.sum() < 3:
+        return float("nan"), float("nan")
+    u = uncertainty_exponent(eps[keep], f[keep], n_samples=samples)
+    return float(u.alpha), float(u.alpha_err)
