@@ -20,7 +20,6 @@ import pytest
 import jaxgear as jg
 from jaxgear.cli import build_parser, main
 
-DATA = Path(__file__).resolve().parent / "data" / "v0.1"
 GIB = 1 << 30
 
 
@@ -183,7 +182,6 @@ PROBE_CASES = [
     # messages that leaked or misled
     (["shoot", "--periods", "8-1", "--random", "3"], 2, 1, "--periods needs 1 <= K1 <= K2 <= 2147483647, got '8-1'"),
     (["shoot", "--periods", "a-b", "--random", "3"], 2, 1, "--periods expects K1-K2"),
-    (["shoot", "--seeds-from", str(DATA / "global_direct.nc")], 2, 1, "another system ('duffing')"),
     (["shoot", "--from", "5,0,8,0", "--tol", "0"], 2, 1, "--tol=0 is out of range: it must be > 0."),
     # integers beyond the compiled kernels' 32-bit counters (the seed was an OverflowError traceback)
     (["shoot", "--random", "3", "--seed", str(10**30)], 2, 1, "--seed=" + str(10**30) + " is out of range: it "
@@ -210,6 +208,24 @@ PROBE_CASES = [
 @pytest.mark.parametrize("argv, rc, max_lines, fragment", PROBE_CASES, ids=[" ".join(c[0]) for c in PROBE_CASES])
 def test_probe_refusals(argv, rc, max_lines, fragment, tmp_path, capsys, monkeypatch, no_work):
     _check_refusal(argv, rc, max_lines, fragment, tmp_path, capsys, monkeypatch)
+
+
+@pytest.fixture(scope="module")
+def duffing_result(tmp_path_factory):
+    """A saved global result of another system (a Duffing oscillator)."""
+    import jaxgear as jg
+
+    p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (4, 3), names=("x", "v"))
+    r = jg.analyze_global(jg.DUFFING, p, grid, jg.Direct(integrator=jg.RK4(32), max_period=4), uncertainty=0)
+    path = tmp_path_factory.mktemp("duffing") / "result.nc"
+    r.save(path)
+    return path
+
+
+def test_seeds_from_a_result_of_another_system_name_it(duffing_result, tmp_path, capsys, monkeypatch, no_work):
+    _check_refusal(["shoot", "--seeds-from", str(duffing_result)], 2, 1, "another system ('duffing')", tmp_path,
+                   capsys, monkeypatch)
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
