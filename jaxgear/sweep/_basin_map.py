@@ -49,7 +49,7 @@ class BasinMap(GlobalShares):
             g at each parameter point (0 where it does not exist); sink_share,
             unresolved_share: ``(ny, nx)``.
         period: ``(ny, nx, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
-        kind, largest_exponent, exponent_error: ``(ny, nx, G)`` its type there (an
+        attractor_type, largest_exponent, exponent_error: ``(ny, nx, G)`` its type there (an
             :class:`~jaxgear.AttractorType` value, -1 where absent or unknown), its largest
             Lyapunov exponent per forcing period and that exponent's error (NaN where
             absent or not measured).

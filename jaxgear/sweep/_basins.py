@@ -76,7 +76,7 @@ class GlobalShares:
     0, type -1, NaN), the sink and unresolved shares, every cell's global label, the
     label uncertainty, and the common settings. Fields added after files were first
     written (``multiplier``, ``uncertainty_step``, ``uncertainty_start``,
-    ``largest_exponent``, ``exponent_error``) load as NaN from those files, ``kind`` as
+    ``largest_exponent``, ``exponent_error``) load as NaN from those files, ``attractor_type`` as
     -1 (unknown) where the attractor is present and its period says nothing more."""
 
     shares: np.ndarray = array_field(_at("attractor"))
@@ -89,7 +89,7 @@ class GlobalShares:
     labels: np.ndarray = array_field(lambda r: (*r.value_dims, *r.grid.axis_names))
     uncertainty_step: np.ndarray | None = array_field(_at(), later=True, default=None)
     uncertainty_start: np.ndarray | None = array_field(_at(), later=True, default=None)
-    kind: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
+    attractor_type: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
     largest_exponent: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
     exponent_error: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
@@ -104,7 +104,7 @@ class GlobalShares:
     def __post_init__(self):
         self._unmeasured_as_nan()
         for f in ("shares", "sink_share", "unresolved_share", "period", "multiplier", "points", "n_points", "labels",
-                  "uncertainty_step", "uncertainty_start", "kind", "largest_exponent", "exponent_error"):
+                  "uncertainty_step", "uncertainty_start", "attractor_type", "largest_exponent", "exponent_error"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
@@ -133,8 +133,8 @@ class GlobalShares:
         for f in ("largest_exponent", "exponent_error"):
             if getattr(self, f) is None:
                 object.__setattr__(self, f, np.full(np.shape(self.shares), np.nan))
-        if self.kind is None:  # a cycle is periodic; the type of a cloud was not recorded
-            object.__setattr__(self, "kind", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
+        if self.attractor_type is None:  # a cycle is periodic; the type of a cloud was not recorded
+            object.__setattr__(self, "attractor_type", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
                                                       int(AttractorType.UNKNOWN)).astype(np.int64))
 
     @property
@@ -146,7 +146,7 @@ class GlobalShares:
     def coexisting_of(self, kind) -> np.ndarray:
         """``(...)``: how many attractors of type ``kind`` (an
         :class:`~jaxgear.AttractorType`) coexist at each parameter value."""
-        return (self.present & (self.kind == int(AttractorType(int(kind))))).sum(axis=-1)
+        return (self.present & (self.attractor_type == int(AttractorType(int(kind))))).sum(axis=-1)
 
     @property
     def dominant(self) -> np.ndarray:
@@ -163,7 +163,7 @@ class GlobalShares:
         """``(...)`` str: the label of global attractor ``g`` at each value (``"P-4"``,
         ``"chaotic"``, ``"quasi-periodic"``, ``"aperiodic"`` for period 0 of unknown type;
         ``""`` where absent)."""
-        per, kind = np.asarray(self.period[..., g]), np.asarray(self.kind[..., g])
+        per, kind = np.asarray(self.period[..., g]), np.asarray(self.attractor_type[..., g])
         out = np.array([type_label(int(k), int(t)) if k >= 0 else "" for k, t in zip(per.ravel(), kind.ravel())],
                        dtype=object)
         return out.reshape(per.shape)
@@ -182,7 +182,7 @@ class GlobalShares:
     def _per_value_summary(self) -> dict[str, list]:
         """The per-value arrays of :meth:`summary` (shares, multipliers, sink and
         unresolved shares, label uncertainties) as nested lists."""
-        return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "kind", "largest_exponent",
+        return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "attractor_type", "largest_exponent",
                                                         "exponent_error", "sink_share", "unresolved_share",
                                                         "uncertainty_step", "uncertainty_start")}
 
@@ -210,7 +210,7 @@ class BasinSweep(GlobalShares):
         shares: ``(V, G)`` share of the grid in the domain of global attractor g at each
             value (0 where it does not exist); sink_share, unresolved_share: ``(V,)``.
         period: ``(V, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
-        kind: ``(V, G)`` its type there (an :class:`~jaxgear.AttractorType` value:
+        attractor_type: ``(V, G)`` its type there (an :class:`~jaxgear.AttractorType` value:
             periodic 0, quasi-periodic 1, chaotic 2; -1 where absent or unknown).
         largest_exponent, exponent_error: ``(V, G)`` its largest Lyapunov exponent of the
             stroboscopic map per forcing period and the exponent's standard error (NaN
@@ -362,7 +362,7 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     cycle never matches a cloud. Greedily, closest pairs first. An attractor that
     appears gets a new global id; one that vanishes keeps its id (it is not matched
     again later). Per value and global attractor the result records its type
-    (``kind``) and largest Lyapunov exponent with its error.
+    (``attractor_type``) and largest Lyapunov exponent with its error.
 
     Args:
         param, values: as in :func:`~jaxgear.bifurcation_diagram`.
@@ -519,7 +519,7 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
     ``n_points`` (each ``(n, G, ...)``),
     ``labels`` ``(n, *grid.counts)`` int16 (global ids, -1 sink, -2 unresolved),
     ``sink_share``, ``unresolved_share``, ``uncertainty_step`` and ``uncertainty_start``
-    ``(n,)`` (NaN where not measured), and each attractor's type ``kind`` (an
+    ``(n,)`` (NaN where not measured), and each attractor's type ``attractor_type`` (an
     :class:`~jaxgear.AttractorType` value, -1 where absent or unknown),
     ``largest_exponent`` and its ``exponent_error`` (per forcing period, NaN where absent
     or not measured) ``(n, G)``."""
@@ -530,7 +530,7 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
                points=np.full((n, G, K, dim), np.nan), n_points=np.zeros((n, G), dtype=np.int64),
                labels=np.empty((n, *grid.counts), dtype=np.int16), sink_share=np.empty(n),
                unresolved_share=np.empty(n), uncertainty_step=np.full(n, np.nan), uncertainty_start=np.full(n, np.nan),
-               kind=np.full((n, G), int(AttractorType.UNKNOWN), dtype=np.int64), largest_exponent=np.full((n, G), np.nan),
+               attractor_type=np.full((n, G), int(AttractorType.UNKNOWN), dtype=np.int64), largest_exponent=np.full((n, G), np.nan),
                exponent_error=np.full((n, G), np.nan))
     for i, (r, g) in enumerate(zip(results, gids)):
         lut = np.full(len(r.attractors) + 2, -1, dtype=np.int64)  # index local id + 2
@@ -539,7 +539,7 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
             pts = np.asarray(a.points)
             out["shares"][i, gg], out["period"][i, gg], out["n_points"][i, gg] = a.share, a.period, len(pts)
             out["multiplier"][i, gg] = a.multiplier
-            out["kind"][i, gg] = a.kind
+            out["attractor_type"][i, gg] = a.kind
             out["largest_exponent"][i, gg] = a.largest_exponent
             out["exponent_error"][i, gg] = a.exponent_errors[0] if len(a.exponent_errors) else np.nan
             out["points"][i, gg, : len(pts)] = pts

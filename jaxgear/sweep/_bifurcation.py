@@ -68,7 +68,7 @@ class BifurcationDiagram:
         period: ``(D, V, S)`` minimal period k of P-k, ``APERIODIC`` (0) or ``ESCAPED`` (-1).
         attractor: ``(D, V, S)`` id of the distinct attractor reached, numbered per
             (direction, value) in order of first start; -1 escaped.
-        kind: ``(D, V, S)`` the type of the attractor reached (an
+        attractor_type: ``(D, V, S)`` the type of the attractor reached (an
             :class:`~jaxgear.AttractorType` value): periodic for P-k, chaotic or
             quasi-periodic for an aperiodic one by its largest Lyapunov exponent, -1
             (unknown) where escaped or not measured (files written before it was).
@@ -87,7 +87,8 @@ class BifurcationDiagram:
     points: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start", "record", "state"))
     period: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
     attractor: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
-    kind: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True, default=None)
+    attractor_type: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True,
+                                                    default=None)
     largest_exponent: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True,
                                                       default=None)
     exponent_error: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True,
@@ -99,13 +100,13 @@ class BifurcationDiagram:
     version: str = ""
 
     def __post_init__(self):
-        if self.kind is None:  # a file written before types were recorded: cycles periodic, the rest unknown
-            object.__setattr__(self, "kind", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
+        if self.attractor_type is None:  # a file written before types were recorded: cycles periodic, the rest unknown
+            object.__setattr__(self, "attractor_type", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
                                                       int(AttractorType.UNKNOWN)).astype(np.int64))
         for f in ("largest_exponent", "exponent_error"):
             if getattr(self, f) is None:
                 object.__setattr__(self, f, np.full(np.shape(self.period), np.nan))
-        for f in ("values", "starts", "points", "period", "attractor", "kind", "largest_exponent", "exponent_error"):
+        for f in ("values", "starts", "points", "period", "attractor", "attractor_type", "largest_exponent", "exponent_error"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
@@ -124,7 +125,7 @@ class BifurcationDiagram:
     def labels(self) -> np.ndarray:
         """``(D, V, S)`` str: the label of the attractor each start reached (``"P-4"``,
         ``"chaotic"``, ``"quasi-periodic"``, ``"aperiodic"`` of unknown type, ``"escaped"``)."""
-        out = np.array([type_label(int(k), int(t)) for k, t in zip(self.period.ravel(), self.kind.ravel())],
+        out = np.array([type_label(int(k), int(t)) for k, t in zip(self.period.ravel(), self.attractor_type.ravel())],
                        dtype=object)
         return out.reshape(self.period.shape)
 
@@ -138,7 +139,7 @@ class BifurcationDiagram:
         for a in range(int(ids.max(initial=-1)) + 1):
             lanes = np.nonzero(ids == a)[0]
             s, k = lanes[0], int(per[lanes[0]])
-            t = int(self.kind[d, index, s])
+            t = int(self.attractor_type[d, index, s])
             out.append(dict(id=a, period=k, label=type_label(k, t), type=AttractorType(t).label,
                             largest_exponent=float(self.largest_exponent[d, index, s]),
                             exponent_error=float(self.exponent_error[d, index, s]), starts=int(len(lanes)),
@@ -170,7 +171,7 @@ class BifurcationDiagram:
         for a in range(int(ids.max(initial=-1)) + 1):
             s = int(np.argmax(ids == a))
             k = int(per[s])
-            out.append((type_label(k, int(self.kind[d, i, s])), pts[s, -k:] if k > 0 else pts[s, -1:]))
+            out.append((type_label(k, int(self.attractor_type[d, i, s])), pts[s, -k:] if k > 0 else pts[s, -1:]))
         if np.any(ids < 0):
             out.append(("escaped", np.zeros((0, pts.shape[-1]))))
         return out
@@ -341,7 +342,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     kind, lam, err = aperiodic_types(run, points, period, attractor, int(chunk_size))
     diagram = BifurcationDiagram(
         param=param, fields=param_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
-        period=period, attractor=attractor, kind=kind, largest_exponent=lam, exponent_error=err,
+        period=period, attractor=attractor, attractor_type=kind, largest_exponent=lam, exponent_error=err,
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
         settings={k: v for k, v in settings.items() if k not in ("values", "starts", "params", "system", "param")},
         version=__version__,
@@ -444,7 +445,7 @@ def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: s
 
 def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor: np.ndarray, chunk_size: int):
     """Type and largest Lyapunov exponent of the attractor every (direction, value, start)
-    reached: ``kind`` (an :class:`~jaxgear.AttractorType` value: periodic for a P-k lane,
+    reached: ``attractor_type`` (an :class:`~jaxgear.AttractorType` value: periodic for a P-k lane,
     unknown for an escaped one), ``largest_exponent`` and ``exponent_error`` (per forcing
     period; NaN where not measured), each ``(D, V, S)``.
 
