@@ -12,7 +12,8 @@ counts as one.
 Used by the global analysis (merging cell-map groups and recurrences of the direct
 method, reducing a period to the minimal one), shooting (deduplicating converged
 seeds), sweeps (grouping the starts of one parameter value, matching attractors
-across values) and the comparison of two results.
+across values: :func:`match_attractors`, cycles by distance, clouds by the overlap of
+their boxes) and the comparison of two results.
 """
 
 from __future__ import annotations

@@ -156,6 +156,8 @@ def test_sweep_records_types_and_exponents_and_counts_every_type():
     assert "1: chaotic" in s.shares_table() and "quasi-periodic" in s.table()
     ax = plotting.plot_basin_shares(s).axes[0]
     assert [t.get_text() for t in ax.get_legend().get_texts()][:3] == ["0: P-4", "1: chaotic", "2: quasi-periodic"]
+    lower = plotting.plot_basin_shares(s, exponents=True).axes[1]  # the exponents, chaotic one above zero
+    assert any(np.array_equal(line.get_ydata(), [0.3, 0.35, 0.4]) for line in lower.lines)
     summary = s.summary()
     assert summary["attractor_type"] == s.attractor_type.tolist() and [a["label"] for a in summary["attractors"]][1] == "chaotic"
     # a file written before types were recorded: cycles periodic, clouds of unknown type, no exponents

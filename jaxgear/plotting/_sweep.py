@@ -2,7 +2,7 @@
 
 Periods have fixed colours in every sweep figure (:func:`period_color`: P-1 blue, P-2
 red, P-3 green, P-4 orange, P-8 cyan, P-12 pink, ... from the attractor palette of
-``_style``; aperiodic motion by its type, :func:`type_color`: chaotic dark purple,
+``_style``; aperiodic motion by its type, :func:`type_color`: chaotic plum,
 quasi-periodic dark gold, of unknown type dark grey; escaped the sink's light grey);
 global attractors of a basin sweep use ``attractor_color(id)`` like the domain figures
 and are labelled with their id and type (``"2: chaotic"``, ``"0: P-4/P-8"``).
@@ -20,7 +20,7 @@ from ..sweep import period_label, type_label
 from ._style import _PALETTE, SINK_COLOR, UNRESOLVED_COLOR, attractor_color, new_figure
 
 APERIODIC_COLOR = "#404040"
-CHAOTIC_COLOR = "#3b0f70"
+CHAOTIC_COLOR = "#7a0177"
 QUASI_PERIODIC_COLOR = "#b8860b"
 
 
@@ -41,7 +41,7 @@ def period_color(k: int) -> str:
 def type_color(k: int, kind: int) -> str:
     """Colour of an attractor of period code ``k`` and type ``kind`` (an
     :class:`~jaxgear.AttractorType` value): :func:`period_color` for P-k and escaped;
-    for period 0 chaotic dark purple, quasi-periodic dark gold, unknown dark grey."""
+    for period 0 chaotic plum, quasi-periodic dark gold, unknown dark grey."""
     if int(k) != 0:
         return period_color(k)
     return {int(AttractorType.CHAOTIC): CHAOTIC_COLOR,
@@ -121,7 +121,7 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
 
 
 def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, multipliers: bool = False,
-                      title: str | None = None):
+                      exponents: bool = False, title: str | None = None):
     """Stacked basin shares against the parameter (a :class:`~jaxgear.BasinSweep`).
 
     One band per global attractor (``attractor_color(id)``, labelled with its id and
@@ -131,7 +131,10 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     appears or vanishes. With ``multipliers`` a second panel below draws each
     attractor's largest Floquet multiplier modulus (``sweep.multiplier``) against the
     parameter, with the stability limit 1: a curve that nears it marks a bifurcation
-    ahead (a period doubling where the attractor's period changes).
+    ahead (a period doubling where the attractor's period changes). With ``exponents`` a
+    panel below draws each attractor's largest Lyapunov exponent per forcing period
+    (``sweep.largest_exponent``, with its error bars) and zero: chaotic above it,
+    quasi-periodic on it, cycles below.
     """
     x = np.asarray(sweep.values)
     f = 100.0 if percent else 1.0
@@ -148,11 +151,10 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
         ys.append(f * sweep.unresolved_share)
         cols.append(UNRESOLVED_COLOR)
         labels.append("unresolved")
-    fig = new_figure(figsize=(7.5, 6.4 if multipliers else 4.2), layout="constrained")
-    if multipliers:
-        ax, ax_mu = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
-    else:
-        ax = fig.add_subplot()
+    panels = 1 + bool(multipliers) + bool(exponents)
+    fig = new_figure(figsize=(7.5, 4.2 + 2.2 * (panels - 1)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(panels, 1, sharex=True, height_ratios=(2,) + (1,) * (panels - 1)))
+    ax = axes[0]
     if len(x) == 1:
         bottom = 0.0
         for y, c, lab in zip(ys, cols, labels):
@@ -173,6 +175,7 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small")
     ax.set_title(title or f"Basin shares ({sweep.method}, {sweep.grid.n_cells} cells per value)")
     if multipliers:
+        ax_mu = axes[1]
         mu = np.asarray(sweep.multiplier, dtype=float)
         for g in range(sweep.n_attractors):
             ax_mu.plot(x, mu[:, g], "o-", color=attractor_color(g), ms=3, lw=1.2)
@@ -180,8 +183,17 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
         top = np.nanmax(mu, initial=1.0)
         ax_mu.set_ylim(0.0, max(1.05, 1.02 * top))
         ax_mu.set_ylabel("max |Floquet multiplier|")
-        ax_mu.set_xlabel(sweep.param)
-        ax.set_xlabel("")
+    if exponents:
+        ax_l = axes[-1]
+        lam, err = np.asarray(sweep.largest_exponent, dtype=float), np.asarray(sweep.exponent_error, dtype=float)
+        for g in range(sweep.n_attractors):
+            ax_l.errorbar(x, lam[:, g], yerr=np.where(np.isfinite(err[:, g]), err[:, g], 0.0), fmt="o-",
+                          color=attractor_color(g), ms=3, lw=1.2, capsize=2)
+        ax_l.axhline(0.0, color="k", ls="--", lw=0.8)
+        ax_l.set_ylabel("largest Lyapunov exponent\n[1/forcing period]")
+    for a in axes[:-1]:
+        a.set_xlabel("")
+    axes[-1].set_xlabel(sweep.param)
     return fig
 
 

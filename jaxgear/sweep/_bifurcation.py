@@ -1,9 +1,10 @@
-"""Bifurcation diagrams: stroboscopic points against one parameter, classified by period.
+"""Bifurcation diagrams: stroboscopic points against one parameter, classified by period and type.
 
 From several initial states per value, a transient is dropped, stroboscopic points are
 recorded and each (value, start) is classified as P-k (recurrence on the stroboscopic
-map, paper §3), aperiodic (no period up to ``max_period``: quasi-periodic or chaotic) or
-escaped. Values and starts are batched (``direction="independent"``), or the state is
+map, paper §3), aperiodic (no period up to ``max_period``) or escaped; an aperiodic
+attractor is then labelled chaotic or quasi-periodic by its largest Lyapunov exponent
+(:func:`aperiodic_types`). Values and starts are batched (``direction="independent"``), or the state is
 carried from one value to the next (``"up"``/``"down"``/``"both"``: a ``lax.scan`` over
 values), so hysteresis shows; ``"all"`` does both kinds.
 
@@ -286,7 +287,11 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     successive periods), classified as P-k (the smallest ``k <= max_period`` with
     ``|x_j - x_(j-k)| <= tol (1 + |x_j|)`` over the last k+1 points), aperiodic (none:
     quasi-periodic, chaotic or a slow transient) or escaped (non-finite, or a norm above
-    ``escape_bound``).
+    ``escape_bound``). Each aperiodic attractor (per direction and value) then gets its
+    type, chaotic or quasi-periodic, from the largest Lyapunov exponent of the
+    stroboscopic map (:func:`aperiodic_types`: a few hundred periods from its last
+    point, every aperiodic attractor of the diagram in one batch; kept as
+    ``attractor_type``, ``largest_exponent`` and ``exponent_error``).
 
     Args:
         system, params: the :class:`ForcedSystem` and its parameter pytree (defaults: the
