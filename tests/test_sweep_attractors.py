@@ -229,3 +229,20 @@ def test_bifurcation_diagram_labels_chaos_and_cycles():
     assert "chaotic" in d.table() and "P-4" in d.table()
     ax = plotting.plot_bifurcation(d).axes[0]
     assert sorted(t.get_text() for t in ax.get_legend().get_texts()) == ["P-4", "chaotic"]
+
+
+def test_exponents_of_many_values_in_one_batch_are_each_values_own():
+    """The batched exponents of a diagram (each lane at its own parameter value, chunks
+    padded) equal :func:`lyapunov_spectrum` run at each value alone."""
+    from jaxgear._examples import DUFFING, DuffingParams
+    from jaxgear.sweep._kernels import values_exponent_estimates
+
+    p = DuffingParams(delta=0.05, alpha=0.0, beta=1.0, gamma=7.5, omega=1.0)
+    V, X = np.array([[7.5], [7.0], [6.0]]), np.array([[2.5, 0.0], [1.0, 0.0], [0.5, 0.5]])
+    est, final = values_exponent_estimates(DUFFING, p, ("gamma",), V, X, n_exponents=2, periods=8, stretches=2,
+                                           integrator=jg.RK4(50), chunk_size=2)
+    for i in range(3):
+        s = lyapunov_spectrum(DUFFING, jg.with_param(p, "gamma", V[i, 0]), X[i], periods=8, stretches=2, transient=0,
+                              integrator=jg.RK4(50))
+        np.testing.assert_allclose(est[i], s.stretch_exponents, rtol=1e-9, atol=1e-10)
+        np.testing.assert_allclose(final[i], s.final_state, rtol=1e-9, atol=1e-10)
