@@ -12,7 +12,8 @@ counts as one.
 Used by the global analysis (merging cell-map groups and recurrences of the direct
 method, reducing a period to the minimal one), shooting (deduplicating converged
 seeds), sweeps (grouping the starts of one parameter value, matching attractors
-across values) and the comparison of two results.
+across values: :func:`match_attractors`, cycles by distance, clouds by the overlap of
+their boxes) and the comparison of two results.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ __all__ = [
     "attractor_scale",
     "same_attractor",
     "same_cloud",
+    "cloud_overlap",
     "group_attractors",
     "match_attractors",
     "minimal_cycle",
@@ -85,23 +87,42 @@ def same_attractor(A, k_a: int, B, k_b: int, tol: float) -> bool:
 CLOUD_BOXES = 32
 """Boxes per axis across the joint bounding box of two clouds compared by :func:`same_cloud`."""
 
+MATCH_CLOUD_DISTANCE = 0.5
+"""Largest overlap distance ``1 - cloud_overlap`` of two clouds :func:`match_attractors` matches."""
+
+
+def cloud_overlap(A, B, boxes: int = CLOUD_BOXES, width: float | None = None) -> float:
+    """Share of the boxes occupied by the cloud ``A (m, dim)`` or ``B (n, dim)``, whichever
+    occupies fewer, that the other cloud occupies too (0 to 1; 0 when either has no
+    finite point): the box counting of Datseris & Wagemakers 2022. Boxes divide the joint
+    bounding box of the clouds into ``boxes`` per axis, or (``width``, state units) are
+    the cubes of that edge of a lattice through the origin, the same for every pair."""
+    A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    A, B = A[np.all(np.isfinite(A), axis=1)], B[np.all(np.isfinite(B), axis=1)]
+    if not (len(A) and len(B)):
+        return 0.0
+    if width is None:
+        lo = np.minimum(A.min(axis=0), B.min(axis=0))
+        ext = np.maximum(A.max(axis=0), B.max(axis=0)) - lo
+        w = np.where(ext > 0, ext, 1.0) / int(boxes)
+    else:
+        lo, w = np.zeros(A.shape[1]), float(width)
+    boxes_a = set(map(tuple, np.floor((A - lo) / w).astype(np.int64)))
+    boxes_b = set(map(tuple, np.floor((B - lo) / w).astype(np.int64)))
+    return len(boxes_a & boxes_b) / min(len(boxes_a), len(boxes_b))
+
 
 def same_cloud(A, B, share: float = 0.5) -> bool:
     """Whether the point clouds ``A (m, dim)`` and ``B (n, dim)`` of two attractors that
     repeat no point (quasi-periodic, chaotic) are one attractor: matched by the boxes they
     occupy, not by point distance (Datseris & Wagemakers 2022). Boxes divide their joint
     bounding box into :data:`CLOUD_BOXES` per axis; they are one attractor when at least
-    ``share`` of the boxes of the cloud with fewer boxes lie among the other's."""
+    ``share`` of the boxes of the cloud with fewer boxes lie among the other's
+    (:func:`cloud_overlap`)."""
     A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
-    A, B = A[np.all(np.isfinite(A), axis=1)], B[np.all(np.isfinite(B), axis=1)]
-    if not (len(A) and len(B)):
+    if not (np.all(np.isfinite(A), axis=-1).any() and np.all(np.isfinite(B), axis=-1).any()):
         return False
-    lo = np.minimum(A.min(axis=0), B.min(axis=0))
-    ext = np.maximum(A.max(axis=0), B.max(axis=0)) - lo
-    width = np.where(ext > 0, ext, 1.0) / CLOUD_BOXES
-    boxes_a = set(map(tuple, np.floor((A - lo) / width).astype(np.int64)))
-    boxes_b = set(map(tuple, np.floor((B - lo) / width).astype(np.int64)))
-    return len(boxes_a & boxes_b) >= share * min(len(boxes_a), len(boxes_b))
+    return cloud_overlap(A, B) >= share
 
 
 def group_attractors(sets: Sequence[tuple[np.ndarray, int]], tol: float) -> np.ndarray:
@@ -121,27 +142,46 @@ def group_attractors(sets: Sequence[tuple[np.ndarray, int]], tol: float) -> np.n
     return ids
 
 
+def _match_distance(c, kc: int, p, kp: int, width: float) -> float:
+    """Distance of a current and a previous attractor for :func:`match_attractors`: the
+    Hausdorff distance of two cycles' point sets (state units), ``1 - cloud_overlap`` of
+    two clouds (period 0) on the boxes of edge ``width``, inf for a cycle and a cloud
+    (never the same attractor) or an empty point set."""
+    c, p = np.asarray(c, dtype=float), np.asarray(p, dtype=float)
+    if (int(kc) == 0) != (int(kp) == 0) or not (len(c) and len(p)):
+        return np.inf
+    if int(kc) == 0:
+        return 1.0 - cloud_overlap(c, p, width=width)
+    return float(hausdorff(c, p))
+
+
 def match_attractors(previous: Sequence[tuple[np.ndarray, int]], current: Sequence[tuple[np.ndarray, int]],
-                     max_distance: float) -> np.ndarray:
+                     max_distance: float, max_cloud_distance: float = MATCH_CLOUD_DISTANCE) -> np.ndarray:
     """Match the attractors of one parameter value to those of the previous value.
 
-    Greedy, closest pairs first (at equal distance a pair of the same period first);
-    pairs farther apart than ``max_distance`` (state units, Hausdorff distance of the
-    point sets) stay unmatched. Returns ``(len(current),)``: the index into
-    ``previous`` of each current attractor's match, or -1.
+    Greedy, closest pairs first (at equal distance a pair of the same period first).
+    Cycles (period ``k != 0``) are compared by the Hausdorff distance of their point sets
+    (state units), pairs farther apart than ``max_distance`` unmatched; attractors that
+    repeat no point (period 0, quasi-periodic or chaotic: clouds of points) by the boxes
+    they occupy, not by point distance: the distance ``1 - cloud_overlap`` on the cubes
+    of edge ``max_distance / 2`` of a lattice through the origin (:func:`cloud_overlap`;
+    the same scale as the cycles', so an attractor that moves by a small part of
+    ``max_distance`` between the values keeps most of its boxes), pairs farther apart
+    than ``max_cloud_distance`` unmatched; a cycle never matches a cloud. Returns
+    ``(len(current),)``: the index into ``previous`` of each current attractor's match,
+    or -1.
     """
     out = np.full(len(current), -1, dtype=np.int64)
     if not previous or not current:
         return out
-    D = np.array([[hausdorff(np.asarray(c), np.asarray(p)) if len(c) and len(p) else np.inf
-                   for p, _ in previous] for c, _ in current])
+    D = np.array([[_match_distance(c, kc, p, kp, 0.5 * max_distance) for p, kp in previous] for c, kc in current])
+    cloud = np.array([[int(kc) == 0 for _ in previous] for _, kc in current])
+    ok = D <= np.where(cloud, max_cloud_distance, max_distance)
     same = np.array([[kc == kp for _, kp in previous] for _, kc in current])
     used = np.zeros(len(previous), bool)
     for flat in np.lexsort((~same.ravel(), D.ravel())):
         i, j = divmod(int(flat), len(previous))
-        if D[i, j] > max_distance:
-            break
-        if out[i] < 0 and not used[j]:
+        if ok[i, j] and out[i] < 0 and not used[j]:
             out[i] = j
             used[j] = True
     return out

@@ -2,8 +2,10 @@
 
 Periods have fixed colours in every sweep figure (:func:`period_color`: P-1 blue, P-2
 red, P-3 green, P-4 orange, P-8 cyan, P-12 pink, ... from the attractor palette of
-``_style``; aperiodic dark grey; escaped the sink's light grey); global attractors of a basin sweep use
-``attractor_color(id)`` like the domain figures.
+``_style``; aperiodic motion by its type, :func:`type_color`: chaotic plum,
+quasi-periodic dark gold, of unknown type dark grey; escaped the sink's light grey);
+global attractors of a basin sweep use ``attractor_color(id)`` like the domain figures
+and are labelled with their id and type (``"2: chaotic"``, ``"0: P-4/P-8"``).
 """
 
 from __future__ import annotations
@@ -12,11 +14,14 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from .._lyapunov import AttractorType
 from .._system import state_index
-from ..sweep import period_label
+from ..sweep import period_label, type_label
 from ._style import _PALETTE, SINK_COLOR, UNRESOLVED_COLOR, attractor_color, new_figure
 
 APERIODIC_COLOR = "#404040"
+CHAOTIC_COLOR = "#7a0177"
+QUASI_PERIODIC_COLOR = "#b8860b"
 
 
 # P-1..P-6 and P-8 take the attractor palette's first colours; P-12 and P-16 get their own.
@@ -33,6 +38,16 @@ def period_color(k: int) -> str:
     return APERIODIC_COLOR if k == 0 else SINK_COLOR
 
 
+def type_color(k: int, kind: int) -> str:
+    """Colour of an attractor of period code ``k`` and type ``kind`` (an
+    :class:`~jaxgear.AttractorType` value): :func:`period_color` for P-k and escaped;
+    for period 0 chaotic plum, quasi-periodic dark gold, unknown dark grey."""
+    if int(k) != 0:
+        return period_color(k)
+    return {int(AttractorType.CHAOTIC): CHAOTIC_COLOR,
+            int(AttractorType.QUASI_PERIODIC): QUASI_PERIODIC_COLOR}.get(int(kind), APERIODIC_COLOR)
+
+
 _DIR_STYLE = {  # marker, size, legend label, horizontal offset (in units of the dodge)
     "up": ("^", 9.0, "sweep up (state carried)", -1.0),
     "independent": ("o", 5.0, "independent starts", 0.0),
@@ -43,8 +58,10 @@ _DIR_STYLE = {  # marker, size, legend label, horizontal offset (in units of the
 def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | None = None):
     """Bifurcation diagram: a state coordinate of the stroboscopic points against the parameter.
 
-    Points are coloured by the period of the (value, start) they belong to; a P-k lane
-    contributes its k points, an aperiodic lane all its recorded points. With several
+    Points are coloured by the period of the (value, start) they belong to, aperiodic
+    ones by their type from the largest Lyapunov exponent (:func:`type_color`: chaotic,
+    quasi-periodic, or of unknown type); a P-k lane contributes its k points, an
+    aperiodic lane all its recorded points. With several
     sweeps each value's column is split: up sweep (``^``, left), independent starts
     (``o``, middle), down sweep (``v``, right); where up and down differ the sweeps
     followed different attractors (hysteresis). Escaped lanes are marked with grey
@@ -72,24 +89,24 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
     for name in dirs:
         d = diagram.directions.index(name)
         per = diagram.period[d]  # (V, S)
+        kind = np.where(per == 0, diagram.attractor_type[d], int(AttractorType.PERIODIC))  # (V, S): the type of aperiodic lanes
         pts = diagram.points[d][..., j]  # (V, S, R)
         marker, size, _, off = _DIR_STYLE[name]
-        codes = [k for k in np.unique(per).tolist() if k != -1]
-        codes.sort(key=lambda k: -int((per == k).sum()))  # rare periods drawn last, on top
-        for k in codes:
-            vi, si = np.nonzero(per == k)
+        codes = {(int(k), int(t)) for k, t in zip(per.ravel(), kind.ravel()) if k != -1}
+        for k, t in sorted(codes, key=lambda c: -int(((per == c[0]) & (kind == c[1])).sum())):  # rare ones on top
+            vi, si = np.nonzero((per == k) & (kind == t))
             take = R if k == 0 else k
             y = pts[vi, si, R - take:].reshape(-1)
             x = np.repeat(vals[vi] + off * dodge, take)
-            ax.scatter(x, y, s=size, marker=marker, color=period_color(k), linewidths=0)
-            periods_seen.add(k)
+            ax.scatter(x, y, s=size, marker=marker, color=type_color(k, t), linewidths=0)
+            periods_seen.add((k, t))
         n_escaped += int((per == -1).sum())
         esc = np.nonzero((per == -1).any(axis=1))[0]
         if len(esc):
             ax.plot(vals[esc] + off * dodge, np.full(len(esc), 0.98), "x", color="#999999", ms=5,
                     transform=ax.get_xaxis_transform())
-    handles = [Patch(color=period_color(k), label=period_label(k))
-               for k in sorted(periods_seen, key=lambda k: (k <= 0, k))]
+    handles = [Patch(color=type_color(k, t), label=type_label(k, t))
+               for k, t in sorted(periods_seen, key=lambda c: (c[0] <= 0, c[0], c[1]))]
     if n_escaped:
         handles.append(Line2D([], [], marker="x", ls="none", color="#999999", label=f"escaped ({n_escaped} runs)"))
     if len(dirs) > 1 or dirs[0] != "independent":
@@ -104,16 +121,20 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
 
 
 def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, multipliers: bool = False,
-                      title: str | None = None):
+                      exponents: bool = False, title: str | None = None):
     """Stacked basin shares against the parameter (a :class:`~jaxgear.BasinSweep`).
 
     One band per global attractor (``attractor_color(id)``, labelled with its id and
-    period(s), e.g. ``"1: P-4/P-8"`` when it doubles along the sweep), then the sink and
+    type: its period(s), e.g. ``"1: P-4/P-8"`` when it doubles along the sweep,
+    ``"2: chaotic"``, ``"3: quasi-periodic"``, ``"0: P-4/chaotic"``), then the sink and
     unresolved cells. With ``mark_events`` a dotted line marks where an attractor
     appears or vanishes. With ``multipliers`` a second panel below draws each
     attractor's largest Floquet multiplier modulus (``sweep.multiplier``) against the
     parameter, with the stability limit 1: a curve that nears it marks a bifurcation
-    ahead (a period doubling where the attractor's period changes).
+    ahead (a period doubling where the attractor's period changes). With ``exponents`` a
+    panel below draws each attractor's largest Lyapunov exponent per forcing period
+    (``sweep.largest_exponent``, with its error bars) and zero: chaotic above it,
+    quasi-periodic on it, cycles below.
     """
     x = np.asarray(sweep.values)
     f = 100.0 if percent else 1.0
@@ -130,11 +151,10 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
         ys.append(f * sweep.unresolved_share)
         cols.append(UNRESOLVED_COLOR)
         labels.append("unresolved")
-    fig = new_figure(figsize=(7.5, 6.4 if multipliers else 4.2), layout="constrained")
-    if multipliers:
-        ax, ax_mu = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
-    else:
-        ax = fig.add_subplot()
+    panels = 1 + bool(multipliers) + bool(exponents)
+    fig = new_figure(figsize=(7.5, 4.2 + 2.2 * (panels - 1)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(panels, 1, sharex=True, height_ratios=(2,) + (1,) * (panels - 1)))
+    ax = axes[0]
     if len(x) == 1:
         bottom = 0.0
         for y, c, lab in zip(ys, cols, labels):
@@ -155,6 +175,7 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small")
     ax.set_title(title or f"Basin shares ({sweep.method.name}, {sweep.grid.n_cells} cells per value)")
     if multipliers:
+        ax_mu = axes[1]
         mu = np.asarray(sweep.multiplier, dtype=float)
         for g in range(sweep.n_attractors):
             ax_mu.plot(x, mu[:, g], "o-", color=attractor_color(g), ms=3, lw=1.2)
@@ -162,8 +183,17 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
         top = np.nanmax(mu, initial=1.0)
         ax_mu.set_ylim(0.0, max(1.05, 1.02 * top))
         ax_mu.set_ylabel("max |Floquet multiplier|")
-        ax_mu.set_xlabel(sweep.param)
-        ax.set_xlabel("")
+    if exponents:
+        ax_l = axes[-1]
+        lam, err = np.asarray(sweep.largest_exponent, dtype=float), np.asarray(sweep.exponent_error, dtype=float)
+        for g in range(sweep.n_attractors):
+            ax_l.errorbar(x, lam[:, g], yerr=np.where(np.isfinite(err[:, g]), err[:, g], 0.0), fmt="o-",
+                          color=attractor_color(g), ms=3, lw=1.2, capsize=2)
+        ax_l.axhline(0.0, color="k", ls="--", lw=0.8)
+        ax_l.set_ylabel("largest Lyapunov exponent\n[1/forcing period]")
+    for a in axes[:-1]:
+        a.set_xlabel("")
+    axes[-1].set_xlabel(sweep.param)
     return fig
 
 

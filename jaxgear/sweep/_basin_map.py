@@ -3,8 +3,9 @@
 The map over ``values_y x values_x`` runs :func:`~jaxgear.analyze_global` at every grid
 point (resumable and split over processes as in :func:`~jaxgear.basin_sweep`, whose
 machinery it shares), then gives the attractors global identities across the map: the
-attractors of a point are matched (:func:`jaxgear._matching.match_attractors`, Hausdorff
-distance of the stroboscopic point sets, cyclic-shift invariant) to those of its left
+attractors of a point are matched (:func:`jaxgear._matching.match_attractors`: cycles by the Hausdorff
+distance of their stroboscopic point sets, cyclic-shift invariant; quasi-periodic and
+chaotic attractors by the overlap of the boxes their clouds occupy) to those of its left
 neighbour ``(iy, ix - 1)`` and its lower neighbour ``(iy - 1, ix)``, the same global
 continuation of attractors as along one parameter, carried over a grid in rows.
 """
@@ -30,7 +31,7 @@ from ..analysis import AbstractGlobalMethod
 from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_options, uncertainty_setting
 from ._bifurcation import read_only
-from ._classify import period_label
+from ._classify import label_order
 from ._values import apply_values, check_values, coord_name, sorted_values
 
 __all__ = ["BasinMap", "basin_map", "match_on_grid"]
@@ -48,6 +49,10 @@ class BasinMap(GlobalShares):
             g at each parameter point (0 where it does not exist); sink_share,
             unresolved_share: ``(ny, nx)``.
         period: ``(ny, nx, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
+        attractor_type, largest_exponent, exponent_error: ``(ny, nx, G)`` its type there (an
+            :class:`~jaxgear.AttractorType` value, -1 where absent or unknown), its largest
+            Lyapunov exponent per forcing period and that exponent's error (NaN where
+            absent or not measured).
         multiplier: ``(ny, nx, G)`` the largest modulus of its Floquet multipliers there
             (NaN where it does not exist or is aperiodic, and in older files).
         points: ``(ny, nx, G, K, dim)`` its stroboscopic points (NaN padded), n_points
@@ -80,26 +85,11 @@ class BasinMap(GlobalShares):
     def value_dims(self) -> tuple[str, ...]:
         return self.coords_xy[::-1]
 
-    @property
-    def coexisting(self) -> np.ndarray:
-        """``(ny, nx)``: how many attractors coexist at each parameter point."""
-        return self.present.sum(axis=-1)
-
-    @property
-    def dominant(self) -> np.ndarray:
-        """``(ny, nx)``: the global attractor with the largest share at each point; -1
-        where the sink holds more cells than any attractor, -2 where the unresolved cells
-        (no period found: a chaotic or long-period motion, or slow transients) hold more
-        than the sink and any attractor."""
-        top = np.argmax(self.shares, axis=-1) if self.n_attractors else np.zeros(self.sink_share.shape, int)
-        best = np.take_along_axis(self.shares, top[..., None], -1)[..., 0] if self.n_attractors else 0.0
-        other = np.where(self.unresolved_share > self.sink_share, -2, -1)
-        return np.where(best > np.maximum(self.sink_share, self.unresolved_share), top, other)
-
     def attractor_label(self, g: int) -> str:
-        """``"P-4"``, or ``"P-4/P-8"`` when its period differs across the map."""
-        ks = sorted(k for k in np.unique(self.period[..., g]).tolist() if k >= 0)
-        return "/".join(period_label(k) for k in ks) or "-"
+        """``"P-4"``, ``"chaotic"``, ``"quasi-periodic"``, or ``"P-4/P-8"`` when its label
+        differs across the map."""
+        labs = sorted({lab for lab in self.labels_at(g).ravel().tolist() if lab}, key=label_order)
+        return "/".join(labs) or "-"
 
     def table(self) -> str:
         """Printable table: per global attractor its period(s), where it exists and its shares."""
@@ -155,7 +145,8 @@ def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarra
     ``[(A_i,) int array]`` for the results listed row by row (``i = iy * nx + ix``).
 
     Point by point in that order, the attractors are matched
-    (:func:`jaxgear._matching.match_attractors`, pairs farther than ``match_tol`` not
+    (:func:`jaxgear._matching.match_attractors`: cycles farther than ``match_tol`` apart,
+    or clouds sharing less than half of their boxes of edge ``match_tol / 2``, not
     matched) to those of the left neighbour and of the lower neighbour together (each
     global id once); an unmatched attractor gets a new global id (numbered in order of
     first appearance).
@@ -189,10 +180,13 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
 
     At every point of ``values_y x values_x`` :func:`~jaxgear.analyze_global` runs
     ``method`` on ``grid`` (default: the method's grid; for the gear model the paper's
-    region D). The attractors are given global ids by :func:`match_on_grid`: matched to
-    those of the left and lower neighbours by the Hausdorff distance of their
+    region D). The attractors of every type (cycles, and quasi-periodic and chaotic
+    attractors with their clouds) are given global ids by :func:`match_on_grid`: matched
+    to those of the left and lower neighbours, cycles by the Hausdorff distance of their
     stroboscopic point sets, pairs farther than ``match_tol`` not matched (default: 5 %
-    of the diagonal of the grid's box). A map of ``ny x nx`` points costs ``ny * nx``
+    of the diagonal of the grid's box), clouds by the overlap of the boxes they occupy
+    (as in :func:`~jaxgear.basin_sweep`). ``dominant`` and ``coexisting`` count
+    attractors of every type (``coexisting_of`` one type). A map of ``ny x nx`` points costs ``ny * nx``
     global analyses: on the paper grid (90,000 cells) about 5 to 10 s each on a 2-core
     CPU.
 

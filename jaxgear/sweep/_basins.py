@@ -3,10 +3,12 @@
 At each value the global analysis runs on the grid (one after another, or with
 ``batched=True`` and the direct method all values of a block in one lane pool over
 (value, cell) pairs, :func:`~jaxgear.analysis.analyze_global_values`); the attractors of
-neighbouring values are matched by the Hausdorff distance of their stroboscopic point
-sets (:func:`jaxgear._matching.match_attractors`, the idea of global continuation of
-attractors), so each keeps a global identity; shares per value and global attractor,
-plus the sink.
+neighbouring values are matched (:func:`jaxgear._matching.match_attractors`, the idea of
+global continuation of attractors, Datseris & Wagemakers 2022): cycles by the Hausdorff
+distance of their stroboscopic point sets, quasi-periodic and chaotic attractors by the
+overlap of the boxes their clouds of points occupy, so each keeps a global identity;
+shares, types and largest Lyapunov exponents per value and global attractor, plus the
+sink.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from .._codec import array_field, custom_field, result_type
 from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
 from .._io import load, save_result
+from .._lyapunov import AttractorType
 from .._matching import match_attractors
 from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
@@ -41,7 +44,7 @@ from ..analysis import (
 from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._bifurcation import read_only
 from ._checkpoint import open_shared_checkpoint
-from ._classify import period_label
+from ._classify import type_label
 from ._values import check_values, coord_name, sorted_values
 
 __all__ = ["BasinSweep", "GlobalShares", "basin_sweep", "match_across_values"]
@@ -51,9 +54,10 @@ def match_across_values(results, match_tol: float) -> list[np.ndarray]:
     """Global id of every attractor of every value: ``[ (A_i,) int array ]``.
 
     Attractors of value i are matched to those of value i-1
-    (:func:`jaxgear._matching.match_attractors`, pairs farther than ``match_tol`` not
-    matched); an unmatched attractor gets a new global id (numbered in order of first
-    appearance).
+    (:func:`jaxgear._matching.match_attractors`: cycles whose point sets are farther than
+    ``match_tol`` apart are not matched, clouds (period 0) that share less than half of
+    their boxes of edge ``match_tol / 2`` are not; a cycle never matches a cloud); an
+    unmatched attractor gets a new global id (numbered in order of first appearance).
     """
     out, prev, nxt = [], [], 0  # prev: [(gid, points, period)]
     for r in results:
@@ -77,11 +81,13 @@ def _at(*tail):
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class GlobalShares:
     """What a basin sweep and a basin map share: per parameter value (the ``...`` axes,
-    named by :attr:`value_dims`) the shares ``(..., G)``, periods, multipliers and points
-    of global attractors (absent: period -1, share 0, NaN), the sink and unresolved
-    shares, every cell's global label, the label uncertainty, and the common options.
-    Fields added after files were first written (``multiplier``, ``uncertainty_step``,
-    ``uncertainty_start``) load as NaN from those files."""
+    named by :attr:`value_dims`) the shares ``(..., G)``, periods, multipliers, types,
+    largest Lyapunov exponents and points of global attractors (absent: period -1, share
+    0, type -1, NaN), the sink and unresolved shares, every cell's global label, the
+    label uncertainty, and the common options. Fields added after files were first
+    written (``multiplier``, ``uncertainty_step``, ``uncertainty_start``,
+    ``largest_exponent``, ``exponent_error``) load as NaN from those files, ``attractor_type`` as
+    -1 (unknown) where the attractor is present and its period says nothing more."""
 
     shares: np.ndarray = array_field(_at("attractor"))
     sink_share: np.ndarray = array_field(_at())
@@ -93,6 +99,9 @@ class GlobalShares:
     labels: np.ndarray = array_field(lambda r: (*r.value_dims, *r.grid.axis_names))
     uncertainty_step: np.ndarray | None = array_field(_at(), later=True, default=None)
     uncertainty_start: np.ndarray | None = array_field(_at(), later=True, default=None)
+    attractor_type: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
+    largest_exponent: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
+    exponent_error: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
     method: AbstractGlobalMethod = custom_field(lambda m: m.to_dict(), method_from_dict)
     match_tol: float = 0.0
@@ -105,7 +114,7 @@ class GlobalShares:
     def __post_init__(self):
         self._unmeasured_as_nan()
         for f in ("shares", "sink_share", "unresolved_share", "period", "multiplier", "points", "n_points", "labels",
-                  "uncertainty_step", "uncertainty_start"):
+                  "uncertainty_step", "uncertainty_start", "attractor_type", "largest_exponent", "exponent_error"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
@@ -131,6 +140,43 @@ class GlobalShares:
                 object.__setattr__(self, f, np.full(np.shape(self.sink_share), np.nan))
         if self.multiplier is None:
             object.__setattr__(self, "multiplier", np.full(np.shape(self.shares), np.nan))
+        for f in ("largest_exponent", "exponent_error"):
+            if getattr(self, f) is None:
+                object.__setattr__(self, f, np.full(np.shape(self.shares), np.nan))
+        if self.attractor_type is None:  # a cycle is periodic; the type of a cloud was not recorded
+            object.__setattr__(self, "attractor_type", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
+                                                      int(AttractorType.UNKNOWN)).astype(np.int64))
+
+    @property
+    def coexisting(self) -> np.ndarray:
+        """``(...)``: how many attractors of any type (cycles, quasi-periodic, chaotic)
+        coexist at each parameter value."""
+        return self.present.sum(axis=-1)
+
+    def coexisting_of(self, kind) -> np.ndarray:
+        """``(...)``: how many attractors of type ``kind`` (an
+        :class:`~jaxgear.AttractorType`) coexist at each parameter value."""
+        return (self.present & (self.attractor_type == int(AttractorType(int(kind))))).sum(axis=-1)
+
+    @property
+    def dominant(self) -> np.ndarray:
+        """``(...)``: the global attractor (of any type) with the largest share at each
+        value; -1 where the sink holds more cells than any attractor, -2 where the
+        unresolved cells (no attractor found: a motion too long to resolve, or slow
+        transients) hold more than the sink and any attractor."""
+        top = np.argmax(self.shares, axis=-1) if self.n_attractors else np.zeros(self.sink_share.shape, int)
+        best = np.take_along_axis(self.shares, top[..., None], -1)[..., 0] if self.n_attractors else 0.0
+        other = np.where(self.unresolved_share > self.sink_share, -2, -1)
+        return np.where(best > np.maximum(self.sink_share, self.unresolved_share), top, other)
+
+    def labels_at(self, g: int) -> np.ndarray:
+        """``(...)`` str: the label of global attractor ``g`` at each value (``"P-4"``,
+        ``"chaotic"``, ``"quasi-periodic"``, ``"aperiodic"`` for period 0 of unknown type;
+        ``""`` where absent)."""
+        per, kind = np.asarray(self.period[..., g]), np.asarray(self.attractor_type[..., g])
+        out = np.array([type_label(int(k), int(t)) if k >= 0 else "" for k, t in zip(per.ravel(), kind.ravel())],
+                       dtype=object)
+        return out.reshape(per.shape)
 
     def uncertainty_note(self, where: str = "values") -> str:
         """One line: the largest label uncertainties over the parameter ``where`` (values,
@@ -146,7 +192,8 @@ class GlobalShares:
     def _per_value_summary(self) -> dict[str, list]:
         """The per-value arrays of :meth:`summary` (shares, multipliers, sink and
         unresolved shares, label uncertainties) as nested lists."""
-        return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "sink_share", "unresolved_share",
+        return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "attractor_type", "largest_exponent",
+                                                        "exponent_error", "sink_share", "unresolved_share",
                                                         "uncertainty_step", "uncertainty_start")}
 
     def settings_summary(self) -> dict[str, Any]:
@@ -176,6 +223,11 @@ class BasinSweep(GlobalShares):
         shares: ``(V, G)`` share of the grid in the domain of global attractor g at each
             value (0 where it does not exist); sink_share, unresolved_share: ``(V,)``.
         period: ``(V, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
+        attractor_type: ``(V, G)`` its type there (an :class:`~jaxgear.AttractorType` value:
+            periodic 0, quasi-periodic 1, chaotic 2; -1 where absent or unknown).
+        largest_exponent, exponent_error: ``(V, G)`` its largest Lyapunov exponent of the
+            stroboscopic map per forcing period and the exponent's standard error (NaN
+            where absent or not measured, and in older files).
         multiplier: ``(V, G)`` the largest modulus of its Floquet multipliers there (below 1:
             stable; it nears 1 at a bifurcation), NaN where it does not exist or is
             aperiodic (and in files written before it was recorded).
@@ -207,33 +259,35 @@ class BasinSweep(GlobalShares):
         return (self.param_coord,)
 
     def attractor_label(self, g: int) -> str:
-        """``"P-4"`` or ``"P-4/P-8"`` when its period changes along the sweep."""
+        """``"P-4"``, ``"chaotic"``, ``"quasi-periodic"``, or ``"P-4/P-8"`` when its label
+        changes along the sweep."""
         ks = []
-        for k in self.period[:, g].tolist():
-            if k >= 0 and (not ks or ks[-1] != k):
-                ks.append(k)
-        return "/".join(period_label(k) for k in ks) or "-"
+        for lab in self.labels_at(g).tolist():
+            if lab and (not ks or ks[-1] != lab):
+                ks.append(lab)
+        return "/".join(ks) or "-"
 
     def events(self, share_step: float = 0.05) -> list[dict]:
-        """Where attractors appear, vanish, change period, or their share moves by at least
-        ``share_step`` between neighbouring values."""
+        """Where attractors appear, vanish, change period or type (``"period change"``:
+        P-4 -> P-8, P-8 -> chaotic, quasi-periodic -> chaotic, ...), or their share moves
+        by at least ``share_step`` between neighbouring values."""
         ev = []
         pres = self.present
+        labs = [self.labels_at(g) for g in range(self.n_attractors)]
         for g in range(self.n_attractors):
             if pres[0, g]:
                 ev.append(dict(index=0, value=float(self.values[0]), id=g, event="present",
-                               detail=f"{period_label(int(self.period[0, g]))}, share {100 * self.shares[0, g]:.1f} %"))
+                               detail=f"{labs[g][0]}, share {100 * self.shares[0, g]:.1f} %"))
         for i in range(1, len(self.values)):
             for g in range(self.n_attractors):
                 a, b = pres[i - 1, g], pres[i, g]
                 e = None
                 if b and not a:
-                    e = ("appears", f"{period_label(int(self.period[i, g]))}, share {100 * self.shares[i, g]:.1f} %")
+                    e = ("appears", f"{labs[g][i]}, share {100 * self.shares[i, g]:.1f} %")
                 elif a and not b:
-                    e = ("vanishes", f"was {period_label(int(self.period[i - 1, g]))}, share "
-                                     f"{100 * self.shares[i - 1, g]:.1f} %")
-                elif a and b and self.period[i, g] != self.period[i - 1, g]:
-                    e = ("period change", f"{period_label(int(self.period[i - 1, g]))} -> {period_label(int(self.period[i, g]))}")
+                    e = ("vanishes", f"was {labs[g][i - 1]}, share {100 * self.shares[i - 1, g]:.1f} %")
+                elif a and b and labs[g][i] != labs[g][i - 1]:
+                    e = ("period change", f"{labs[g][i - 1]} -> {labs[g][i]}")
                 elif a and b and abs(self.shares[i, g] - self.shares[i - 1, g]) >= share_step:
                     e = ("share change", f"{100 * self.shares[i - 1, g]:.1f} % -> {100 * self.shares[i, g]:.1f} %")
                 if e:
@@ -313,13 +367,19 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
     the method's grid; for the gear model the paper's region D), values in blocks of at
     most :data:`BLOCK_CELLS` cells (``batched``: each block in one lane pool,
-    :func:`~jaxgear.analysis.analyze_global_values`). The attractors of
-    neighbouring values are matched by the Hausdorff distance of their stroboscopic
-    point sets (cyclic-shift invariant, the idea of global continuation of attractors):
-    greedily, closest pairs first, pairs farther than ``match_tol`` not matched (default:
-    5 % of the diagonal of the grid's box over its gridded axes). An attractor that
+    :func:`~jaxgear.analysis.analyze_global_values`). The attractors of every type
+    each analysis finds (cycles, and the quasi-periodic and chaotic attractors that
+    repeat no point, period 0, with their clouds of points and Lyapunov exponents) are
+    matched from value to value (the idea of global continuation of attractors,
+    Datseris & Wagemakers 2022): cycles by the Hausdorff distance of their stroboscopic
+    point sets (cyclic-shift invariant), pairs farther than ``match_tol`` not matched
+    (default: 5 % of the diagonal of the grid's box over its gridded axes); clouds by
+    the overlap of the boxes of edge ``match_tol / 2`` they occupy (matched when they
+    share at least half of the boxes of the one with fewer), not by point distance; a
+    cycle never matches a cloud. Greedily, closest pairs first. An attractor that
     appears gets a new global id; one that vanishes keeps its id (it is not matched
-    again later).
+    again later). Per value and global attractor the result records its type
+    (``attractor_type``) and largest Lyapunov exponent with its error.
 
     Args:
         param, values: as in :func:`~jaxgear.bifurcation_diagram`.
@@ -468,14 +528,19 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
     ``n_points`` (each ``(n, G, ...)``),
     ``labels`` ``(n, *grid.counts)`` int16 (global ids, -1 sink, -2 unresolved),
     ``sink_share``, ``unresolved_share``, ``uncertainty_step`` and ``uncertainty_start``
-    ``(n,)`` (NaN where not measured)."""
+    ``(n,)`` (NaN where not measured), and each attractor's type ``attractor_type`` (an
+    :class:`~jaxgear.AttractorType` value, -1 where absent or unknown),
+    ``largest_exponent`` and its ``exponent_error`` (per forcing period, NaN where absent
+    or not measured) ``(n, G)``."""
     n = len(results)
     G = int(max([g.max(initial=-1) for g in gids] + [-1])) + 1
     K = max([len(a.points) for r in results for a in r.attractors] + [1])
     out = dict(shares=np.zeros((n, G)), period=np.full((n, G), -1, dtype=np.int64), multiplier=np.full((n, G), np.nan),
                points=np.full((n, G, K, dim), np.nan), n_points=np.zeros((n, G), dtype=np.int64),
                labels=np.empty((n, *grid.counts), dtype=np.int16), sink_share=np.empty(n),
-               unresolved_share=np.empty(n), uncertainty_step=np.full(n, np.nan), uncertainty_start=np.full(n, np.nan))
+               unresolved_share=np.empty(n), uncertainty_step=np.full(n, np.nan), uncertainty_start=np.full(n, np.nan),
+               attractor_type=np.full((n, G), int(AttractorType.UNKNOWN), dtype=np.int64), largest_exponent=np.full((n, G), np.nan),
+               exponent_error=np.full((n, G), np.nan))
     for i, (r, g) in enumerate(zip(results, gids)):
         lut = np.full(len(r.attractors) + 2, -1, dtype=np.int64)  # index local id + 2
         lut[0], lut[1] = -2, -1
@@ -483,6 +548,9 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
             pts = np.asarray(a.points)
             out["shares"][i, gg], out["period"][i, gg], out["n_points"][i, gg] = a.share, a.period, len(pts)
             out["multiplier"][i, gg] = a.multiplier
+            out["attractor_type"][i, gg] = a.kind
+            out["largest_exponent"][i, gg] = a.largest_exponent
+            out["exponent_error"][i, gg] = a.exponent_errors[0] if len(a.exponent_errors) else np.nan
             out["points"][i, gg, : len(pts)] = pts
             lut[a.id + 2] = gg
         out["labels"][i] = lut[np.asarray(r.labels) + 2].reshape(grid.counts)

@@ -1,9 +1,10 @@
-"""Bifurcation diagrams: stroboscopic points against one parameter, classified by period.
+"""Bifurcation diagrams: stroboscopic points against one parameter, classified by period and type.
 
 From several initial states per value, a transient is dropped, stroboscopic points are
 recorded and each (value, start) is classified as P-k (recurrence on the stroboscopic
-map, paper §3), aperiodic (no period up to ``max_period``: quasi-periodic or chaotic) or
-escaped. Values and starts are batched (``direction="independent"``), or the state is
+map, paper §3), aperiodic (no period up to ``max_period``) or escaped; an aperiodic
+attractor is then labelled chaotic or quasi-periodic by its largest Lyapunov exponent
+(:func:`aperiodic_types`). Values and starts are batched (``direction="independent"``), or the state is
 carried from one value to the next (``"up"``/``"down"``/``"both"``: a ``lax.scan`` over
 values), so hysteresis shows; ``"all"`` does both kinds.
 
@@ -29,16 +30,19 @@ from .._codec import array_field, custom_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
 from .._io import save_result
+from .._lyapunov import AttractorType, LyapunovSpectrum, classify_attractor, kaplan_yorke
 from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
 from .._presets import paper_params
+from .._status import Status
 from .._system import ForcedSystem, check_system
 from .._version import __version__
+from ..analysis._global import LYAPUNOV_PERIODS, LYAPUNOV_STRETCHES
 from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ._checkpoint import checkpoint_on_zero, shared_block
-from ._classify import ESCAPED, classify_sequences, group_starts, label_order, period_label
-from ._kernels import independent_points, sequential_points
-from ._values import check_starts, check_values, coord_name, sorted_values
+from ._classify import APERIODIC, ESCAPED, classify_sequences, group_starts, label_order, type_label
+from ._kernels import independent_points, sequential_points, values_exponent_estimates
+from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
 
 __all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "DIRECTIONS", "check_common", "read_only"]
 
@@ -93,6 +97,13 @@ class BifurcationDiagram:
         period: ``(D, V, S)`` minimal period k of P-k, ``APERIODIC`` (0) or ``ESCAPED`` (-1).
         attractor: ``(D, V, S)`` id of the distinct attractor reached, numbered per
             (direction, value) in order of first start; -1 escaped.
+        attractor_type: ``(D, V, S)`` the type of the attractor reached (an
+            :class:`~jaxgear.AttractorType` value): periodic for P-k, chaotic or
+            quasi-periodic for an aperiodic one by its largest Lyapunov exponent, -1
+            (unknown) where escaped or not measured (files written before it was).
+        largest_exponent, exponent_error: ``(D, V, S)`` the largest Lyapunov exponent of
+            the stroboscopic map per forcing period on an aperiodic attractor and its
+            standard error (NaN for P-k and escaped lanes, and in older files).
         system, state_names, params (the base parameter set, canonical names), settings
         (a :class:`SequenceSettings`: transient, record, integrator, tolerances), version.
     """
@@ -105,6 +116,12 @@ class BifurcationDiagram:
     points: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start", "record", "state"))
     period: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
     attractor: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
+    attractor_type: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True,
+                                                    default=None)
+    largest_exponent: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True,
+                                                      default=None)
+    exponent_error: np.ndarray | None = array_field(lambda d: ("direction", d.param_coord, "start"), later=True,
+                                                    default=None)
     system: str = ""
     state_names: tuple[str, ...] = ()
     params: dict = dataclasses.field(default_factory=dict)
@@ -112,7 +129,13 @@ class BifurcationDiagram:
     version: str = ""
 
     def __post_init__(self):
-        for f in ("values", "starts", "points", "period", "attractor"):
+        if self.attractor_type is None:  # a file written before types were recorded: cycles periodic, the rest unknown
+            object.__setattr__(self, "attractor_type", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
+                                                      int(AttractorType.UNKNOWN)).astype(np.int64))
+        for f in ("largest_exponent", "exponent_error"):
+            if getattr(self, f) is None:
+                object.__setattr__(self, f, np.full(np.shape(self.period), np.nan))
+        for f in ("values", "starts", "points", "period", "attractor", "attractor_type", "largest_exponent", "exponent_error"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
@@ -128,19 +151,32 @@ class BifurcationDiagram:
             raise ValueError(f"direction {direction!r} is not in this diagram; it has {self.directions}.")
         return self.directions.index(direction)
 
+    def labels(self) -> np.ndarray:
+        """``(D, V, S)`` str: the label of the attractor each start reached (``"P-4"``,
+        ``"chaotic"``, ``"quasi-periodic"``, ``"aperiodic"`` of unknown type, ``"escaped"``)."""
+        out = np.array([type_label(int(k), int(t)) for k, t in zip(self.period.ravel(), self.attractor_type.ravel())],
+                       dtype=object)
+        return out.reshape(self.period.shape)
+
     def attractors_at(self, index: int, direction: str | None = None) -> list[dict]:
-        """Distinct attractors at ``values[index]``: label, period, number of starts, one point."""
+        """Distinct attractors at ``values[index]``: label (``"P-k"``, ``"chaotic"``,
+        ``"quasi-periodic"``, ``"aperiodic"``), period, type, largest Lyapunov exponent and
+        its error (per forcing period; NaN for P-k), number of starts, one point."""
         d = self._d(direction)
         ids, per, pts = self.attractor[d, index], self.period[d, index], self.points[d, index]
         out = []
         for a in range(int(ids.max(initial=-1)) + 1):
             lanes = np.nonzero(ids == a)[0]
-            k = int(per[lanes[0]])
-            out.append(dict(id=a, period=k, label=period_label(k), starts=int(len(lanes)),
-                            point=pts[lanes[0], -1].tolist()))
+            s, k = lanes[0], int(per[lanes[0]])
+            t = int(self.attractor_type[d, index, s])
+            out.append(dict(id=a, period=k, label=type_label(k, t), type=AttractorType(t).label,
+                            largest_exponent=float(self.largest_exponent[d, index, s]),
+                            exponent_error=float(self.exponent_error[d, index, s]), starts=int(len(lanes)),
+                            point=pts[s, -1].tolist()))
         n_esc = int((ids < 0).sum())
         if n_esc:
-            out.append(dict(id=-1, period=ESCAPED, label="escaped", starts=n_esc, point=None))
+            out.append(dict(id=-1, period=ESCAPED, label="escaped", type=AttractorType.UNKNOWN.label,
+                            largest_exponent=float("nan"), exponent_error=float("nan"), starts=n_esc, point=None))
         return out
 
     def transitions(self, direction: str | None = None) -> list[dict]:
@@ -157,20 +193,22 @@ class BifurcationDiagram:
                             "from": list(sets[i]), "to": list(sets[j])})
         return out
 
-    def _attractor_sets(self, d: int, i: int) -> list[tuple[int, np.ndarray]]:
+    def _attractor_sets(self, d: int, i: int) -> list[tuple[str, np.ndarray]]:
+        """``[(label, points)]`` of the attractors at value ``i`` of direction ``d``."""
         ids, per, pts = self.attractor[d, i], self.period[d, i], self.points[d, i]
         out = []
         for a in range(int(ids.max(initial=-1)) + 1):
             s = int(np.argmax(ids == a))
             k = int(per[s])
-            out.append((k, pts[s, -k:] if k > 0 else pts[s, -1:]))
+            out.append((type_label(k, int(self.attractor_type[d, i, s])), pts[s, -k:] if k > 0 else pts[s, -1:]))
         if np.any(ids < 0):
-            out.append((ESCAPED, np.zeros((0, pts.shape[-1]))))
+            out.append(("escaped", np.zeros((0, pts.shape[-1]))))
         return out
 
     def differs(self, a: str = "up", b: str = "down") -> np.ndarray:
         """``(V,)`` bool: the sweeps ``a`` and ``b`` end on different sets of attractors at
-        each value (same periods and point sets within ``merge_tol`` count as equal);
+        each value (same periods and point sets within ``merge_tol``, or aperiodic
+        attractors of the same type, count as equal);
         for ``"up"`` and ``"down"`` this marks the hysteresis."""
         da, db = self._d(a), self._d(b)
         tol = self.settings.merge_tol
@@ -181,8 +219,8 @@ class BifurcationDiagram:
             def same(x, y):
                 if x[0] != y[0]:
                     return False
-                if x[0] <= 0:
-                    return True  # aperiodic sets, escape
+                if not x[0].startswith("P-"):
+                    return True  # aperiodic sets of one type, escape
                 scale = 1.0 + max(np.abs(x[1]).max(), np.abs(y[1]).max())
                 d = np.linalg.norm(x[1][:, None] - y[1][None], axis=-1)
                 return max(d.min(axis=0).max(), d.min(axis=1).max()) <= tol * scale
@@ -272,7 +310,11 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     successive periods), classified as P-k (the smallest ``k <= max_period`` with
     ``|x_j - x_(j-k)| <= tol (1 + |x_j|)`` over the last k+1 points), aperiodic (none:
     quasi-periodic, chaotic or a slow transient) or escaped (non-finite, or a norm above
-    ``escape_bound``).
+    ``escape_bound``). Each aperiodic attractor (per direction and value) then gets its
+    type, chaotic or quasi-periodic, from the largest Lyapunov exponent of the
+    stroboscopic map (:func:`aperiodic_types`: a few hundred periods from its last
+    point, every aperiodic attractor of the diagram in one batch; kept as
+    ``attractor_type``, ``largest_exponent`` and ``exponent_error``).
 
     Args:
         system, params: the :class:`ForcedSystem` and its parameter pytree (defaults: the
@@ -311,74 +353,25 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     Returns:
         :class:`BifurcationDiagram`.
     """
-    system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
-    check_choice(direction, "direction", DIRECTIONS)
-    check_bool(restart, "restart")
-    check_bool(save, "save")
-    param_targets(params, param)
-    vals = sorted_values(values, param)
-    X0 = check_starts(system, x0s)
-    check_system(system, with_param(params, param, vals[0]), X0[0])
-    check_values(system, params, (param,), vals[:, None])
-    integrator = resolve_integrator(integrator)
-    check_number(merge_tol, "merge_tol", 0, strict_min=True)
-    check_number(escape_bound, "escape_bound", 0, strict_min=True)
-    S, V = len(X0), len(vals)
-    # passes: (name of its parts, directions it computes together)
-    passes = {"independent": [("independent", ("independent",))], "up": [("up", ("up",))],
-              "down": [("down", ("down",))], "both": [("both", ("up", "down"))],
-              "all": [("independent", ("independent",)), ("both", ("up", "down"))]}[direction]
-    dirs = tuple(d for _, ds in passes for d in ds)
-    blocks = {}
-    for name, ds in passes:
-        if name == "independent":
-            blocks[name] = max(1, min(V, int(chunk_size) // S))
-        else:  # sequential: the block only sets how often the sweep is saved
-            blocks[name] = max(1, min(V, int(chunk_size) // (S * len(ds)), -(-V // 8)))
+    system, params, vals, X0, integrator = _check_diagram(system, params, param, values, x0s, transient, record,
+                                                          direction, integrator, max_period, tol, merge_tol,
+                                                          escape_bound, chunk_size, restart, save)
+    passes, dirs, blocks = _passes(direction, len(vals), len(X0), int(chunk_size))
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
                     starts=X0.tolist(), params=params_to_dict(params), transient=int(transient), record=int(record),
                     direction=direction, integrator=integrator.to_dict(), max_period=int(max_period),
                     tol=float(tol), merge_tol=float(merge_tol), escape_bound=float(escape_bound),
                     block_values=blocks, version=__version__)
     ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
-    names = (param,)
-    R = int(record)
-    points = np.empty((len(dirs), V, S, R, system.dim))
-    bar = progress_bar(len(dirs) * V, f"sweep {param}", progress, unit="value")
-    jX0 = jnp.asarray(X0)
-
-    def compute(name, B, orders, a, b, carry):  # one block of values a:b of a pass
-        if name == "independent":
-            pts = independent_points(system, params, names, vals[a:b, None], B, jX0, int(transient), R,
-                                     integrator)[:, None]
-        else:
-            seq = np.stack([vals[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
-            pts, carry = sequential_points(system, params, names, seq, B, jX0, carry, int(transient), R,
-                                           integrator, float(escape_bound))
-        return dict(points=pts, carry=carry)
-
-    for name, ds in passes:
-        B, nd = blocks[name], len(ds)
-        rows = [dirs.index(d) for d in ds]
-        orders = [np.arange(V)[::-1] if d == "down" else np.arange(V) for d in ds]
-        carry = np.broadcast_to(X0, (nd, S, system.dim)).copy()
-        for bi, a in enumerate(range(0, V, B)):
-            b = min(a + B, V)
-            like = dict(points=((b - a, nd, S, R, system.dim), float), carry=((nd, S, system.dim), float))
-            z = shared_block(ck, f"{name}_{bi:05d}.npz", functools.partial(compute, name, B, orders, a, b, carry),
-                             like, collective=name == "independent")
-            pts, carry = z["points"], z["carry"]
-            for j in range(nd):
-                points[rows[j], orders[j][a:b]] = pts[:, j]
-            bar.update(nd * (b - a))
-    bar.close()
+    run = _Run(system, params, (param,), vals, X0, int(transient), int(record), integrator, float(escape_bound))
+    points = _record_passes(run, passes, dirs, blocks, ck, progress, f"sweep {param}")
     period = classify_sequences(points, int(max_period), float(tol), float(escape_bound))
-    M = int(max_period)
-    attractor = group_starts(points[..., -M:, :], period, float(merge_tol))
+    attractor = group_starts(points[..., -int(max_period):, :], period, float(merge_tol))
+    kind, lam, err = aperiodic_types(run, points, period, attractor, int(chunk_size))
     diagram = BifurcationDiagram(
         param=param, fields=param_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
-        period=period, attractor=attractor, system=system.name, state_names=tuple(system.state_names),
-        params=params_to_dict(params),
+        period=period, attractor=attractor, attractor_type=kind, largest_exponent=lam, exponent_error=err,
+        system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
         settings=SequenceSettings(transient=int(transient), record=int(record), integrator=integrator,
                                   max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
                                   escape_bound=float(escape_bound)),
@@ -389,3 +382,148 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     return diagram
 
 
+def _check_diagram(system, params, param, values, x0s, transient, record, direction, integrator, max_period, tol,
+                   merge_tol, escape_bound, chunk_size, restart, save):
+    """The defaults and checks of :func:`bifurcation_diagram`: ``(system, params, values
+    (sorted), starts (S, dim), integrator)``."""
+    system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
+    check_choice(direction, "direction", DIRECTIONS)
+    check_bool(restart, "restart")
+    check_bool(save, "save")
+    param_targets(params, param)
+    vals = sorted_values(values, param)
+    X0 = check_starts(system, x0s)
+    check_system(system, with_param(params, param, vals[0]), X0[0])
+    check_values(system, params, (param,), vals[:, None])
+    check_number(merge_tol, "merge_tol", 0, strict_min=True)
+    check_number(escape_bound, "escape_bound", 0, strict_min=True)
+    return system, params, vals, X0, resolve_integrator(integrator)
+
+
+def _passes(direction: str, V: int, S: int, chunk_size: int):
+    """The passes of a diagram: ``[(name of its parts, directions it computes together)]``,
+    the directions in order, and the values per block of each pass (independent: as many
+    as ``chunk_size`` trajectories hold; sequential: the block only sets how often the
+    sweep is saved)."""
+    passes = {"independent": [("independent", ("independent",))], "up": [("up", ("up",))],
+              "down": [("down", ("down",))], "both": [("both", ("up", "down"))],
+              "all": [("independent", ("independent",)), ("both", ("up", "down"))]}[direction]
+    dirs = tuple(d for _, ds in passes for d in ds)
+    blocks = {}
+    for name, ds in passes:
+        if name == "independent":
+            blocks[name] = max(1, min(V, chunk_size // S))
+        else:
+            blocks[name] = max(1, min(V, chunk_size // (S * len(ds)), -(-V // 8)))
+    return passes, dirs, blocks
+
+
+@dataclasses.dataclass(frozen=True)
+class _Run:
+    """What every block of a diagram integrates with: the system, base parameters, swept
+    names, sorted values ``(V,)``, starts ``(S, dim)``, transient and record periods, the
+    integrator and the escape bound."""
+
+    system: Any
+    params: Any
+    names: tuple[str, ...]
+    values: np.ndarray
+    starts: np.ndarray
+    transient: int
+    record: int
+    integrator: Any
+    bound: float
+
+
+def _compute_block(run: _Run, name: str, B: int, orders, a: int, b: int, carry) -> dict:
+    """Points of the values ``a:b`` of one pass (padded to ``B`` values), and the state
+    carried out of the block (sequential passes; the carry in for independent ones)."""
+    if name == "independent":
+        pts = independent_points(run.system, run.params, run.names, run.values[a:b, None], B, jnp.asarray(run.starts),
+                                 run.transient, run.record, run.integrator)[:, None]
+    else:
+        seq = np.stack([run.values[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
+        pts, carry = sequential_points(run.system, run.params, run.names, seq, B, jnp.asarray(run.starts), carry,
+                                       run.transient, run.record, run.integrator, run.bound)
+    return dict(points=pts, carry=carry)
+
+
+def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: str) -> np.ndarray:
+    """Every pass block by block (each saved to and resumed from ``ck``): the recorded
+    points ``(D, V, S, R, dim)``."""
+    V, (S, dim), R = len(run.values), run.starts.shape, run.record
+    points = np.empty((len(dirs), V, S, R, dim))
+    bar = progress_bar(len(dirs) * V, label, progress, unit="value")
+    for name, ds in passes:
+        B, nd = blocks[name], len(ds)
+        rows = [dirs.index(d) for d in ds]
+        orders = [np.arange(V)[::-1] if d == "down" else np.arange(V) for d in ds]
+        carry = np.broadcast_to(run.starts, (nd, S, dim)).copy()
+        for bi, a in enumerate(range(0, V, B)):
+            b = min(a + B, V)
+            like = dict(points=((b - a, nd, S, R, dim), float), carry=((nd, S, dim), float))
+            z = shared_block(ck, f"{name}_{bi:05d}.npz", functools.partial(_compute_block, run, name, B, orders, a, b,
+                                                                           carry),
+                             like, collective=name == "independent")
+            pts, carry = z["points"], z["carry"]
+            for j in range(nd):
+                points[rows[j], orders[j][a:b]] = pts[:, j]
+            bar.update(nd * (b - a))
+    bar.close()
+    return points
+
+
+def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor: np.ndarray, chunk_size: int):
+    """Type and largest Lyapunov exponent of the attractor every (direction, value, start)
+    reached: ``attractor_type`` (an :class:`~jaxgear.AttractorType` value: periodic for a P-k lane,
+    unknown for an escaped one), ``largest_exponent`` and ``exponent_error`` (per forcing
+    period; NaN where not measured), each ``(D, V, S)``.
+
+    Of each aperiodic attractor (the aperiodic starts of one direction and value, one
+    group of :func:`group_starts`) the exponents of the stroboscopic map are computed
+    from the last recorded point of its first start (:data:`LYAPUNOV_PERIODS` periods in
+    :data:`LYAPUNOV_STRETCHES` weighted stretches, as
+    :func:`~jaxgear.lyapunov_spectrum`; all of the diagram's aperiodic attractors, each at
+    its own value, in one batch) and classified (:func:`~jaxgear.classify_attractor`:
+    chaotic when the largest exponent is positive beyond its error, quasi-periodic when
+    it is zero within it).
+    """
+    kind = np.where(period > 0, int(AttractorType.PERIODIC), int(AttractorType.UNKNOWN)).astype(np.int64)
+    lam, err = np.full(period.shape, np.nan), np.full(period.shape, np.nan)
+    first = np.argmax(period == APERIODIC, axis=-1)  # the first aperiodic start of each (direction, value)
+    dd, vv = np.nonzero(np.any(period == APERIODIC, axis=-1))
+    if len(dd) == 0:
+        return kind, lam, err
+    ss = first[dd, vv]
+    k = min(2, run.system.dim)
+    est, final = values_exponent_estimates(run.system, run.params, run.names, run.values[vv, None],
+                                           points[dd, vv, ss, -1], n_exponents=k, periods=LYAPUNOV_PERIODS,
+                                           stretches=LYAPUNOV_STRETCHES, integrator=run.integrator,
+                                           chunk_size=chunk_size)
+    spectrum = exponent_spectrum(run, vv, est, final)
+    types = np.asarray(classify_attractor(spectrum))
+    here = (period[dd, vv] == APERIODIC) & (attractor[dd, vv] == attractor[dd, vv, ss][:, None])  # (n, S)
+    for i, (d, v) in enumerate(zip(dd, vv)):
+        kind[d, v, here[i]] = types[i]
+        lam[d, v, here[i]] = spectrum.exponents[i, 0]
+        err[d, v, here[i]] = spectrum.errors[i, 0]
+    return kind, lam, err
+
+
+def exponent_spectrum(run: _Run, vv: np.ndarray, est: np.ndarray, final: np.ndarray) -> LyapunovSpectrum:
+    """The :class:`~jaxgear.LyapunovSpectrum` of stretch estimates ``est (n, stretches, k)``
+    (each lane at the value ``run.values[vv]``) and their final states: the mean of the
+    stretches and its standard error, NaN and ``DIVERGED`` where a lane became non-finite
+    (as :func:`~jaxgear.lyapunov_spectrum`)."""
+    ok = np.all(np.isfinite(est), axis=(1, 2)) & np.all(np.isfinite(final), axis=1)
+    est = np.where(ok[:, None, None], est, np.nan)
+    lam = est.mean(axis=1)
+    err = est.std(axis=1, ddof=1) / np.sqrt(est.shape[1])
+    T = np.asarray([float(run.system.period(apply_values(run.params, run.names, [v])))
+                    for v in run.values[vv]])[:, None]
+    return LyapunovSpectrum(
+        exponents=jnp.asarray(lam), per_time=jnp.asarray(lam / T), errors=jnp.asarray(err),
+        errors_per_time=jnp.asarray(err / T), stretch_exponents=jnp.asarray(est),
+        kaplan_yorke=kaplan_yorke(jnp.asarray(lam)), final_state=jnp.asarray(final),
+        status=jnp.asarray(np.where(ok, int(Status.CONVERGED), int(Status.DIVERGED)), jnp.int32),
+        periods=LYAPUNOV_PERIODS, transient=0, weighted=True)

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._lyapunov import AttractorType
 from .._matching import pairwise_hausdorff
 from ..analysis import detect_period
 
-__all__ = ["ESCAPED", "APERIODIC", "classify_sequences", "group_starts", "period_label", "label_order"]
+__all__ = ["ESCAPED", "APERIODIC", "classify_sequences", "group_starts", "period_label", "type_label", "label_order"]
 
 ESCAPED = -1
 """Period code of a (value, start) whose motion left ``escape_bound`` or became non-finite."""
@@ -61,8 +62,22 @@ def period_label(k: int) -> str:
     return f"P-{k}" if k > 0 else ("aperiodic" if k == APERIODIC else "escaped")
 
 
+def type_label(k: int, kind: int) -> str:
+    """Label of an attractor of period code ``k`` and type ``kind`` (an
+    :class:`~jaxgear.AttractorType` value): ``"P-k"``; for period 0 ``"chaotic"`` or
+    ``"quasi-periodic"``, ``"aperiodic"`` where the type is unknown (or says periodic: a
+    cycle longer than the periods searched); ``"escaped"``."""
+    if int(k) == APERIODIC:
+        return {int(AttractorType.CHAOTIC): "chaotic", int(AttractorType.QUASI_PERIODIC): "quasi-periodic"}.get(
+            int(kind), "aperiodic")
+    return period_label(k)
+
+
+_APERIODIC_ORDER = {"quasi-periodic": 1, "chaotic": 2, "aperiodic": 3}
+
+
 def label_order(label: str):
-    """Sort key of labels: P-1, P-2, ..., then aperiodic, then escaped."""
+    """Sort key of labels: P-1, P-2, ..., then quasi-periodic, chaotic, aperiodic, then escaped."""
     if label.startswith("P-"):
         return (0, int(label[2:]))
-    return (1, 0) if label == "aperiodic" else (2, 0)
+    return (1, _APERIODIC_ORDER[label]) if label in _APERIODIC_ORDER else (2, 0)

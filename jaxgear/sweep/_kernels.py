@@ -15,9 +15,10 @@ import numpy as np
 
 from .._batching import pad_rows
 from .._devices import rows_over_processes, shard_rows
+from .._lyapunov import _lyapunov_kernel, birkhoff_weights
 from ._values import apply_values
 
-__all__ = ["advance_values", "record_values", "independent_points", "sequential_points"]
+__all__ = ["advance_values", "record_values", "independent_points", "sequential_points", "values_exponent_estimates"]
 
 
 def advance_values(system, params, names, V, Y, periods: int, integrator):
@@ -96,3 +97,40 @@ def sequential_points(system, params, names, seq, size, X0, carry, transient, re
     V = jnp.asarray(pad_rows(np.asarray(seq, dtype=float), size))
     pts, car = _scan_kernel(system, params, names, V, jnp.asarray(carry), X0, transient, record, integrator, bound)
     return np.asarray(pts)[:n], np.asarray(car)[n - 1]
+
+
+@eqx.filter_jit
+def _values_lyapunov_kernel(system, params, names, V, X, k, stretches, weights, integrator):
+    """Lyapunov stretch estimates of lanes with parameters of their own: ``V (n, m)``, ``X (n, dim)``
+    -> ``(n, stretches, k)`` and the final states ``(n, dim)`` (the kernel of
+    :func:`~jaxgear.lyapunov_spectrum`, one lane per parameter row, under ``vmap``)."""
+
+    def one(v, x):
+        est, y = _lyapunov_kernel(system, apply_values(params, names, v), x[:, None], jnp.asarray(0.0), k, 0,
+                                  stretches, weights, integrator)
+        return est[:, 0], y[:, 0]
+
+    return jax.vmap(one)(V, X)
+
+
+def values_exponent_estimates(system, params, names, Vrows, X, *, n_exponents: int, periods: int, stretches: int,
+                              integrator, chunk_size: int):
+    """The stretch estimates of the ``n_exponents`` largest Lyapunov exponents of the
+    stroboscopic map (per forcing period, as :func:`~jaxgear.lyapunov_spectrum` with
+    ``transient=0``) from the states ``X (n, dim)``, each at its own parameter row
+    ``Vrows (n, m)``: all in one compiled batch of ``chunk_size`` lanes at a time (padded,
+    one compiled shape), each stretch a weighted Birkhoff average
+    (:func:`~jaxgear._lyapunov.birkhoff_weights`). Returns ``(n, stretches, n_exponents)`` estimates and ``(n, dim)`` final states."""
+    Vrows, X = np.asarray(Vrows, dtype=float), np.asarray(X, dtype=float)
+    n = len(X)
+    size = min(int(chunk_size), n)
+    w = jnp.asarray(birkhoff_weights(int(periods) // int(stretches)), jnp.float64)
+    ests, finals = [], []
+    for a in range(0, n, size):
+        V = jnp.asarray(pad_rows(Vrows[a:a + size], size))
+        Y = jnp.asarray(pad_rows(X[a:a + size], size))
+        est, fin = _values_lyapunov_kernel(system, params, names, V, Y, int(n_exponents), int(stretches), w,
+                                           integrator)
+        ests.append(np.asarray(est)[: min(size, n - a)])
+        finals.append(np.asarray(fin)[: min(size, n - a)])
+    return np.concatenate(ests, axis=0), np.concatenate(finals, axis=0)
