@@ -103,6 +103,8 @@ try:
         seeds_in_box as seeds_in_box,
         Instability as Instability,
         ShootResult as ShootResult,
+        ShootOptions as ShootOptions,
+        SearchOptions as SearchOptions,
         PeriodicOrbit as PeriodicOrbit,
         OrbitSearch as OrbitSearch,
         OrbitCheck as OrbitCheck,
@@ -126,6 +128,7 @@ try:
     from .design import (  # noqa: E402
         design as design,
         DesignResult as DesignResult,
+        DesignOptions as DesignOptions,
         OrbitSamples as OrbitSamples,
         sample_orbit as sample_orbit,
         MeshForces as MeshForces,
