@@ -341,10 +341,10 @@ def _after_transient(ctx: _Search, groups: dict[int, np.ndarray], integrator) ->
 def _shoot_rounds(ctx: _Search, X, k: int, found: list[PeriodicOrbit]):
     """The plain round and the deflated rounds for ``P^k`` from ``X``.
 
-    Returns the shots of all rounds (concatenated), the distinct orbits known after them
-    (``found`` extended) and the converged runs of the plain round."""
+    Returns the shots of all rounds (concatenated) and the distinct orbits known after
+    them (``found`` extended)."""
     opts = ctx.options
-    rounds, first = [], 0
+    rounds = []
     for r in range(1 + opts.deflation_rounds):
         known = _known_points(found, k, 16, ctx.system.dim) if r > 0 else None
         if r > 0 and not np.any(np.isfinite(np.asarray(known))):
@@ -354,11 +354,9 @@ def _shoot_rounds(ctx: _Search, X, k: int, found: list[PeriodicOrbit]):
         n_before = len(found)
         found = _merge_orbits(list(found) + _orbits_from_shots(res, opts.dedup_tol, float(ctx.t0)), opts.dedup_tol,
                               keep_order=True)
-        if r == 0:
-            first = int(np.sum(np.asarray(res.status) == Status.CONVERGED))
-        elif len(found) == n_before:
+        if r > 0 and len(found) == n_before:
             break
-    return _concat(rounds), found, first
+    return _concat(rounds), found
 
 
 def _orbit_index(res: ShootResult, orbits: Sequence[PeriodicOrbit], dedup_tol: float) -> np.ndarray:
@@ -420,7 +418,7 @@ def _final_orbits(found, index, lanes, dedup_tol):
     return orbits, to_final
 
 
-def _convergence(to_final: dict[int, np.ndarray], groups: dict[int, np.ndarray], first_round) -> dict:
+def _convergence(to_final: dict[int, np.ndarray], groups: dict[int, np.ndarray]) -> dict:
     """Per ``k``: runs, seeds, converged runs, seeds with a converged run, to which orbits."""
     out = {}
     for k, lab in to_final.items():
@@ -514,12 +512,11 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds: Float[ArrayLike, "
     groups = _after_transient(ctx, groups, integrator)
     shots: dict[int, ShootResult] = {}
     found: list[PeriodicOrbit] = []  # distinct orbits of the search integrator's map
-    first_round: dict[int, int] = {}
     bar = progress_bar(sum(len(X) for X in groups.values()) * (1 + opts.deflation_rounds), "shooting", progress,
                        unit="seed")
     try:
         for k, X in sorted(groups.items()):  # one jit per distinct k (and chunk shape)
-            shots[k], found, first_round[k] = _shoot_rounds(ctx._replace(bar=bar), X, k, found)
+            shots[k], found = _shoot_rounds(ctx._replace(bar=bar), X, k, found)
     finally:
         bar.close()
     lanes = {k: _orbit_index(res, found, opts.dedup_tol) for k, res in shots.items()}
@@ -536,5 +533,5 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds: Float[ArrayLike, "
     return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
                        state_names=tuple(system.state_names), section_index=system.section_index,
                        params=params_to_dict(params), settings=settings, version=__version__,
-                       runtime_s=time.perf_counter() - start, convergence=_convergence(to_final, groups, first_round),
+                       runtime_s=time.perf_counter() - start, convergence=_convergence(to_final, groups),
                        checks=_checks(ctx, orbits, integrator))
