@@ -64,7 +64,7 @@ print("files go to", SCRATCH)
 
 # %%
 x_guess = np.array([1.2736, -2.7122, 5.5372, 0.0])  # the paper's P-1 guess
-# the library's solver (options=None: jg.SearchOptions() with solver=None, optimistix's Dogleg)
+# the library's solver (options=None: jg.SearchOptions() with solver=None, Levenberg-Marquardt)
 box = jg.find_periodic_orbits(jg.REDUCED, p, jg.seeds_in_box(n_box, x_guess - 3.0, x_guess + 3.0, seed=1),
                               period=(1, 2), progress=False)
 print("solver:", box.status_counts)

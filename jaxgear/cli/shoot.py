@@ -66,7 +66,7 @@ def add_parser(sub) -> None:
                    help="search every period in K1..K2 (e.g. 1-8): the search of --period for each K; seeds from "
                    "--random, plus the attractors of --seeds-from")
     p.add_argument("--solver", default=None, choices=tuple(SOLVERS),
-                   help="nonlinear solver, an optimistix one (default: the library's choice, Dogleg)")
+                   help="nonlinear solver, an optimistix one (default: the library's choice, levenberg-marquardt)")
     p.add_argument("--segments", type=int, default=None, metavar="M",
                    help="multiple shooting with M segments per orbit (default 1)")
     p.add_argument("--deflation-rounds", type=int, default=None, metavar="R",
