@@ -18,7 +18,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
+from jaxtyping import ArrayLike, Float
 
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
@@ -42,6 +42,9 @@ class ShootResult(NamedTuple):
     function theorem); the other fields are diagnostics. For derivatives of the
     multipliers use :func:`floquet_multipliers` at ``point``.
 
+    The fields are plain ``jax.Array`` annotations (the result codec reads them); their
+    shapes are given here.
+
     Attributes:
         point: ``(..., dim)`` fixed point ``x*`` of ``P^k`` at time ``t0``
             (differentiable w.r.t. the parameters by the implicit function theorem).
@@ -63,18 +66,18 @@ class ShootResult(NamedTuple):
             chain ``max_iter=1`` solves through it to follow the iteration).
     """
 
-    point: Float[Array, "*batch dim"]
-    orbit: Float[Array, "*batch k dim"]
-    min_period: Int[Array, "*batch"]
-    monodromy: Float[Array, "*batch dim dim"]
-    multipliers: Complex[Array, "*batch dim"]
-    stable: Bool[Array, "*batch"]
-    instability: Int[Array, "*batch"]
-    residual: Float[Array, "*batch"]
-    iterations: Int[Array, "*batch"]
-    status: Int[Array, "*batch"]
-    history: Float[Array, "*batch max_iter_plus_1"]
-    last_iterate: Float[Array, "*batch dim"]
+    point: jax.Array
+    orbit: jax.Array
+    min_period: jax.Array
+    monodromy: jax.Array
+    multipliers: jax.Array
+    stable: jax.Array
+    instability: jax.Array
+    residual: jax.Array
+    iterations: jax.Array
+    status: jax.Array
+    history: jax.Array
+    last_iterate: jax.Array
 
 
 def _minimal_period(pts, x, k, period_tol):
