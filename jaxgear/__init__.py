@@ -111,6 +111,8 @@ from .shooting import (
     seeds_in_box as seeds_in_box,
     Instability as Instability,
     ShootResult as ShootResult,
+    ShootOptions as ShootOptions,
+    SearchOptions as SearchOptions,
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
     OrbitCheck as OrbitCheck,
@@ -134,6 +136,7 @@ from .sweep import (
 from .design import (
     design as design,
     DesignResult as DesignResult,
+    DesignOptions as DesignOptions,
     OrbitSamples as OrbitSamples,
     sample_orbit as sample_orbit,
     MeshForces as MeshForces,

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 import pytest
 from scipy.optimize import brentq
 
@@ -22,6 +23,7 @@ SHOOT_CONVERGED, SHOOT_SINGULAR = Status.CONVERGED, Status.SINGULAR
 # Hardening Duffing with three P-1 orbits (checked by shooting from a box of seeds;
 # harmonic balance gives amplitudes 0.34, 0.95, 1.24): two stable, one saddle between.
 BISTABLE = dict(delta=0.1, alpha=1.0, beta=1.0, gamma=0.3, omega=1.4)
+NEWTON = optx.Newton(rtol=1e-10, atol=1e-12)
 
 
 def duffing(**kw):
@@ -115,11 +117,20 @@ def test_autodiff_jacobian_matches_central_difference():
 
 
 def test_newton_converges_quadratically():
-    # the hand-written Newton records every iterate's residual
-    r = jg.periodic_orbit(jg.DUFFING, duffing(), jnp.array([0.7, 1.3]), solver="damped-newton")
+    # one optimistix Newton step per call, chained through the last iterate; the residual
+    # ||P(x) - x|| of each iterate measured here by the stroboscopic map
+    p = duffing()
+    x = jnp.array([0.7, 1.3])
+    h = []
+    for _ in range(12):
+        h.append(float(jnp.linalg.norm(jg.stroboscopic_map(jg.DUFFING, p, x) - x)))
+        r = jg.periodic_orbit(jg.DUFFING, p, x, solver=NEWTON, max_iter=1)
+        x = r.last_iterate
+        if int(r.status) == SHOOT_CONVERGED:
+            break
     assert int(r.status) == SHOOT_CONVERGED and float(r.residual) <= 1e-10
-    h = np.asarray(r.history)
-    h = h[np.isfinite(h)]
+    h.append(float(jnp.linalg.norm(jg.stroboscopic_map(jg.DUFFING, p, x) - x)))
+    h = np.asarray(h)
     pairs = [(a, b) for a, b in zip(h[:-1], h[1:]) if a < 1e-2 and b > 1e-13]  # above round-off
     assert len(pairs) >= 2
     for a, b in pairs:
@@ -334,7 +345,7 @@ def test_find_periodic_orbits_stores_settings_and_trajectories():
     s = jg.find_periodic_orbits(jg.DUFFING, p, np.array([[1.0, 1.1]]), progress=False, trajectory_samples=40)
     o = s.orbits[0]
     assert s.params == {"delta": 0.1, "alpha": 1.0, "beta": 1.0, "gamma": 0.3, "omega": 1.4}
-    assert s.system == "duffing" and s.state_names == ("x", "v") and s.settings.tol == 1e-10
+    assert s.system == "duffing" and s.state_names == ("x", "v") and s.settings["tol"] == 1e-10
     assert o.trajectory.shape == (41, 2) and o.samples_per_period == 40
     # the stored trajectory is the flow: it starts at the orbit point and closes after one period
     # (40 samples of 5 RK4 steps: the 200 steps of the map the orbit is a fixed point of)
@@ -369,7 +380,7 @@ def test_deflation_finds_the_saddle_plain_newton_misses():
     # the deflated round pushes the same seeds off it, onto the saddle (and the large orbit)
     p = duffing()
     seeds = jg.seeds_in_box(8, [-0.6, -0.2], [-0.1, 0.3], seed=0)
-    kw = dict(integrator=jg.RK4(100), max_iter=20, progress=False, trajectory_samples=0, solver="newton")
+    kw = dict(integrator=jg.RK4(100), max_iter=20, progress=False, trajectory_samples=0, solver=NEWTON)
     plain = jg.find_periodic_orbits(jg.DUFFING, p, seeds, **kw)
     assert [o.stable for o in plain.orbits] == [True] and plain.orbits[0].n_seeds == 8
     defl = jg.find_periodic_orbits(jg.DUFFING, p, seeds, deflation_rounds=1, **kw)
@@ -380,7 +391,7 @@ def test_deflation_finds_the_saddle_plain_newton_misses():
     assert c["runs"] == 16 and c["first_round"] == 8 and c["converged"] > 8
     # plain Newton from the same seeds with the known orbit deflated finds no stable small orbit again
     small = plain.orbits[0].points
-    r = jg.periodic_orbit(jg.DUFFING, p, seeds, integrator=jg.RK4(100), max_iter=20, deflate=small, solver="newton")
+    r = jg.periodic_orbit(jg.DUFFING, p, seeds, integrator=jg.RK4(100), max_iter=20, deflate=small, solver=NEWTON)
     conv = np.asarray(r.status) == SHOOT_CONVERGED
     assert conv.any() and np.all(np.linalg.norm(np.asarray(r.point)[conv] - small[0], axis=1) > 0.1)
 
@@ -392,7 +403,7 @@ def test_multiple_shooting_converges_from_more_seeds():
     seeds = jg.seeds_in_box(32, [-4.0, -4.0], [4.0, 4.0], seed=2)
     frac = {}
     for M in (1, 5):
-        r = jg.periodic_orbit(jg.DUFFING, p, seeds, segments=M, integrator=jg.RK4(100), max_iter=20, solver="newton")
+        r = jg.periodic_orbit(jg.DUFFING, p, seeds, segments=M, integrator=jg.RK4(100), max_iter=20, solver=NEWTON)
         st = np.asarray(r.status)
         frac[M] = float(np.mean(st == SHOOT_CONVERGED))
         assert np.all(np.asarray(r.residual)[st == SHOOT_CONVERGED] <= 1e-10)
@@ -407,7 +418,7 @@ def test_implicit_gradient_through_optimistix_solvers_and_segments():
         return jnp.sum(r.point**2)
 
     h = 1e-5
-    for solver, M in (("levenberg-marquardt", 1), ("newton", 4)):
+    for solver, M in ((optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12), 1), (NEWTON, 4)):
         g = float(jax.grad(amplitude)(0.3, solver, M))
         fd = (float(amplitude(0.3 + h, solver, M)) - float(amplitude(0.3 - h, solver, M))) / (2 * h)
         assert np.isfinite(g) and abs(g) > 0.1 and abs(g - fd) <= 1e-6 * abs(fd), (solver, M, g, fd)
@@ -419,8 +430,27 @@ def test_solver_options_rejected():
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), solver="bisection")
     with pytest.raises(ValueError, match="segments"):
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), segments=3)  # 200 steps: 3 does not divide
-    with pytest.raises(ValueError, match="damped-newton"):
+    with pytest.raises(ValueError, match="damped-newton"):  # names are the command line's only
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), solver="damped-newton", segments=2)
+
+
+def test_bad_solver_object_refused_with_a_clear_message():
+    p = duffing()
+    bad = [(optx.Newton, "is a class"),  # not an instance
+           ("dogleg", "command line only"),  # a name, not an object
+           (optx.BFGS(rtol=1e-8, atol=1e-8), "optimistix solver instance"),  # a minimiser
+           (optx.Bisection(rtol=1e-8, atol=1e-8), "scalar equations"),
+           (lambda f, x: x, "optimistix solver instance")]
+    for solver, match in bad:
+        with pytest.raises(ValueError, match=match) as err:
+            jg.ShootOptions(solver=solver)
+        assert str(err.value).startswith("solver=")
+        with pytest.raises(ValueError, match=match):
+            jg.find_periodic_orbits(jg.DUFFING, p, np.zeros((1, 2)), solver=solver, progress=False)
+    with pytest.raises(ValueError, match="unknown option 'solvr'"):
+        jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), solvr=NEWTON)
+    with pytest.raises(ValueError, match="SearchOptions"):
+        jg.find_periodic_orbits(jg.DUFFING, p, np.zeros((1, 2)), options={"transient": 40}, progress=False)
 
 
 # --------------------------------------------------------------------------- jaxgear shoot --periods
@@ -447,11 +477,11 @@ def _assert_periodic_by_reintegration(out, integrator):
 
 def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
     # a small search over the paper's region D, from 8 random seeds at a coarse step
-    # (100 steps per period): the transient brings the seeds near the attractor, Newton on
+    # (100 steps per period): the transient brings the seeds near the attractor, the solver on
     # P^1 and P^2 from there reaches the unstable P-1 (flip) and P-2 born from it
     n = 100
-    out = _cli_json(["shoot", "--periods", "1-2", "--random", "8", "--steps-per-period", str(n), "--verify", "50",
-                     "--json"])
+    argv = ["--random", "8", "--steps-per-period", str(n), "--verify", "50", "--json"]
+    out = _cli_json(["shoot", "--periods", "1-2"] + argv)
     assert out["settings"]["periods_tried"] == [1, 2]
     _assert_periodic_by_reintegration(out, jg.default_integrator(n))
     periods = sorted(o["period"] for o in out["orbits"])
@@ -462,6 +492,13 @@ def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
     assert c["1"]["runs"] == 8 and c["1"]["converged"] >= 1 and c["2"]["converged"] >= 1
     # each orbit checked by direct integration, consistent with its multipliers
     assert len(out["checks"]) == len(out["orbits"]) and all(v["consistent"] for v in out["checks"].values())
+    # one search: --period 1 from the same seeds converges from the same seeds to the same P-1
+    # (it once ran without the transient and converged from none of them)
+    one = _cli_json(["shoot", "--period", "1"] + argv)
+    assert one["convergence"]["1"] == c["1"]
+    assert one["settings"]["search"] == dict(out["settings"]["search"], periods=[1])
+    assert len(one["orbits"]) == 1
+    np.testing.assert_allclose(one["orbits"][0]["points"], p1["points"], atol=1e-9)
 
 
 @pytest.mark.slow

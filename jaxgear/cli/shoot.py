@@ -1,11 +1,13 @@
 """``jaxgear shoot``: periodic orbits of the gear model by shooting, with Floquet multipliers.
 
-The paper's local method (§4.1): damped Newton on ``P^k(x) - x = 0`` for the
+The paper's local method (§4.1): a Newton-type solve of ``P^k(x) - x = 0`` for the
 stroboscopic map of the reduced 2-DOF model, from user points (``--from``), from a
 cell-mapping result (``--seeds-from``) or from random points of a box (``--random``).
-Prints each distinct orbit: its points, minimal period, Floquet multipliers,
-stability and kind of instability; ``--verify`` adds the paper's check by direct
-integration; ``--json`` prints one JSON object (with the full parameter set);
+``--period K`` and ``--periods K1-K2`` run the same search
+(:func:`~jaxgear.find_periodic_orbits`) with the same options. Prints each distinct
+orbit: its points, minimal period, Floquet multipliers, stability, kind of instability
+and the paper's check by direct integration (``--verify``); ``--json`` prints one JSON
+object (with the full parameter set);
 ``--out DIR`` writes ``orbits.nc`` (open with ``jaxgear.load`` or xarray),
 ``orbits.json`` (the ``--json`` object) and figures (``orbit_N.png``, ``multipliers.png``).
 """
@@ -19,18 +21,7 @@ import numpy as np
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from .common import (
-    INT_MAX,
-    SHOT_BYTES,
-    add_param_options,
-    check_options,
-    check_point,
-    check_region,
-    check_shoot_work,
-    check_work,
-    parse_point,
-    parse_ranges,
-)
+from .common import add_param_options, check_options, check_point, check_region, parse_point, parse_ranges
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
 DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
@@ -72,24 +63,24 @@ def add_parser(sub) -> None:
                    help="shoot for P-K orbits (fixed points of P^K); repeatable (default 1, or the attractors' "
                    "periods with --seeds-from)")
     p.add_argument("--periods", type=_parse_periods, default=None, metavar="K1-K2",
-                   help="search every period in K1..K2 (e.g. 1-8) with the search settings below: transient, "
-                   "deflation, multiple shooting, polishing with the integrator and verification of each orbit "
-                   "by direct integration; seeds from --random, plus the attractors of --seeds-from")
-    p.add_argument("--solver", default=None, choices=("newton", "dogleg", "levenberg-marquardt", "damped-newton"),
-                   help="nonlinear solver (default damped-newton, the hand-written "
-                   "single-shooting Newton with backtracking)")
+                   help="search every period in K1..K2 (e.g. 1-8): the search of --period for each K; seeds from "
+                   "--random, plus the attractors of --seeds-from")
+    p.add_argument("--solver", default=None, choices=tuple(SOLVERS),
+                   help="nonlinear solver, an optimistix one (default: the library's choice, levenberg-marquardt)")
     p.add_argument("--segments", type=int, default=None, metavar="M",
-                   help="multiple shooting with M segments per orbit (default 1; needs an optimistix --solver)")
+                   help="multiple shooting with M segments per orbit (default 1)")
     p.add_argument("--deflation-rounds", type=int, default=None, metavar="R",
-                   help="deflated rounds after the plain one (default 0; needs an optimistix --solver)")
+                   help="deflated rounds after the plain one (default 0)")
     p.add_argument("--transient", type=int, default=None, metavar="PERIODS",
-                   help="map each seed PERIODS forcing periods forward before shooting (default 0; with --periods 40)")
+                   help=f"map each seed PERIODS forcing periods forward before shooting (default {RANDOM_TRANSIENT} "
+                   "with --random, else 0)")
     p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
     p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on ||P^K(x) - x|| (default 1e-10)")
     p.add_argument("--max-iter", type=int, default=40, help="Newton iteration limit (default 40)")
     p.add_argument("--verify", type=int, default=None, metavar="PERIODS",
-                   help="check each orbit by direct integration over PERIODS >= 1 periods from a perturbed start")
+                   help="check each orbit by direct integration over PERIODS >= 1 periods from a perturbed start "
+                   f"(default {VERIFY_PERIODS})")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="also write DIR/orbits.nc (every orbit and every shot; open with jaxgear.load or "
@@ -100,48 +91,45 @@ def add_parser(sub) -> None:
 
 
 def _parse_periods(text: str) -> list[int]:
-    """``"1-8"`` -> ``[1, ..., 8]``; ``"4"`` -> ``[4]`` (``argparse.ArgumentTypeError``, a
-    one-line refusal naming ``--periods``, for anything else)."""
-    import argparse
-
+    """``"1-8"`` -> ``[1, ..., 8]``; ``"4"`` -> ``[4]``."""
     try:
         lo, _, hi = text.partition("-")
         a, b = int(lo), int(hi or lo)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
-    if not 1 <= a <= b <= INT_MAX:
-        raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2 <= {INT_MAX}, got {text!r}")
-    try:
-        check_work("--periods", text, b - a + 1, SHOT_BYTES, "periods per seed")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+        raise ValueError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
+    if not 1 <= a <= b:
+        raise ValueError(f"--periods needs 1 <= K1 <= K2, got {text!r}")
     return list(range(a, b + 1))
 
 
-# Settings of a --periods search, chosen by measurement (benchmarks/shooting.py, table in
-# benchmarks/RESULTS.md; paper preset, 64 seeds over region D, periods 1, 2, 4, 8):
-# - transient 40: it alone lifts the converged fraction from 1-2 % to 76-84 % for every solver;
-# - solver damped-newton: with the transient it converges as often as the best optimistix
-#   solver (84 % vs Dogleg 84 %, Newton 76 %, Levenberg-Marquardt 78 %) and is the fastest
-#   (13 s vs 20-59 s). This is the benchmark row that keeps the hand-written loop; the
-#   optimistix solvers stay available (--solver) and are needed for segments and deflation;
-# - one segment: 4 segments lift Newton from 76 % to 83 %, no more than damped Newton's
-#   single shooting, at 1.6x Newton's time;
-# - no deflated round: two rounds found no orbit that the plain round had not (the same five
-#   orbits) at 2.7x the time, and they halve the fraction per run.
-SEARCH_DEFAULTS = dict(solver="damped-newton", segments=1, deflation_rounds=0, transient=40)
+# Settings of every search (--period and --periods alike), chosen by measurement
+# (benchmarks/shooting.py, table in benchmarks/RESULTS.md; paper preset, 64 random seeds over
+# region D): a transient of 40 periods for random seeds lifts the converged fraction from 1-2 %
+# to about 80 % for every solver; the rounds run with classical RK4 (its jacfwd is far cheaper
+# than the kink-aware steps'), every orbit is then re-converged with the default integrator;
+# one segment and no deflated round (4 segments or two deflated rounds found no orbit more).
+RANDOM_TRANSIENT = 40
+VERIFY_PERIODS = 300
+
+
+def _solvers():
+    import optimistix as optx
+
+    from ..shooting._options import STEP_ATOL, STEP_RTOL
+
+    return {"newton": optx.Newton(rtol=STEP_RTOL, atol=STEP_ATOL), "dogleg": optx.Dogleg(rtol=STEP_RTOL, atol=STEP_ATOL),
+            "levenberg-marquardt": optx.LevenbergMarquardt(rtol=STEP_RTOL, atol=STEP_ATOL)}
+
+
+SOLVERS = ("newton", "dogleg", "levenberg-marquardt")
+"""``--solver`` names, mapped to optimistix solver objects by :func:`_solvers` (names exist only here)."""
 
 
 def _load_seeds(path: str):
     from .._io import load
-    from .._model import REDUCED
     from ..shooting import seeds_from_result
 
     result = load(path, expected="GlobalResult")
-    system = getattr(result, "system", None)
-    if system and system != REDUCED.name:  # "" in files written before the name was saved
-        raise ValueError(f"--seeds-from {path} holds a result of another system ({system!r}); jaxgear shoot "
-                         f"shoots on the gear model ({REDUCED.name!r}): give a result of jaxgear analyze.")
     return result, seeds_from_result(result)
 
 
@@ -162,35 +150,45 @@ def _canonical_overrides(overrides) -> dict:
     return out
 
 
-def run(args) -> int:
+def _check_args(args) -> list[int] | None:
+    """Check every option before any integration and before ``--out`` is touched; return the
+    periods asked for (``None``: one per attractor period of ``--seeds-from``, else ``[1]``)."""
     from .._checks import check_int
     from .._model import REDUCED
-    from .._params import GearParams
-    from .._presets import resolve_params
-    from ..integrate import default_integrator
-    from ..shooting import find_periodic_orbits, seeds_in_box, verify_orbit
 
-    # every option is checked before any integration and before --out is touched
     check_options(args, OPTIONS)
-    periods = args.period
-    for k in periods or ():
-        check_int(k, "--period", 1, INT_MAX)
-    if args.points:
-        for pt in args.points:
-            check_point(pt, "--from", REDUCED.dim)
+    for k in args.period or ():
+        check_int(k, "--period", 1)
+    for pt in args.points or ():
+        check_point(pt, "--from", REDUCED.dim)
     if args.random is not None:
         check_region(args.region, "--region", REDUCED.dim, REDUCED.state_names)
     if args.out is not None:
         check_output_folder(args.out)
-    if args.periods is not None:
-        if periods is not None:
-            raise ValueError("give either --period (repeatable) or --periods K1-K2, not both.")
-        periods = args.periods
-    check_shoot_work(args, periods)
+    if args.periods is not None and args.period is not None:
+        raise ValueError("give either --period (repeatable) or --periods K1-K2, not both.")
+    periods = args.periods if args.periods is not None else args.period
     if not (args.points or args.seeds_from or args.random is not None):
         raise ValueError("give seeds: --from, --seeds-from or --random N.")
-    if args.random is not None and (args.points or (args.seeds_from and args.periods is None)):
-        raise ValueError("--random cannot be combined with --from, nor with --seeds-from outside a --periods search.")
+    if args.random is not None and (args.points or (args.seeds_from and periods is None)):
+        raise ValueError("--random cannot be combined with --from, nor with --seeds-from unless periods are given "
+                         "(--period or --periods).")
+    return periods
+
+
+def _random_seeds(args):
+    from ..shooting import seeds_in_box
+
+    region = np.asarray(args.region, dtype=float)
+    return seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)
+
+
+def _params_and_seeds(args, periods):
+    """The uniform gear parameters, the seeds (an array, or ``{k: seeds}`` from
+    ``--seeds-from`` when no period is given) and where the parameters came from."""
+    from .._params import GearParams
+    from .._presets import resolve_params
+
     source = None
     if args.seeds_from:
         result, groups = _load_seeds(args.seeds_from)
@@ -204,110 +202,102 @@ def run(args) -> int:
         if not groups:
             raise ValueError(f"{args.seeds_from} has no periodic attractor to seed shooting from.")
         seeds = groups if periods is None else np.concatenate(list(groups.values()))
+        if args.random:
+            seeds = np.concatenate([seeds, _random_seeds(args)])
     else:
         params = resolve_params(args.preset, args.overrides)[1]
-        if args.points:
-            seeds = np.asarray(args.points, dtype=float)
-        else:
-            region = np.asarray(args.region, dtype=float)
-            seeds = seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)
+        seeds = np.asarray(args.points, dtype=float) if args.points else _random_seeds(args)
     if not params.is_uniform:
         raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
                          "the given parameters differ per planet.")
-    params = params.uniform()
+    return params.uniform(), seeds, source
+
+
+def _search_options(args, integ):
+    """The :class:`~jaxgear.SearchOptions` of the command line (the same for --period and --periods)."""
+    from ..integrate import RK4
+    from ..shooting import SearchOptions
+
+    transient = args.transient if args.transient is not None else (RANDOM_TRANSIENT if args.random else 0)
+    return SearchOptions(
+        solver=None if args.solver is None else _solvers()[args.solver], tol=args.tol, max_iter=args.max_iter,
+        segments=args.segments or 1, deflation_rounds=args.deflation_rounds or 0, transient=transient,
+        search_integrator=RK4(integ.steps_per_period), verify=args.verify or VERIFY_PERIODS)
+
+
+def run(args) -> int:
+    from .._model import REDUCED
+    from ..integrate import default_integrator
+    from ..shooting import find_periodic_orbits
+
+    periods = _check_args(args)
+    params, seeds, source = _params_and_seeds(args, periods)
     integ = default_integrator(args.steps_per_period)
-    search_mode = args.periods is not None
-    opt = {name: getattr(args, name) for name in SEARCH_DEFAULTS}
-    for name, value in opt.items():
-        if value is None:
-            opt[name] = SEARCH_DEFAULTS[name] if search_mode else {"solver": "damped-newton", "segments": 1,
-                                                                    "deflation_rounds": 0, "transient": 0}[name]
-    extra = {}
-    if search_mode:
-        if isinstance(seeds, dict):  # --seeds-from: the attractors' points seed every period
-            seeds = np.concatenate(list(seeds.values()))
-        if args.seeds_from and args.random:
-            region = np.asarray(args.region, dtype=float)
-            seeds = np.concatenate([seeds, seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)])
-        from ..integrate import RK4
-
-        # rounds with classical RK4 (its jacfwd is far cheaper than the kink-aware steps'), every
-        # orbit then re-converged with the default integrator (measured: benchmarks/shooting.py)
-        extra = dict(search_integrator=RK4(integ.steps_per_period), verify=args.verify or 300)
     search = find_periodic_orbits(REDUCED, params, seeds, period=periods or [1], integrator=integ,
-                                  tol=args.tol, max_iter=args.max_iter, progress=not (args.quiet or args.json),
-                                  **opt, **extra)
-    n_seeds = search.n_seeds
-    checks = []
-    if args.verify and not search.checks:
-        checks = [verify_orbit(REDUCED, params, o, periods=args.verify, integrator=integ) for o in search.orbits]
-
-    if args.json or args.out:
-        orbits = []
-        for i, o in enumerate(search.orbits):
-            d = o.to_dict()
-            if checks:
-                c = checks[i]
-                d["verification"] = {"periods": args.verify, "kept": c.kept, "left_at": c.left_at.tolist(),
-                                     "final_points": np.where(np.isfinite(c.final_points[:, -1]),
-                                                              c.final_points[:, -1], None).tolist()}
-            orbits.append(d)
-        out = {
-            "command": "shoot", "system": REDUCED.name, "state_names": list(REDUCED.state_names),
-            "params": params.to_dict(),
-            "settings": {"periods_tried": sorted(search.shots), "n_seeds": n_seeds,
-                         "integrator": integ.to_dict(), "tol": args.tol, "max_iter": args.max_iter,
-                         "t0": 0.0, "seeds_from": args.seeds_from, "random": args.random, "seed": args.seed},
-            "status_counts": search.status_counts, "convergence": search.convergence, "checks": search.checks,
-            "orbits": orbits, "version": search.version, "runtime_s": search.runtime_s,
-        }
-        if args.json:
-            print(json.dumps(out))
-    written = _write_outputs(search, out, args) if args.out else []
+                                  options=_search_options(args, integ), progress=not (args.quiet or args.json))
+    summary = _summary(search, params, args) if (args.json or args.out) else {}
     if args.json:
-        return 0
+        print(json.dumps(summary))
+    written = _write_outputs(search, summary, args) if args.out else []
+    if not args.json:
+        _print_search(search, params, args, source)
+        if written:
+            print(f"\nwrote {', '.join(written)} to {args.out}/")
+    return 0
 
-    names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
+
+def _summary(search, params, args) -> dict:
+    """The ``--json`` object (also ``orbits.json``)."""
+    from .._model import REDUCED
+
+    st = search.settings
+    return {
+        "command": "shoot", "system": REDUCED.name, "state_names": list(REDUCED.state_names),
+        "params": params.to_dict(),
+        "settings": {"periods_tried": sorted(search.shots), "n_seeds": search.n_seeds, "integrator": st["integrator"],
+                     "tol": args.tol, "max_iter": args.max_iter, "t0": 0.0, "seeds_from": args.seeds_from,
+                     "random": args.random, "seed": args.seed, "search": st},
+        "status_counts": search.status_counts, "convergence": search.convergence, "checks": search.checks,
+        "orbits": [o.to_dict() for o in search.orbits], "version": search.version, "runtime_s": search.runtime_s,
+    }
+
+
+def _print_search(search, params, args, source) -> None:
+    """The text report: the search's settings, its convergence per period, every orbit."""
+    from .._model import REDUCED
+
+    st = search.settings
+    n = search.n_seeds
     print(f"jaxgear shoot: {REDUCED.name} model, {source or 'preset ' + args.preset}, "
-          f"Omega={float(params.Omega):.4g}, {n_seeds} seed run{'s' if n_seeds != 1 else ''}, P^K for K in {sorted(search.shots)}, "
-          f"{integ.name} {integ.steps_per_period} steps/period, tol {args.tol:g}")
-    print("Newton: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
-    if search_mode:
-        st = search.settings
-        print(f"search: {st.solver}, {st.segments} segment(s), {st.deflation_rounds} deflated round(s), "
-              f"transient {st.transient} periods, rounds with {st.search_integrator.name}; "
-              f"{search.runtime_s:.1f} s")
-        print(search.convergence_table())
+          f"Omega={float(params.Omega):.4g}, {n} seed run{'s' if n != 1 else ''}, P^K for K in {sorted(search.shots)}, "
+          f"{st['integrator']['type']} {st['integrator']['steps_per_period']} steps/period, tol {args.tol:g}")
+    print("solver: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
+    print(f"search: {st['solver']['type']}, {st['segments']} segment(s), {st['deflation_rounds']} deflated round(s), "
+          f"transient {st['transient']} periods, rounds with {st['search_integrator']['type']}; "
+          f"{search.runtime_s:.1f} s")
+    print(search.convergence_table())
     if not search.orbits:
         print("no periodic orbit converged from these seeds.")
-        return 0
     for i, o in enumerate(search.orbits):
-        kind = "stable" if o.stable else f"unstable ({o.instability})"
-        print(f"\norbit {i + 1}: P-{o.period}, {kind}, max |multiplier| {o.max_multiplier:.4f}, "
-              f"residual {o.residual:.1e}, from {o.n_seeds} seed(s)")
-        print("  |multipliers|: " + " ".join(f"{abs(z):.4f}" for z in o.multipliers))
-        print("  multipliers:   " + " ".join(f"{z.real:+.4f}{z.imag:+.4f}j" for z in o.multipliers))
-        print(f"  points (phase 0): {names}")
-        for pt in o.points:
-            print("                   " + " ".join(f"{v:11.5f}" for v in pt))
-        if search.checks:
-            c = search.checks[str(i)]
-            left = "stays on the orbit" if c["kept"] else f"leaves the orbit after {c['left_at']} period(s)"
-            print(f"  direct integration ({c['periods']} periods): {left}"
-                  + ("" if c["consistent"] else " (INCONSISTENT with the multipliers)"))
-        if checks:
-            c = checks[i]
-            if c.kept:
-                print(f"  direct integration ({args.verify} periods): stays on the orbit")
-            else:
-                first = int(np.min(c.left_at[c.left_at > 0]))
-                ends = c.final_points[:, -1]
-                print(f"  direct integration ({args.verify} periods): leaves the orbit after {first} period(s); "
-                      f"ends at " + "; ".join("diverged" if not np.all(np.isfinite(e)) else
-                                               "[" + ", ".join(f"{v:.4f}" for v in e) + "]" for e in ends))
-    if written:
-        print(f"\nwrote {', '.join(written)} to {args.out}/")
-    return 0
+        _print_orbit(i, o, search.checks.get(str(i)))
+
+
+def _print_orbit(i: int, o, check) -> None:
+    from .._model import REDUCED
+
+    names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
+    kind = "stable" if o.stable else f"unstable ({o.instability})"
+    print(f"\norbit {i + 1}: P-{o.period}, {kind}, max |multiplier| {o.max_multiplier:.4f}, "
+          f"residual {o.residual:.1e}, from {o.n_seeds} seed(s)")
+    print("  |multipliers|: " + " ".join(f"{abs(z):.4f}" for z in o.multipliers))
+    print("  multipliers:   " + " ".join(f"{z.real:+.4f}{z.imag:+.4f}j" for z in o.multipliers))
+    print(f"  points (phase 0): {names}")
+    for pt in o.points:
+        print("                   " + " ".join(f"{v:11.5f}" for v in pt))
+    if check:
+        left = "stays on the orbit" if check["kept"] else f"leaves the orbit after {check['left_at']} period(s)"
+        print(f"  direct integration ({check['periods']} periods): {left}"
+              + ("" if check["consistent"] else " (INCONSISTENT with the multipliers)"))
 
 
 def _write_outputs(search, summary: dict, args) -> list[str]:

@@ -64,7 +64,7 @@ from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
-from ..shooting import periodic_orbit, sorted_eigvals
+from ..shooting import ShootOptions, periodic_orbit, sorted_eigvals
 from ..shooting._floquet import check_period
 from ._branch import BifurcationPoint, Branch, BranchSettings
 
@@ -428,7 +428,7 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
     """Follow a P-k orbit in the parameter ``param`` by pseudo-arclength continuation.
 
     Starts by converging the orbit at the parameter's current value in ``params`` with
-    :func:`~jaxgear.periodic_orbit` (damped Newton from ``x0``), then follows the curve
+    :func:`~jaxgear.periodic_orbit` (the library's solver from ``x0``), then follows the curve
     of fixed points of ``P^k`` in ``(x, p)`` until the parameter reaches ``stop`` (the
     last point is placed at ``stop`` exactly), leaves ``bounds``, ``max_steps`` steps are
     taken, or the corrector fails at the smallest step (see :data:`BRANCH_STATUS`).
@@ -479,8 +479,8 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
     if x0.shape != (system.dim,):
         raise ValueError(f"x0 must be one state of shape ({system.dim},), got {x0.shape}.")
     check_system(system, params, x0)
-    res = periodic_orbit(system, params, x0, period=k, t0=t0, integrator=integrator, tol=tol,
-                         max_norm=max_norm)
+    res = periodic_orbit(system, params, x0, period=k, t0=t0, integrator=integrator,
+                         options=ShootOptions(tol=tol, max_norm=max_norm))
     if int(res.status) != Status.CONVERGED:
         raise ValueError(f"Newton from x0={x0.tolist()} did not converge to a P-{k} orbit at {param}={p0:.6g} "
                          f"({Status(int(res.status)).label}, residual {float(res.residual):.2e}); "

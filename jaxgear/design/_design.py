@@ -6,21 +6,21 @@ differentiable function of the parameters: its point ``x*(p)`` solves
 
     dx*/dp = -(DP^k - I)^{-1} dP^k/dp          (implicit function theorem)
 
-without differentiating Newton's iterations. A scalar of the orbit — the peak-to-peak
+(``optimistix.ImplicitAdjoint``) without differentiating the solver's iterations. A scalar of the orbit — the peak-to-peak
 or RMS dynamic mesh force (model document §4, ``g_sp``, ``g_rp``), the dynamic transmission
 error, the largest Floquet multiplier modulus — is computed from a trajectory sampled
 over the ``k`` periods starting at ``x*`` with the same fixed-step RK4 scan (forward
 and reverse differentiable), so ``jax.grad`` of the scalar is exact for the discrete
 map and cheap:
 
-- forward: the damped Newton solve (warm-started, usually 1-3 iterations in a design
-  loop) and one sampled pass over the orbit;
+- forward: the shooting solve (optimistix, warm-started, usually 1-3 iterations in a
+  design loop) and one sampled pass over the orbit;
 - reverse: one reverse pass through the sampled orbit, the Jacobian ``DP^k`` (``dim``
   forward tangents through ``k`` periods, as in one Newton iteration), **one** dense
   ``dim × dim`` linear solve with its transpose, and one reverse pass through ``P^k``
-  for ``dP^k/dp``. Newton is never unrolled: JAX cannot reverse-differentiate the
-  Newton ``while_loop`` at all, so a working ``jax.grad`` is itself the proof that only
-  the root is differentiated. Measured on the paper's P-4 (4 periods × 200 RK4 steps,
+  for ``dP^k/dp``. The solver is never unrolled: JAX cannot reverse-differentiate its
+  ``while_loop`` at all, so a working ``jax.grad`` is itself the proof that only the
+  root is differentiated. Measured on the paper's P-4 (4 periods × 200 RK4 steps,
   2-core CPU): objective 2.3 ms, objective and gradient for five parameters 16 ms
   (about seven objective evaluations, whatever the number of parameters; a central
   difference needs two re-converged orbits per parameter).
@@ -47,49 +47,23 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from .._batching import progress_bar
-from .._checks import check_int
+from .._checks import check_int, check_number
 from .._codec import custom_field, result_type
 from .._format import format_table
-from .._io import save_result
 from .._params import get_field, params_from_dict, params_to_dict, params_type_name, set_fields
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, integrator_from_dict, resolve_integrator
-from ..shooting import Instability, PeriodicOrbit, classify_multipliers, periodic_orbit
+from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
+from ..shooting import Instability, PeriodicOrbit, ShootOptions, classify_multipliers, periodic_orbit
 from ..shooting._floquet import check_period
+from ..shooting._options import with_changes
 from ._objectives import OrbitSamples, sample_orbit
 
-__all__ = ["design", "DesignResult", "DesignSettings"]
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class DesignSettings:
-    """The options a design ran with (:func:`design`; their meaning is documented there).
-
-    Attributes:
-        period: k of the P-k orbit; t0: its forcing phase (time) of the stroboscopic points.
-        steps, tol, require_stable, max_shrink, max_jump: the optimisation's steps, its
-            projected-gradient tolerance, whether the orbit must stay stable, the step
-            halvings allowed and the largest relative move of the orbit per step (None: no limit).
-        integrator: the integrator; samples_per_period: orbit samples per period for the objective.
-        shoot_tol: the shooting tolerance.
-        optimizer: ``"adam, lr 0.05 cosine decay"`` (the default) or ``"user"`` (one given).
-    """
-
-    period: int
-    t0: float
-    steps: int
-    tol: float
-    require_stable: bool
-    max_shrink: int
-    max_jump: float | None = None
-    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
-    samples_per_period: int
-    shoot_tol: float
-    optimizer: str
+__all__ = ["design", "DesignResult", "DesignOptions"]
 
 
 @result_type
@@ -115,7 +89,7 @@ class DesignResult:
         message: a sentence explaining ``status``.
         initial_params: parameters at the start (a dict of every parameter).
         system: the system's name; state_names: its coordinates.
-        settings: a :class:`DesignSettings` (period, t0, steps, tolerances, integrator, ...).
+        settings: period, t0, steps, tol, integrator, ... (JSON-able).
         version: jaxgear version.
     """
 
@@ -130,7 +104,7 @@ class DesignResult:
     initial_params: dict = dataclasses.field(default_factory=dict)
     system: str = ""
     state_names: tuple[str, ...] = ()
-    settings: DesignSettings
+    settings: dict = dataclasses.field(default_factory=dict)
     version: str = ""
 
     @property
@@ -180,7 +154,51 @@ class DesignResult:
 
     def save(self, path):
         """Write a netCDF file atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
         return save_result(self, path)
+
+
+class DesignOptions(eqx.Module):
+    """Options of :func:`design` (immutable; checked at construction).
+
+    Attributes:
+        optimizer: an ``optax.GradientTransformation`` acting on the scaled parameters
+            (``None``: Adam, learning rate 0.05 of the bound range with cosine decay to
+            1/50 of it over ``steps``).
+        steps: maximum number of optimiser steps.
+        tol: stop when the projected gradient norm (objective units per bound range)
+            is at most ``tol``.
+        require_stable: keep the tracked orbit asymptotically stable (shrink steps that
+            would destabilise it; the initial orbit must be stable).
+        max_shrink: halvings of a rejected step before the design stops.
+        max_jump: largest accepted move of the orbit's point in one step, relative to
+            ``1 + ||x||`` (``None``: no limit).
+        samples_per_period: samples of the orbit per period for the objective (``None``:
+            the integrator's steps per period).
+        shoot: the options of the shooting solve that re-converges the orbit at every
+            step (:class:`~jaxgear.ShootOptions`).
+    """
+
+    optimizer: Any = eqx.field(static=True, default=None)
+    steps: int = eqx.field(static=True, default=100)
+    tol: float = 1e-6
+    require_stable: bool = eqx.field(static=True, default=False)
+    max_shrink: int = eqx.field(static=True, default=6)
+    max_jump: float | None = 0.1
+    samples_per_period: int | None = eqx.field(static=True, default=None)
+    shoot: ShootOptions = ShootOptions()
+
+    def __check_init__(self):
+        check_int(self.steps, "steps", 0)
+        check_number(self.tol, "tol", 0)
+        check_int(self.max_shrink, "max_shrink", 0)
+        if self.max_jump is not None:
+            check_number(self.max_jump, "max_jump (or None for no limit)", 0, strict_min=True)
+        if self.samples_per_period is not None:
+            check_int(self.samples_per_period, "samples_per_period", 2)
+        if not isinstance(self.shoot, ShootOptions):
+            raise ValueError(f"shoot={self.shoot!r} must be a jaxgear.ShootOptions.")
 
 
 class _Eval(NamedTuple):
@@ -195,21 +213,41 @@ class _Eval(NamedTuple):
     min_period: jax.Array
 
 
+class _Problem(eqx.Module):
+    """What :func:`_evaluate` needs besides the scaled parameters and the guess."""
+
+    params: Any
+    lows: jax.Array
+    highs: jax.Array
+    t0: jax.Array
+    names: tuple[str, ...] = eqx.field(static=True)
+    system: ForcedSystem = eqx.field(static=True)
+    objective: Callable = eqx.field(static=True)
+    k: int = eqx.field(static=True)
+    integrator: AbstractIntegrator = eqx.field(static=True)
+    samples: int = eqx.field(static=True)
+    shoot: ShootOptions = eqx.field(static=True)
+
+    def at(self, u):
+        """The parameters at the scaled ``u``."""
+        vals = _values(u, self.lows, self.highs)
+        return set_fields(self.params, self.names, [vals[i] for i in range(len(self.names))])
+
+
 @eqx.filter_jit
-def _evaluate(u, x_guess, params, lows, highs, names, system, objective, k, t0, integrator, samples, tol, max_iter,
-              max_norm):
+def _evaluate(u, x_guess, prob: _Problem) -> _Eval:
     """Objective, its gradient w.r.t. the scaled parameters ``u`` and the re-converged orbit.
 
-    ``u in [0, 1]^n`` maps to ``low + u (high - low)``; Newton starts at ``x_guess``.
+    ``u in [0, 1]^n`` maps to ``low + u (high - low)``; the solver starts at ``x_guess``.
     """
 
     def f(u):
-        vals = _values(u, lows, highs)
-        p = set_fields(params, names, [vals[i] for i in range(len(names))])
-        res = periodic_orbit(system, p, x_guess, period=k, t0=t0, integrator=integrator, tol=tol,
-                             max_iter=max_iter, max_norm=max_norm)
-        orbit = sample_orbit(system, p, res.point, period=k, t0=t0, samples_per_period=samples, integrator=integrator)
-        J = jnp.asarray(objective(p, orbit), jnp.float64)
+        p = prob.at(u)
+        res = periodic_orbit(prob.system, p, x_guess, period=prob.k, t0=prob.t0, integrator=prob.integrator,
+                             options=prob.shoot)
+        orbit = sample_orbit(prob.system, p, res.point, period=prob.k, t0=prob.t0, samples_per_period=prob.samples,
+                             integrator=prob.integrator)
+        J = jnp.asarray(prob.objective(p, orbit), jnp.float64)
         if J.shape != ():
             raise ValueError(f"the objective must return a scalar, got shape {J.shape}.")
         return J, res
@@ -241,67 +279,8 @@ def _default_optimizer(steps: int):
     return optax.adam(optax.cosine_decay_schedule(0.05, max(int(steps), 1), alpha=0.02))
 
 
-def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamples], Any], *,
-           free: Mapping[str, tuple[float, float]], period: int = 1, t0=0.0, optimizer=None, steps: int = 100,
-           tol: float = 1e-6, require_stable: bool = False, max_shrink: int = 6, max_jump: float | None = 0.1,
-           integrator: AbstractIntegrator | None = None, samples_per_period: int | None = None, shoot_tol: float = 1e-10,
-           max_iter: int = 40, max_norm: float = 1e6, progress: bool = True) -> DesignResult:
-    """Minimise a scalar of a periodic orbit over chosen parameters (gradient-based design).
-
-    At every step the tracked P-k orbit is re-converged by Newton from the previous
-    orbit's point (warm start), the objective ``objective(params, orbit)`` is evaluated
-    on the orbit sampled over its ``k`` periods (:class:`OrbitSamples`), and its
-    gradient with respect to the free parameters comes from implicit differentiation of
-    the shooting fixed point (see the module docstring: one linear solve, Newton not
-    unrolled). An optax optimiser takes the step.
-
-    Bounds are enforced by **projection**: the free parameters are optimised in scaled
-    coordinates ``u = (value - low) / (high - low)`` in ``[0, 1]`` (one unit = the whole
-    bound range, so one learning rate suits parameters of different units) and every
-    proposed iterate is clipped to the box, so a parameter whose optimum lies outside
-    ends exactly on its bound. Convergence is measured by the projected gradient
-    ``||u - clip(u - dJ/du)||``, which vanishes at a constrained stationary point.
-
-    When Newton fails at a proposed step, or converges to another orbit (its minimal
-    period changed, or its point moved by more than ``max_jump * (1 + ||x||)``: past a
-    fold the tracked orbit no longer exists and Newton may land on a coexisting one), or
-    with ``require_stable`` the new orbit has a multiplier ``|lambda| >= 1``, the step is
-    halved toward the last good iterate, up to ``max_shrink`` times; if that does not
-    help the design stops and returns the last good iterate with ``status`` saying why
-    (the tracked orbit ends near its fold or its stability boundary).
-
-    Args:
-        system: any :class:`~jaxgear.ForcedSystem`.
-        params: its parameters (an eqx.Module, NamedTuple or dict pytree); the free ones
-            must be scalar fields.
-        x0: ``(dim,)`` a point of (or near) the P-k orbit at the initial parameters.
-        objective: ``objective(params, orbit) -> scalar`` to minimise, written in JAX
-            (e.g. ``lambda p, o: mesh_force_ptp(p, o)``, or anything of ``orbit.states``).
-        free: ``{name: (low, high)}``, the parameters to optimise and their bounds; each
-            start value must lie inside its bounds.
-        period: ``k`` of the tracked P-k orbit.
-        optimizer: an ``optax.GradientTransformation`` acting on the scaled parameters
-            (default: Adam, learning rate 0.05 of the bound range with cosine decay to
-            1/50 of it over ``steps``).
-        steps: maximum number of optimiser steps.
-        tol: stop when the projected gradient norm (objective units per bound range)
-            is at most ``tol``.
-        require_stable: keep the tracked orbit asymptotically stable (shrink steps that
-            would destabilise it; the initial orbit must be stable).
-        max_shrink: halvings of a rejected step before the design stops.
-        max_jump: largest accepted move of the orbit's point in one step, relative to
-            ``1 + ||x||`` (``None``: no limit).
-        integrator, shoot_tol, max_iter, max_norm: as in :func:`~jaxgear.periodic_orbit`.
-        samples_per_period: samples of the orbit per period for the objective (default
-            the integrator's steps per period).
-        progress: tqdm progress bar.
-    Returns:
-        :class:`DesignResult`.
-    Raises:
-        ValueError: unknown, non-scalar or out-of-bounds free parameters, bad bounds,
-        a bad system, or no converged (stable, if required) orbit at the start.
-    """
-    k = check_period(period)
+def _free_bounds(params, free) -> tuple[tuple[str, ...], list[float], list[float]]:
+    """The free parameters' names and bounds, checked against ``params`` (``ValueError``)."""
     if not isinstance(free, Mapping) or not free:
         raise ValueError("free must be a non-empty dict {parameter name: (low, high)}.")
     names = tuple(free)
@@ -329,38 +308,14 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
     except (TypeError, ValueError):
         raise ValueError(f"the free parameters {list(names)} must be array leaves of the parameter pytree "
                          "(a static field such as the number of planets N cannot be free).") from None
-    if int(steps) < 0:
-        raise ValueError(f"steps={steps} must be >= 0.")
-    if not tol >= 0:
-        raise ValueError(f"tol={tol} must be >= 0.")
-    if int(max_shrink) < 0:
-        raise ValueError(f"max_shrink={max_shrink} must be >= 0.")
-    if max_jump is not None and not max_jump > 0:
-        raise ValueError(f"max_jump={max_jump} must be > 0 (or None for no limit).")
-    x0 = np.asarray(x0, dtype=float)
-    check_state_shape(system, x0)
-    if x0.shape != (system.dim,):
-        raise ValueError(f"x0 must be one state of shape ({system.dim},), got {x0.shape}.")
-    check_system(system, params, x0, batched=False)
-    integrator = resolve_integrator(integrator)
-    samples = check_int(samples_per_period if samples_per_period is not None else
-                        getattr(integrator, "steps_per_period", DEFAULT_STEPS_PER_PERIOD), "samples_per_period", 2)
-    default_opt = optimizer is None
-    optimizer = _default_optimizer(steps) if default_opt else optimizer
-    lows_a, highs_a = jnp.asarray(lows), jnp.asarray(highs)
-    u = jnp.asarray([(float(get_field(params, n)) - lo) / (hi - lo) for n, lo, hi in zip(names, lows, highs)])
-    u = jnp.clip(u, 0.0, 1.0)
-    initial_dict = params_to_dict(params)
+    return names, lows, highs
 
-    def evaluate(u, guess):
-        return _evaluate(u, jnp.asarray(guess), params, lows_a, highs_a, names, system, objective, k,
-                         jnp.asarray(t0, jnp.float64), integrator, samples, float(shoot_tol), int(max_iter),
-                         float(max_norm))
 
-    ev = evaluate(u, x0)
+def _check_start(ev: _Eval, k: int, require_stable: bool) -> PeriodicOrbit:
+    """The orbit at the initial parameters; ``ValueError`` when there is none to track."""
     st = int(ev.status)
     if st != Status.CONVERGED:
-        raise ValueError(f"no P-{k} orbit found from x0 at the initial parameters (Newton: "
+        raise ValueError(f"no P-{k} orbit found from x0 at the initial parameters (solver: "
                          f"{Status(st).label}, residual {float(ev.residual):.2e}); give a point "
                          "of the orbit, e.g. from find_periodic_orbits.")
     if not np.isfinite(float(ev.value)) or not np.all(np.isfinite(np.asarray(ev.grad))):
@@ -369,84 +324,181 @@ def design(system: ForcedSystem, params, x0, objective: Callable[[Any, OrbitSamp
     if require_stable and not orbit0.stable:
         raise ValueError(f"require_stable=True but the initial P-{orbit0.period} orbit is unstable "
                          f"(max |multiplier| {orbit0.max_multiplier:.4f}).")
-    period0 = int(ev.min_period)
+    return orbit0
 
-    hist: dict[str, list] = {"objective": [], **{n: [] for n in names}, "max_multiplier": [], "grad_norm": [],
-                             "newton_iterations": [], "residual": [], "step_scale": []}
 
-    def record(ev, u, scale):
-        vals = np.asarray(_values(u, lows_a, highs_a))
-        g = np.asarray(ev.grad)
+class _History:
+    """The per-iterate records of :attr:`DesignResult.history`."""
+
+    def __init__(self, prob: _Problem):
+        self.prob = prob
+        self.data: dict[str, list] = {"objective": [], **{n: [] for n in prob.names}, "max_multiplier": [],
+                                      "grad_norm": [], "newton_iterations": [], "residual": [], "step_scale": []}
+
+    def record(self, ev: _Eval, u, scale: float) -> float:
+        """Append one accepted iterate; return its projected gradient norm."""
+        vals = np.asarray(_values(u, self.prob.lows, self.prob.highs))
         un = np.asarray(u)
-        pg = un - np.clip(un - g, 0.0, 1.0)
-        hist["objective"].append(float(ev.value))
-        for n, v in zip(names, vals):
-            hist[n].append(float(v))
-        hist["max_multiplier"].append(float(np.max(np.abs(np.asarray(ev.multipliers)))))
-        hist["grad_norm"].append(float(np.linalg.norm(pg)))
-        hist["newton_iterations"].append(int(ev.iterations))
-        hist["residual"].append(float(ev.residual))
-        hist["step_scale"].append(float(scale))
-        return float(np.linalg.norm(pg))
+        pg = float(np.linalg.norm(un - np.clip(un - np.asarray(ev.grad), 0.0, 1.0)))
+        h = self.data
+        h["objective"].append(float(ev.value))
+        for n, v in zip(self.prob.names, vals):
+            h[n].append(float(v))
+        h["max_multiplier"].append(float(np.max(np.abs(np.asarray(ev.multipliers)))))
+        h["grad_norm"].append(pg)
+        h["newton_iterations"].append(int(ev.iterations))
+        h["residual"].append(float(ev.residual))
+        h["step_scale"].append(float(scale))
+        return pg
 
-    pg = record(ev, u, 1.0)
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {key: np.asarray(v) for key, v in self.data.items()}
+
+
+def _rejection(ev: _Eval, ev_new: _Eval, period0: int, options: DesignOptions) -> str:
+    """Why the step to ``ev_new`` is refused (``""``: accepted)."""
+    finite = np.isfinite(float(ev_new.value)) and np.all(np.isfinite(np.asarray(ev_new.grad)))
+    if int(ev_new.status) != Status.CONVERGED or not finite:
+        return "newton failed"
+    x, x_new = np.asarray(ev.point), np.asarray(ev_new.point)
+    jump = options.max_jump is not None and np.linalg.norm(x_new - x) > options.max_jump * (1.0 + np.linalg.norm(x))
+    if int(ev_new.min_period) != period0 or jump:
+        return "newton failed"  # it converged to another orbit: the tracked one is gone
+    if options.require_stable and not np.max(np.abs(np.asarray(ev_new.multipliers))) < 1.0:
+        return "lost stability"
+    return ""
+
+
+def _try_step(evaluate, u, target, ev: _Eval, period0: int, options: DesignOptions):
+    """Step from ``u`` toward ``target``, halved up to ``max_shrink`` times until the orbit
+    stays tracked. Returns ``(u, ev, scale, why)`` (``why`` empty when a step was taken)."""
+    scale, why = 1.0, ""
+    for _ in range(options.max_shrink + 1):
+        trial = u + scale * (target - u)
+        ev_new = evaluate(trial, ev.point)
+        why = _rejection(ev, ev_new, period0, options)
+        if not why:
+            return trial, ev_new, scale, ""
+        scale *= 0.5
+    return u, ev, scale, why
+
+
+def _stop_message(why: str, period0: int, max_shrink: int) -> str:
+    if why == "newton failed":
+        return (f"no converged P-{period0} orbit near the last iterate even after {max_shrink} step halvings "
+                "(the solver failed or reached another orbit): the tracked orbit ends near a fold")
+    return (f"every step toward lower objective (down to 1/{2 ** max_shrink} of the proposed one) "
+            "made the orbit unstable: the optimum lies on the stability boundary")
+
+
+def _optimise(evaluate, u, ev: _Eval, hist: _History, options: DesignOptions, optimizer, progress: bool):
+    """The optimiser loop: returns the last accepted ``u``, its evaluation, status and message."""
+    pg = hist.record(ev, u, 1.0)
+    period0 = int(ev.min_period)
     opt_state = optimizer.init(u)
-    status, message = "max steps", f"the step limit ({int(steps)}) was reached."
-    bar = progress_bar(int(steps), "design", progress, unit="step")
-    for _ in range(int(steps)):
-        if pg <= tol:
-            status, message = "converged", f"projected gradient {pg:.2e} <= tol={tol:g}."
-            break
-        # optax's own arithmetic mixes Python floats with its int32 step count (Adam's bias
-        # correction 1 - b1**count), which only standard promotion allows
-        with jax.numpy_dtype_promotion("standard"):
-            updates, new_state = optimizer.update(ev.grad, opt_state, u)
-        target = jnp.clip(u + updates, 0.0, 1.0)
-        scale, accepted, why = 1.0, False, ""
-        for _s in range(int(max_shrink) + 1):
-            trial = u + scale * (target - u)
-            ev_new = evaluate(trial, ev.point)
-            st = int(ev_new.status)
-            finite = np.isfinite(float(ev_new.value)) and np.all(np.isfinite(np.asarray(ev_new.grad)))
-            if st != Status.CONVERGED or not finite:
-                why = "newton failed"
-            elif int(ev_new.min_period) != period0 or (
-                    max_jump is not None and np.linalg.norm(np.asarray(ev_new.point) - np.asarray(ev.point))
-                    > max_jump * (1.0 + np.linalg.norm(np.asarray(ev.point)))):
-                why = "newton failed"  # it converged to another orbit: the tracked one is gone
-            elif require_stable and not np.max(np.abs(np.asarray(ev_new.multipliers))) < 1.0:
-                why = "lost stability"
-            else:
-                accepted = True
+    status, message = "max steps", f"the step limit ({options.steps}) was reached."
+    bar = progress_bar(options.steps, "design", progress, unit="step")
+    try:
+        for _ in range(options.steps):
+            if pg <= options.tol:
                 break
-            scale *= 0.5
-        if not accepted:
-            status = why
-            message = (f"no converged P-{period0} orbit near the last iterate even after {int(max_shrink)} step halvings "
-                       "(Newton failed or reached another orbit): the tracked orbit ends near a fold"
-                       if why == "newton failed" else
-                       f"every step toward lower objective (down to 1/{2 ** int(max_shrink)} of the proposed one) "
-                       "made the orbit unstable: the optimum lies on the stability boundary")
-            break
-        u, ev, opt_state = trial, ev_new, new_state
-        pg = record(ev, u, scale)
-        bar.update(1)
-        bar.set_postfix(objective=f"{float(ev.value):.6g}")
-    else:
-        if pg <= tol:
-            status, message = "converged", f"projected gradient {pg:.2e} <= tol={tol:g}."
-    bar.close()
-    vals = _values(u, lows_a, highs_a)
-    final = set_fields(params, names, [vals[i] for i in range(len(names))])
-    settings = DesignSettings(period=k, t0=float(t0), steps=int(steps), tol=float(tol),
-                              require_stable=bool(require_stable), max_shrink=int(max_shrink),
-                              max_jump=None if max_jump is None else float(max_jump), integrator=integrator,
-                              samples_per_period=int(samples), shoot_tol=float(shoot_tol),
-                              optimizer="adam, lr 0.05 cosine decay" if default_opt else "user")
+            # optax's own arithmetic mixes Python floats with its int32 step count (Adam's bias
+            # correction 1 - b1**count), which only standard promotion allows
+            with jax.numpy_dtype_promotion("standard"):
+                updates, new_state = optimizer.update(ev.grad, opt_state, u)
+            u, ev, scale, why = _try_step(evaluate, u, jnp.clip(u + updates, 0.0, 1.0), ev, period0, options)
+            if why:
+                return u, ev, why, _stop_message(why, period0, options.max_shrink)
+            opt_state = new_state
+            pg = hist.record(ev, u, scale)
+            bar.update(1)
+            bar.set_postfix(objective=f"{float(ev.value):.6g}")
+    finally:
+        bar.close()
+    if pg <= options.tol:
+        status, message = "converged", f"projected gradient {pg:.2e} <= tol={options.tol:g}."
+    return u, ev, status, message
+
+
+def design(system: ForcedSystem, params, x0: Float[ArrayLike, " dim"], objective: Callable[[Any, OrbitSamples], Any],
+           *, free: Mapping[str, tuple[float, float]], period: int = 1, t0=0.0,
+           integrator: AbstractIntegrator | None = None, options: DesignOptions | None = None, progress: bool = True,
+           **changes) -> DesignResult:
+    """Minimise a scalar of a periodic orbit over chosen parameters (gradient-based design).
+
+    At every step the tracked P-k orbit is re-converged by the shooting solver from the
+    previous orbit's point (warm start), the objective ``objective(params, orbit)`` is
+    evaluated on the orbit sampled over its ``k`` periods (:class:`OrbitSamples`), and
+    its gradient with respect to the free parameters comes from implicit differentiation
+    of the shooting fixed point (see the module docstring: one linear solve, the solver
+    not unrolled). An optax optimiser takes the step.
+
+    Bounds are enforced by **projection**: the free parameters are optimised in scaled
+    coordinates ``u = (value - low) / (high - low)`` in ``[0, 1]`` (one unit = the whole
+    bound range, so one learning rate suits parameters of different units) and every
+    proposed iterate is clipped to the box, so a parameter whose optimum lies outside
+    ends exactly on its bound. Convergence is measured by the projected gradient
+    ``||u - clip(u - dJ/du)||``, which vanishes at a constrained stationary point.
+
+    When the solver fails at a proposed step, or converges to another orbit (its minimal
+    period changed, or its point moved by more than ``max_jump * (1 + ||x||)``: past a
+    fold the tracked orbit no longer exists and the solver may land on a coexisting one),
+    or with ``require_stable`` the new orbit has a multiplier ``|lambda| >= 1``, the step
+    is halved toward the last good iterate, up to ``max_shrink`` times; if that does not
+    help the design stops and returns the last good iterate with ``status`` saying why
+    (the tracked orbit ends near its fold or its stability boundary).
+
+    Args:
+        system: any :class:`~jaxgear.ForcedSystem`.
+        params: its parameters (an eqx.Module, NamedTuple or dict pytree); the free ones
+            must be scalar fields.
+        x0: ``(dim,)`` a point of (or near) the P-k orbit at the initial parameters.
+        objective: ``objective(params, orbit) -> scalar`` to minimise, written in JAX
+            (e.g. ``lambda p, o: mesh_force_ptp(p, o)``, or anything of ``orbit.states``).
+        free: ``{name: (low, high)}``, the parameters to optimise and their bounds; each
+            start value must lie inside its bounds.
+        period: ``k`` of the tracked P-k orbit.
+        t0: phase of the stroboscopic section (system time unit).
+        integrator: as in :func:`~jaxgear.periodic_orbit`.
+        options: :class:`DesignOptions` (optimiser, steps, tolerance, stability, step
+            shrinking, the shooting options); ``None``: the defaults.
+        progress: tqdm progress bar.
+        **changes: fields of ``options`` to change, e.g. ``steps=40, require_stable=True``.
+    Returns:
+        :class:`DesignResult`.
+    Raises:
+        ValueError: unknown, non-scalar or out-of-bounds free parameters, bad bounds,
+        bad options, a bad system, or no converged (stable, if required) orbit at the start.
+    """
+    k = check_period(period)
+    names, lows, highs = _free_bounds(params, free)
+    options = with_changes(options, DesignOptions, changes)
+    x0 = np.asarray(x0, dtype=float)
+    check_state_shape(system, x0)
+    if x0.shape != (system.dim,):
+        raise ValueError(f"x0 must be one state of shape ({system.dim},), got {x0.shape}.")
+    check_system(system, params, x0, batched=False)
+    integrator = resolve_integrator(integrator)
+    samples = check_int(options.samples_per_period if options.samples_per_period is not None else
+                        getattr(integrator, "steps_per_period", DEFAULT_STEPS_PER_PERIOD), "samples_per_period", 2)
+    optimizer = _default_optimizer(options.steps) if options.optimizer is None else options.optimizer
+    prob = _Problem(params, jnp.asarray(lows), jnp.asarray(highs), jnp.asarray(t0, jnp.float64), names, system,
+                    objective, k, integrator, samples, options.shoot)
+    u = jnp.clip(jnp.asarray([(float(get_field(params, n)) - lo) / (hi - lo) for n, lo, hi in zip(names, lows, highs)]),
+                 0.0, 1.0)
+    evaluate = lambda u, guess: _evaluate(u, jnp.asarray(guess), prob)
+    ev = evaluate(u, x0)
+    orbit0 = _check_start(ev, k, options.require_stable)
+    hist = _History(prob)
+    u, ev, status, message = _optimise(evaluate, u, ev, hist, options, optimizer, progress)
+    settings = dict(period=k, t0=float(t0), steps=options.steps, tol=float(options.tol),
+                    require_stable=bool(options.require_stable), max_shrink=options.max_shrink,
+                    max_jump=options.max_jump, integrator=integrator.to_dict(), samples_per_period=samples,
+                    shoot_tol=float(options.shoot.tol),
+                    optimizer="adam, lr 0.05 cosine decay" if options.optimizer is None else "user")
     return DesignResult(
-        params=final, orbit=_orbit_of(ev, k), initial_orbit=orbit0,
-        history={key: np.asarray(v) for key, v in hist.items()}, free={n: (lo, hi) for n, lo, hi in
-                                                                       zip(names, lows, highs)},
-        status=status, message=message, initial_params=initial_dict, system=system.name,
-        state_names=tuple(system.state_names), settings=settings, version=__version__,
+        params=prob.at(u), orbit=_orbit_of(ev, k), initial_orbit=orbit0, history=hist.arrays(),
+        free={n: (lo, hi) for n, lo, hi in zip(names, lows, highs)}, status=status, message=message,
+        initial_params=params_to_dict(params), system=system.name, state_names=tuple(system.state_names),
+        settings=settings, version=__version__,
     )

@@ -19,7 +19,7 @@ from .._system import ForcedSystem, check_state_shape
 from ..integrate import AbstractIntegrator, resolve_integrator
 
 __all__ = ["Instability", "classify_multipliers", "sorted_eigvals", "monodromy", "floquet_multipliers",
-           "check_period"]
+           "check_period", "orbit_jacobians"]
 
 
 class Instability(enum.IntEnum):
@@ -71,6 +71,34 @@ def sorted_eigvals(M):
     lam = jnp.linalg.eigvals(M)
     order = jnp.argsort(-jnp.abs(lam), axis=-1)
     return jnp.take_along_axis(lam, order, axis=-1)
+
+
+def orbit_jacobians(system, params, x, t0, k, integrator):
+    """Points and Jacobians along ``k`` periods from ``x (dim,)`` at ``t0``.
+
+    Returns ``x_k = P^k(x)``, the points ``pts = (x, P(x), ..., P^{k-1}(x))`` of shape
+    ``(k, dim)`` and ``Cs`` of shape ``(k, dim, dim)`` with ``Cs[j] = D P^{j+1}(x)``
+    (products of one-period Jacobians from ``jax.jacfwd``; ``Cs[k-1]`` is ``DP^k``, the
+    monodromy matrix of a P-k orbit through ``x``).
+    """
+    T = system.period(params)
+
+    def one_period(z, i):
+        def step(w):
+            y = integrator.flow(system, params, w, t0 + i * T, 1)
+            return y, y
+
+        J, y = jax.jacfwd(step, has_aux=True)(z)
+        return y, (z, J)
+
+    xk, (pts, Js) = jax.lax.scan(one_period, x, jnp.arange(k, dtype=jnp.float64))
+
+    def accumulate(C, J):
+        C = J @ C
+        return C, C
+
+    _, Cs = jax.lax.scan(accumulate, jnp.eye(x.shape[0]), Js)
+    return xk, pts, Cs
 
 
 @eqx.filter_jit

@@ -5,30 +5,30 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from .._batching import chunks, pad_rows, progress_bar
-from .._checks import check_int, check_number
-from .._codec import array_field, custom_field, items_field, plain, result_type
+from .._codec import array_field, items_field, result_type
 from .._devices import local_devices, shard_rows
 from .._format import format_table
-from .._io import save_result, write_json
 from .._matching import group_attractors, same_attractor
 from .._params import params_to_dict
 from .._poincare import sample_trajectory, stroboscopic_map
 from .._status import Status, count_statuses
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
+from ..integrate import AbstractIntegrator, resolve_integrator
 from ._floquet import Instability, check_period
-from ._orbit import ShootResult, check_newton_options, check_solver_options, default_solver, shoot_kernel
+from ._options import SearchOptions, ShootOptions, with_changes
+from ._orbit import ShootResult, check_shooting, shoot_kernel
 from ._solve import check_segments
-from ._verify import verify_orbit
 
-__all__ = ["PeriodicOrbit", "OrbitSearch", "SearchSettings", "find_periodic_orbits", "NEWTON_STATUSES"]
+__all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
 
 NEWTON_STATUSES = (Status.CONVERGED, Status.NOT_CONVERGED, Status.SINGULAR, Status.DIVERGED)
 """The outcomes a Newton run can have."""
@@ -87,48 +87,6 @@ class PeriodicOrbit:
         }
 
 
-def _integrator_field():
-    return custom_field(lambda i: i.to_dict(), integrator_from_dict)
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class SearchSettings:
-    """The options an orbit search ran with (:func:`find_periodic_orbits`; their
-    meaning is documented there).
-
-    Attributes:
-        periods: the periods k tried.
-        t0: forcing phase (time) of the stroboscopic points.
-        integrator: the integrator of the shooting; search_integrator: that of the
-            search rounds (transient and seeding).
-        tol, max_iter, max_norm, period_tol, solver, segments: the Newton options.
-        dedup_tol: relative distance under which two converged orbits are the same.
-        chunk_size: seeds shot in one batch; trajectory_samples: points stored per orbit.
-        deflation_rounds, deflation_power, deflation_shift: the deflated rounds.
-        transient: forcing periods integrated from each seed before shooting.
-        verify: periods of the check by direct integration (0: none).
-    """
-
-    periods: tuple[int, ...]
-    t0: float
-    integrator: AbstractIntegrator = _integrator_field()
-    tol: float
-    max_iter: int
-    max_norm: float
-    period_tol: float
-    dedup_tol: float
-    chunk_size: int
-    trajectory_samples: int
-    solver: str
-    segments: int
-    deflation_rounds: int
-    deflation_power: float
-    deflation_shift: float
-    transient: int
-    search_integrator: AbstractIntegrator = _integrator_field()
-    verify: int
-
-
 @result_type
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class OrbitSearch:
@@ -146,7 +104,8 @@ class OrbitSearch:
         system: the system's name; state_names: its coordinate names;
         section_index: its default section coordinate (or ``None``).
         params: the full parameter set as a dict (canonical names for the gear models).
-        settings: the options of the search, a :class:`SearchSettings`.
+        settings: the options of the search (:meth:`SearchOptions.to_dict`, the periods,
+            ``t0`` and the integrator), JSON-able.
         version: jaxgear version; runtime_s: wall time of the search (s).
         convergence: per ``k`` (keys ``"1"``, ``"2"``, ...): ``runs`` (seed runs, all
             deflation rounds), ``seeds``, ``converged`` (runs that converged to an orbit of
@@ -167,7 +126,7 @@ class OrbitSearch:
     state_names: tuple[str, ...] = ()
     section_index: int | None = None
     params: dict = dataclasses.field(default_factory=dict)
-    settings: SearchSettings
+    settings: dict = dataclasses.field(default_factory=dict)
     version: str = ""
     runtime_s: float = float("nan")
     convergence: dict = dataclasses.field(default_factory=dict)
@@ -209,7 +168,7 @@ class OrbitSearch:
         """Everything but the per-seed arrays and trajectories, JSON-able."""
         return dict(
             jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
-            params=self.params, settings=plain(self.settings), n_seeds=self.n_seeds,
+            params=self.params, settings=self.settings, n_seeds=self.n_seeds,
             status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
             convergence=dict(self.convergence), checks=dict(self.checks),
             runtime_s=self.runtime_s, version=self.version,
@@ -227,10 +186,14 @@ class OrbitSearch:
 
     def save(self, path):
         """Write the search to a netCDF file atomically; reload with :func:`jaxgear.load`."""
+        from .._io import save_result
+
         return save_result(self, path)
 
     def write_summary(self, path):
         """Write :meth:`summary` as strict JSON."""
+        from .._io import write_json
+
         return write_json(self.summary(), path)
 
 
@@ -295,26 +258,38 @@ def _with_trajectories(system, params, orbits: list[PeriodicOrbit], samples: int
     return out
 
 
-def _run_kernel(system, params, X, t0_arr, k, integrator, opts, known, chunk_size, bar):
+class _Search(NamedTuple):
+    """What every round of a search shares: the problem and its options."""
+
+    system: ForcedSystem
+    params: Any
+    t0: jax.Array
+    integrator: AbstractIntegrator  # the rounds' (search) integrator
+    options: SearchOptions
+    bar: Any
+
+
+def _run_kernel(ctx: _Search, X, k: int, known, options: ShootOptions, chunk_size: int) -> ShootResult:
     """``shoot_kernel`` over ``X (n, dim)`` in chunks of ``chunk_size``: a numpy :class:`ShootResult`.
 
     The chunks of one device, one per local device at a time (sharded over the devices,
     :func:`jaxgear._devices.shard_rows`): each device runs the chunk shape of one device,
     so the result (each seed converges alone) is that of one device bit for bit (the
-    Newton kernel's round-off depends on its batch shape). Several devices pay off once
-    there are more seeds than ``chunk_size``."""
+    solver's round-off depends on its batch shape). Several devices pay off once there
+    are more seeds than ``chunk_size``."""
     X = np.asarray(X)
     size = min(int(chunk_size), len(X))
     D = len(local_devices())
+    shoot = check_shooting(ctx.system, ctx.integrator, k, options)
+    opts = options.shoot_options()
     parts = []
     for a, b in chunks(len(X), D * size):
         rows = -(-(b - a) // size) * size  # whole chunks
-        res = shard_rows(shoot_kernel, system, params, pad_rows(X[a:b], rows), t0_arr, k, integrator, opts["tol"],
-                         opts["max_iter"], opts["max_norm"], opts["period_tol"], opts["solver"], opts["segments"],
-                         known, opts["power"], opts["shift"], batch=2, per_device=size)
+        res = shard_rows(shoot_kernel, shoot, ctx.params, pad_rows(X[a:b], rows), ctx.t0, known, opts, batch=2,
+                         per_device=size)
         parts.append(ShootResult(*[f[: b - a] for f in res]))
-        if bar is not None:
-            bar.update(b - a)
+        if ctx.bar is not None:
+            ctx.bar.update(b - a)
     return _concat(parts)
 
 
@@ -332,110 +307,8 @@ def _concat(results: Sequence[ShootResult]) -> ShootResult:
     return ShootResult(*[np.concatenate(f, axis=0) for f in zip(*results)])
 
 
-def _polish(system, params, orbits, t0_arr, integrator, opts, dedup_tol, t0):
-    """Re-converge each orbit (found with the search integrator) with ``integrator``: Newton on
-    its minimal period ``m`` with one segment per period. Returns ``(orbits, index)``,
-    ``index[i]`` the polished orbit of input ``i`` or -1 when its Newton failed."""
-    out: list[PeriodicOrbit] = []
-    index = np.full(len(orbits), -1)
-    by_m: dict[int, list[int]] = {}
-    for i, o in enumerate(orbits):
-        by_m.setdefault(int(o.period), []).append(i)
-    for m, idx in sorted(by_m.items()):
-        X = np.stack([orbits[i].points[0] for i in idx])
-        try:
-            M = check_segments(integrator, m, m)
-        except ValueError:
-            M = 1
-        pol = dict(opts, solver="newton", segments=M, max_iter=min(int(opts["max_iter"]), 20))
-        res = _run_kernel(system, params, X, t0_arr, m, integrator, pol, None, 8, None)
-        found = _orbits_from_shots(res, dedup_tol, t0)
-        for j, i in enumerate(idx):
-            if int(res.status[j]) != Status.CONVERGED:
-                continue
-            pts = res.orbit[j, : int(res.min_period[j])]
-            for f, o in enumerate(found):
-                if same_attractor(pts, int(res.min_period[j]), o.points, o.period, dedup_tol):
-                    index[i] = len(out) + f
-                    break
-        out.extend(dataclasses.replace(o, n_seeds=0) for o in found)
-    return out, index
-
-
-def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | Sequence[int] = 1, t0=0.0,
-                         integrator: AbstractIntegrator | None = None, tol: float = 1e-10, max_iter: int = 40,
-                         max_norm: float = 1e6, period_tol: float = 1e-6, dedup_tol: float = 1e-6,
-                         chunk_size: int = 256, progress: bool = True,
-                         trajectory_samples: int = 200, solver: str | None = None, segments: int = 1,
-                         deflation_rounds: int = 0, deflation_power: float = 2.0, deflation_shift: float = 1.0,
-                         transient: int = 0, search_integrator: AbstractIntegrator | None = None,
-                         verify: int = 0) -> OrbitSearch:
-    """Shoot from many seeds and return the distinct periodic orbits (paper §4.1, ref. [15]).
-
-    For every ``k`` and every seed, a Newton-type solve of ``G(x) = P^k(x) - x = 0`` (the
-    k-fold stroboscopic map of paper eq. 6, full state; single or multiple shooting, see
-    :func:`periodic_orbit`); then the Floquet multipliers of each converged orbit (its
-    minimal period ``m``), and the converged seeds deduplicated into distinct orbits.
-    Seeds are processed in chunks of ``chunk_size`` (one compiled shape per ``k``,
-    ``vmap`` over the chunk): memory is bounded by the chunk, and the result does not
-    depend on ``chunk_size``. The system and parameters are checked once on entry
-    (:func:`~jaxgear.check_system`).
-
-    A search for every orbit of a region (``jaxgear shoot --periods 1-8 --random N``)
-    adds three things:
-
-    - ``transient``: the seeds are first mapped ``transient`` forcing periods forward
-      (direct integration), which brings seeds from anywhere in a region near the
-      attractors and the unstable orbits they are born from;
-    - ``deflation_rounds``: after the plain round, the same seeds are shot again with the
-      orbits known so far (of periods dividing ``k``) deflated away, so that they go to
-      other orbits (see :mod:`jaxgear.shooting._solve`); rounds stop when one finds
-      nothing new;
-    - ``search_integrator``: the rounds use this (cheaper) integrator; each distinct
-      orbit is then re-converged with ``integrator`` (Newton on its minimal period, one
-      segment per period) and only orbits that re-converge are reported. Their
-      multipliers are those of ``integrator``'s map.
-
-    Args:
-        system: a :class:`~jaxgear.ForcedSystem` of state dimension ``dim``.
-        params: its parameter pytree (not batched), e.g. :func:`jaxgear.paper_params`.
-        seeds: ``(n, dim)`` array of states at phase ``t0`` (state units; shot for
-            every ``k`` in ``period``), or a mapping ``{k: (n_k, dim)}`` such as
-            :func:`seeds_from_result` returns.
-        period: ``k`` or a sequence of ``k`` (forcing periods; ignored when ``seeds``
-            is a mapping).
-        t0: phase of the stroboscopic section (system time unit; the gear models use
-            dimensionless time ``omega_n t``).
-        integrator: any integrator object; default :func:`~jaxgear.default_integrator`
-            (kink-aware RK4, 200 steps per period).
-        tol: convergence on ``||P^k(x) - x||`` (Euclidean, state units).
-        max_iter, max_norm, period_tol, solver, segments: as in :func:`periodic_orbit`.
-        dedup_tol: two converged seeds give the same orbit when a point of one lies
-            within ``dedup_tol * (1 + ||x||)`` of a point of the other (any cyclic
-            shift); an orbit found with several multiples of its period is reported
-            once, with its minimal period.
-        chunk_size: seeds per batch (>= 1).
-        progress: show a progress bar (tqdm, with time left); ``False`` silences it.
-        trajectory_samples: samples per forcing period of each orbit's stored
-            trajectory (:attr:`PeriodicOrbit.trajectory`, used by
-            :func:`jaxgear.plotting.plot_orbit` without integrating); 0 stores none.
-        deflation_rounds: deflated rounds after the plain one (0: none).
-        deflation_power, deflation_shift: ``p`` and ``shift`` of the deflation operator.
-        transient: forcing periods each seed is mapped forward before shooting (0: none).
-        search_integrator: integrator of the rounds (default: ``integrator``).
-        verify: when > 0, check each orbit by direct integration over ``verify`` periods
-            (:func:`verify_orbit`), stored in :attr:`OrbitSearch.checks`.
-    Returns:
-        :class:`OrbitSearch`: ``orbits`` (distinct, sorted by period), ``shots``
-        ``{k: ShootResult}`` with leading shape ``(n_k (rounds + 1),)`` (round after
-        round; with a search integrator the fields are that integrator's),
-        ``status_counts``, the seeds, the per-``k`` convergence, the parameter set and
-        the settings.
-    Raises:
-        ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
-            options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
-    """
-    start = time.perf_counter()
+def _seed_groups(system: ForcedSystem, seeds, period) -> dict[int, np.ndarray]:
+    """``{k: (n_k, dim)}`` from an array shot for every ``k`` of ``period``, or a mapping."""
     if isinstance(seeds, Mapping):
         groups = {check_period(k): np.asarray(v, dtype=float) for k, v in seeds.items()}
     else:
@@ -450,118 +323,215 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds, *, period: int | S
             raise ValueError(f"seeds for period {k} must have shape (n, {system.dim}) with n >= 1 "
                              f"({', '.join(system.state_names)}), got {X.shape}.")
         check_state_shape(system, X)
-    check_newton_options(tol, max_iter, period_tol, max_norm)
-    check_int(chunk_size, "chunk_size", 1)
-    check_int(trajectory_samples, "trajectory_samples", 0)
-    check_int(deflation_rounds, "deflation_rounds", 0)
-    check_int(transient, "transient", 0)
-    check_int(segments, "segments", 1)
-    solver = default_solver(segments, deflation_rounds > 0) if solver is None else solver
-    check_int(verify, "verify", 0)
-    check_number(dedup_tol, "dedup_tol", 0, strict_min=True)
-    integrator = resolve_integrator(integrator)
-    search_int = integrator if search_integrator is None else resolve_integrator(search_integrator)
-    polish = search_int != integrator
-    for k in groups:
-        check_solver_options(solver, segments, search_int, k, deflation_rounds > 0, deflation_power,
-                             deflation_shift)
-    first = next(iter(groups.values()))[0]
-    check_system(system, params, first)
+    return groups
 
-    if transient:
-        for k, X in groups.items():
-            Y = np.asarray(stroboscopic_map(system, params, X, periods=int(transient), t0=t0, integrator=integrator))
-            groups[k] = np.where(np.all(np.isfinite(Y), axis=1, keepdims=True), Y, X)
 
-    opts = dict(tol=float(tol), max_iter=int(max_iter), max_norm=float(max_norm), period_tol=float(period_tol),
-                solver=solver, segments=int(segments), power=float(deflation_power), shift=float(deflation_shift))
-    t0_arr = jnp.asarray(t0, jnp.float64)
-    shots: dict[int, ShootResult] = {}
-    found: list[PeriodicOrbit] = []  # distinct orbits of the search integrator's map
-    lanes: dict[int, np.ndarray] = {}  # per k and run: index into `found`, -1 if not converged
-    first_round: dict[int, int] = {}
-    bar = progress_bar(sum(len(X) for X in groups.values()) * (1 + int(deflation_rounds)), "shooting", progress,
-                       unit="seed")
-    try:
-        for k, X in sorted(groups.items()):  # one jit per distinct k (and chunk shape)
-            rounds = []
-            for r in range(1 + int(deflation_rounds)):
-                known = _known_points(found, k, 16, system.dim) if r > 0 else None
-                if r > 0 and not np.any(np.isfinite(np.asarray(known))):
-                    break
-                res = _run_kernel(system, params, X, t0_arr, k, search_int, opts, known, chunk_size, bar)
-                rounds.append(res)
-                new = _orbits_from_shots(res, dedup_tol, float(t0))
-                n_before = len(found)
-                found = _merge_orbits(list(found) + new, dedup_tol, keep_order=True)
-                if r == 0:
-                    first_round[k] = int(np.sum(np.asarray(res.status) == Status.CONVERGED))
-                if r > 0 and len(found) == n_before:
-                    break
-            shots[k] = _concat(rounds)
-    finally:
-        bar.close()
-    # every converged run: which distinct orbit it reached
-    for k, res in shots.items():
-        st = np.asarray(res.status)
-        lab = np.full(len(st), -1)
-        for i in np.flatnonzero(st == Status.CONVERGED):
-            m = int(res.min_period[i])
-            for j, o in enumerate(found):
-                if same_attractor(res.orbit[i, :m], m, o.points, o.period, dedup_tol):
-                    lab[i] = j
-                    break
-        lanes[k] = lab
-    if polish and found:
-        final, index = _polish(system, params, found, t0_arr, integrator, opts, dedup_tol, float(t0))
-    else:
-        final, index = list(found), np.arange(len(found))
-    # merge orbits that coincide after polishing, sort, and count the seeds of each
-    order = _merge_orbits(final, dedup_tol, keep_order=True)
-    remap = np.full(len(final), -1)
-    for i, o in enumerate(final):
-        remap[i] = next(j for j, q in enumerate(order) if same_attractor(o.points, o.period, q.points, q.period,
-                                                                         dedup_tol))
+def _after_transient(ctx: _Search, groups: dict[int, np.ndarray], integrator) -> dict[int, np.ndarray]:
+    """Each seed mapped ``transient`` forcing periods forward (kept where that blew up)."""
+    n = ctx.options.transient
+    if not n:
+        return groups
+    out = {}
+    for k, X in groups.items():
+        Y = np.asarray(stroboscopic_map(ctx.system, ctx.params, X, periods=int(n), t0=ctx.t0, integrator=integrator))
+        out[k] = np.where(np.all(np.isfinite(Y), axis=1, keepdims=True), Y, X)
+    return out
+
+
+def _shoot_rounds(ctx: _Search, X, k: int, found: list[PeriodicOrbit]):
+    """The plain round and the deflated rounds for ``P^k`` from ``X``.
+
+    Returns the shots of all rounds (concatenated) and the distinct orbits known after
+    them (``found`` extended)."""
+    opts = ctx.options
+    rounds = []
+    for r in range(1 + opts.deflation_rounds):
+        known = _known_points(found, k, 16, ctx.system.dim) if r > 0 else None
+        if r > 0 and not np.any(np.isfinite(np.asarray(known))):
+            break
+        res = _run_kernel(ctx, X, k, known, opts, opts.chunk_size)
+        rounds.append(res)
+        n_before = len(found)
+        found = _merge_orbits(list(found) + _orbits_from_shots(res, opts.dedup_tol, float(ctx.t0)), opts.dedup_tol,
+                              keep_order=True)
+        if r > 0 and len(found) == n_before:
+            break
+    return _concat(rounds), found
+
+
+def _orbit_index(res: ShootResult, orbits: Sequence[PeriodicOrbit], dedup_tol: float) -> np.ndarray:
+    """Per run of ``res``: the index of the orbit of ``orbits`` it converged to, -1 if none."""
+    st = np.asarray(res.status)
+    lab = np.full(len(st), -1)
+    for i in np.flatnonzero(st == Status.CONVERGED):
+        m = int(res.min_period[i])
+        for j, o in enumerate(orbits):
+            if same_attractor(res.orbit[i, :m], m, o.points, o.period, dedup_tol):
+                lab[i] = j
+                break
+    return lab
+
+
+def _polish(ctx: _Search, orbits, integrator, dedup_tol):
+    """Re-converge each orbit (found with the search integrator) with ``integrator``: the
+    library's solver on its minimal period ``m`` with one segment per period. Returns
+    ``(orbits, index)``, ``index[i]`` the polished orbit of input ``i`` or -1 when that failed."""
+    out: list[PeriodicOrbit] = []
+    index = np.full(len(orbits), -1)
+    by_m: dict[int, list[int]] = {}
+    for i, o in enumerate(orbits):
+        by_m.setdefault(int(o.period), []).append(i)
+    pctx = ctx._replace(integrator=integrator, bar=None)
+    for m, idx in sorted(by_m.items()):
+        X = np.stack([orbits[i].points[0] for i in idx])
+        try:
+            M = check_segments(integrator, m, m)
+        except ValueError:
+            M = 1
+        pol = ShootOptions(tol=ctx.options.tol, max_iter=min(ctx.options.max_iter, 20), max_norm=ctx.options.max_norm,
+                           period_tol=ctx.options.period_tol, segments=M)
+        res = _run_kernel(pctx, X, m, None, pol, 8)
+        found = _orbits_from_shots(res, dedup_tol, float(ctx.t0))
+        lab = _orbit_index(res, found, dedup_tol)
+        index[idx] = np.where(lab >= 0, lab + len(out), -1)
+        out.extend(dataclasses.replace(o, n_seeds=0) for o in found)
+    return out, index
+
+
+def _final_orbits(found, index, lanes, dedup_tol):
+    """Merge the (polished) orbits that coincide, sort them by period and first coordinate,
+    count the runs that reached each. Returns the orbits and, per ``k``, each run's index
+    into them (-1: no reported orbit)."""
+    order = _merge_orbits(found, dedup_tol, keep_order=True)
+    remap = np.array([next(j for j, q in enumerate(order) if same_attractor(o.points, o.period, q.points, q.period,
+                                                                           dedup_tol)) for o in found], dtype=int)
     sorted_idx = sorted(range(len(order)), key=lambda j: (order[j].period, float(order[j].points[0, 0])))
     rank = np.empty(len(order), dtype=int)
     rank[sorted_idx] = np.arange(len(order))
-    final_of_found = np.array([rank[remap[index[j]]] if index[j] >= 0 else -1 for j in range(len(found))], dtype=int)
-    lane_to_final = {k: np.where(lab >= 0, final_of_found[np.maximum(lab, 0)], -1) if len(found) else lab
-                     for k, lab in lanes.items()}
+    of_found = np.array([rank[remap[i]] if i >= 0 else -1 for i in index], dtype=int)
+    to_final = {k: np.where(lab >= 0, of_found[np.maximum(lab, 0)], -1) if len(index) else lab
+                for k, lab in lanes.items()}
     counts = np.zeros(len(order), dtype=int)
-    for lab in lane_to_final.values():
+    for lab in to_final.values():
         counts += np.bincount(lab[lab >= 0], minlength=len(order))
     orbits = [dataclasses.replace(order[j], n_seeds=int(counts[rank[j]])) for j in sorted_idx]
-    orbits = _with_trajectories(system, params, orbits, int(trajectory_samples), integrator)
-    convergence = {}
-    for k, lab in lane_to_final.items():
+    return orbits, to_final
+
+
+def _convergence(to_final: dict[int, np.ndarray], groups: dict[int, np.ndarray]) -> dict:
+    """Per ``k``: runs, seeds, converged runs, seeds with a converged run, to which orbits."""
+    out = {}
+    for k, lab in to_final.items():
         n = len(groups[k])
         ok = lab >= 0
         per_seed = ok.reshape(-1, n).any(axis=0) if len(lab) else np.zeros(n, bool)
-        convergence[str(k)] = dict(runs=int(len(lab)), seeds=int(n), converged=int(ok.sum()),
-                                   seeds_converged=int(per_seed.sum()), first_round=int(np.sum(ok[:n])),
-                                   orbits={str(int(j)): int(c) for j, c in
-                                           zip(*np.unique(lab[ok], return_counts=True))})
-    checks = {}
-    if verify:
-        for i, o in enumerate(orbits):
-            c = verify_orbit(system, params, o, periods=int(verify), t0=t0, integrator=integrator)
-            left = c.left_at[c.left_at > 0]
-            checks[str(i)] = dict(periods=int(verify), kept=bool(c.kept), left_at=int(left.min()) if left.size else -1,
-                                  consistent=bool(c.kept) == bool(o.stable))
-    counts_st = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
-                               NEWTON_STATUSES)
-    settings = SearchSettings(
-        periods=tuple(sorted(groups)), t0=float(t0), integrator=integrator, tol=float(tol), max_iter=int(max_iter),
-        max_norm=float(max_norm),
-        period_tol=float(period_tol), dedup_tol=float(dedup_tol), chunk_size=int(chunk_size),
-        trajectory_samples=int(trajectory_samples), solver=solver, segments=int(segments),
-        deflation_rounds=int(deflation_rounds), deflation_power=float(deflation_power),
-        deflation_shift=float(deflation_shift), transient=int(transient),
-        search_integrator=search_int, verify=int(verify),
-    )
-    params_dict = params_to_dict(params)
-    return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts_st, seeds=groups, system=system.name,
+        out[str(k)] = dict(runs=int(len(lab)), seeds=int(n), converged=int(ok.sum()),
+                           seeds_converged=int(per_seed.sum()), first_round=int(np.sum(ok[:n])),
+                           orbits={str(int(j)): int(c) for j, c in zip(*np.unique(lab[ok], return_counts=True))})
+    return out
+
+
+def _checks(ctx: _Search, orbits, integrator) -> dict:
+    """Each orbit checked by direct integration over ``verify`` periods (:func:`verify_orbit`)."""
+    from ._verify import verify_orbit
+
+    n = ctx.options.verify
+    out = {}
+    for i, o in enumerate(orbits if n else ()):
+        c = verify_orbit(ctx.system, ctx.params, o, periods=n, t0=ctx.t0, integrator=integrator)
+        left = c.left_at[c.left_at > 0]
+        out[str(i)] = dict(periods=n, kept=bool(c.kept), left_at=int(left.min()) if left.size else -1,
+                           consistent=bool(c.kept) == bool(o.stable))
+    return out
+
+
+def find_periodic_orbits(system: ForcedSystem, params, seeds: Float[ArrayLike, "n dim"] | Mapping, *,
+                         period: int | Sequence[int] = 1, t0=0.0, integrator: AbstractIntegrator | None = None,
+                         options: SearchOptions | None = None, progress: bool = True, **changes) -> OrbitSearch:
+    """Shoot from many seeds and return the distinct periodic orbits (paper §4.1, ref. [15]).
+
+    For every ``k`` and every seed, a Newton-type solve of ``G(x) = P^k(x) - x = 0`` (the
+    k-fold stroboscopic map of paper eq. 6, full state; single or multiple shooting, see
+    :func:`periodic_orbit`); then the Floquet multipliers of each converged orbit (its
+    minimal period ``m``), and the converged seeds deduplicated into distinct orbits.
+    One period and a range of periods are the same search (``jaxgear shoot --period K``
+    and ``--periods K1-K2``): seeds are processed in chunks (one compiled shape per
+    ``k``, ``vmap`` over the chunk), so memory is bounded by the chunk and the result
+    does not depend on its size. The system and parameters are checked once on entry
+    (:func:`~jaxgear.check_system`).
+
+    The :class:`SearchOptions` add to each solve (:class:`ShootOptions`):
+
+    - ``transient``: the seeds are first mapped ``transient`` forcing periods forward
+      (direct integration), which brings seeds from anywhere in a region near the
+      attractors and the unstable orbits they are born from (random seeds need it;
+      ``jaxgear shoot --random`` uses 40);
+    - ``deflation_rounds``: after the plain round, the same seeds are shot again with the
+      orbits known so far (of periods dividing ``k``) deflated away, so that they go to
+      other orbits (see :mod:`jaxgear.shooting._solve`); rounds stop when one finds
+      nothing new;
+    - ``search_integrator``: the rounds use this (cheaper) integrator; each distinct
+      orbit is then re-converged with ``integrator`` (one segment per period) and only
+      orbits that re-converge are reported, with ``integrator``'s multipliers;
+    - ``verify``: each orbit checked by direct integration (:func:`verify_orbit`).
+
+    Args:
+        system: a :class:`~jaxgear.ForcedSystem` of state dimension ``dim``.
+        params: its parameter pytree (not batched), e.g. :func:`jaxgear.paper_params`.
+        seeds: ``(n, dim)`` array of states at phase ``t0`` (state units; shot for
+            every ``k`` in ``period``), or a mapping ``{k: (n_k, dim)}`` such as
+            :func:`seeds_from_result` returns.
+        period: ``k`` or a sequence of ``k`` (forcing periods; ignored when ``seeds``
+            is a mapping).
+        t0: phase of the stroboscopic section (system time unit; the gear models use
+            dimensionless time ``omega_n t``).
+        integrator: any integrator object; default :func:`~jaxgear.default_integrator`
+            (kink-aware RK4, 200 steps per period).
+        options: :class:`SearchOptions`; ``None``: the defaults.
+        progress: show a progress bar (tqdm, with time left); ``False`` silences it.
+        **changes: fields of ``options`` to change, e.g. ``max_iter=15, transient=40``.
+    Returns:
+        :class:`OrbitSearch`: ``orbits`` (distinct, sorted by period), ``shots``
+        ``{k: ShootResult}`` with leading shape ``(n_k (rounds + 1),)`` (round after
+        round; with a search integrator the fields are that integrator's),
+        ``status_counts``, the seeds (after the transient), the per-``k`` convergence,
+        the parameter set and the settings.
+    Raises:
+        ValueError: seeds not of shape ``(n, dim)`` or not finite, ``k < 1``, bad
+            options, or a system/parameter set that fails :func:`~jaxgear.check_system`.
+    """
+    start = time.perf_counter()
+    groups = _seed_groups(system, seeds, period)
+    opts = with_changes(options, SearchOptions, changes)
+    integrator = resolve_integrator(integrator)
+    search_int = integrator if opts.search_integrator is None else resolve_integrator(opts.search_integrator)
+    for k in groups:
+        check_shooting(system, search_int, k, opts)
+    check_system(system, params, next(iter(groups.values()))[0])
+    ctx = _Search(system, params, jnp.asarray(t0, jnp.float64), search_int, opts, None)
+    groups = _after_transient(ctx, groups, integrator)
+    shots: dict[int, ShootResult] = {}
+    found: list[PeriodicOrbit] = []  # distinct orbits of the search integrator's map
+    bar = progress_bar(sum(len(X) for X in groups.values()) * (1 + opts.deflation_rounds), "shooting", progress,
+                       unit="seed")
+    try:
+        for k, X in sorted(groups.items()):  # one jit per distinct k (and chunk shape)
+            shots[k], found = _shoot_rounds(ctx._replace(bar=bar), X, k, found)
+    finally:
+        bar.close()
+    lanes = {k: _orbit_index(res, found, opts.dedup_tol) for k, res in shots.items()}
+    if search_int != integrator and found:
+        polished, index = _polish(ctx, found, integrator, opts.dedup_tol)
+    else:
+        polished, index = list(found), np.arange(len(found))
+    orbits, to_final = _final_orbits(polished, index, lanes, opts.dedup_tol)
+    orbits = _with_trajectories(system, params, orbits, opts.trajectory_samples, integrator)
+    counts = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
+                            NEWTON_STATUSES)
+    settings = dict(opts.to_dict(), periods=sorted(groups), t0=float(t0), integrator=integrator.to_dict(),
+                    search_integrator=search_int.to_dict())
+    return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
                        state_names=tuple(system.state_names), section_index=system.section_index,
-                       params=params_dict, settings=settings, version=__version__,
-                       runtime_s=time.perf_counter() - start, convergence=convergence, checks=checks)
+                       params=params_to_dict(params), settings=settings, version=__version__,
+                       runtime_s=time.perf_counter() - start, convergence=_convergence(to_final, groups),
+                       checks=_checks(ctx, orbits, integrator))

@@ -24,7 +24,7 @@ known orbit points ``r_i``, the solver works on
 which has the same roots except the known ones (near ``r_i`` it stays away from zero
 for ``p >= 2``), so a seed that went to a known orbit goes elsewhere.
 
-The solvers are optimistix's (``Newton``, ``Dogleg``, ``LevenbergMarquardt``) under
+The solver is an optimistix object (``Newton``, ``Dogleg``, ``LevenbergMarquardt``, ...) under
 ``vmap`` with ``throw=False``: every seed ends with its own :class:`~jaxgear.Status`.
 Derivatives of the root with respect to the parameters are implicit
 (``optimistix.ImplicitAdjoint``: the solver's iterations are not differentiated).
@@ -40,13 +40,9 @@ from jax.custom_derivatives import SymbolicZero
 
 from .._status import Status
 from ..integrate import AbstractIntegrator
+from ._options import ShootOptions, _optx
 
-__all__ = ["SOLVERS", "Shooting", "segment_map", "make_solver",
-           "check_segments", "solve_orbit", "optx_status"]
-
-SOLVERS = ("newton", "dogleg", "levenberg-marquardt", "damped-newton")
-"""Solver names: the three optimistix solvers, and the hand-written damped Newton of
-:mod:`._newton` (single shooting only; kept as the baseline of the benchmarks)."""
+__all__ = ["Shooting", "segment_map", "check_segments", "solve_orbit", "optx_status"]
 
 class Shooting(eqx.Module):
     """The multiple-shooting problem of a P-k orbit: system, integrator, ``k``, ``M``.
@@ -143,30 +139,6 @@ def _segment_map_jvp(primals, tangents):
 _segment_map.defjvp(_segment_map_jvp, symbolic_zeros=True)
 
 
-def _optx():
-    """optimistix, imported on first use (it adds a tenth of a second to every ``import jaxgear``)."""
-    import optimistix
-
-    return optimistix
-
-
-def make_solver(name: str, tol: float):
-    """The optimistix solver called ``name`` (one of :data:`SOLVERS` but ``damped-newton``).
-
-    Tolerances: steps below ``1e-12 + 1e-10 |x|`` (max norm) end the iteration; whether a
-    seed converged is then decided on the residual (``||P^k(x) - x|| <= tol``).
-    """
-    optx = _optx()
-    rtol, atol = 1e-10, 1e-12
-    if name == "newton":  # its atol also bounds the residual (max norm) at termination
-        return optx.Newton(rtol=rtol, atol=1e-2 * tol)
-    if name == "dogleg":
-        return optx.Dogleg(rtol=rtol, atol=atol)
-    if name == "levenberg-marquardt":
-        return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    raise ValueError(f"unknown solver {name!r}; choose one of {', '.join(SOLVERS)}.")
-
-
 def optx_status(result, finite, residual, tol, diverged):
     """A :class:`~jaxgear.Status` code from an optimistix ``RESULTS`` and the residual check."""
     optx = _optx()
@@ -187,18 +159,19 @@ def deflation(x, known, power: float, shift: float):
     return jnp.prod(jnp.where(ok, fac, 1.0))
 
 
-def solve_orbit(shoot: Shooting, params, t0, x0, known, *, solver: str, tol: float, max_iter: int,
-                max_norm: float, power: float = 2.0, shift: float = 1.0):
+def solve_orbit(shoot: Shooting, params, t0, x0, known, options: ShootOptions):
     """Solve the (deflated) multiple-shooting problem from one seed ``x0 (dim,)``.
 
     Returns ``x (dim,)`` (the first segment start, differentiable w.r.t. ``params`` by
-    the implicit function theorem), the status code, the iterations and the residual
-    ``||P^k(x) - x||`` of the composed segments.
+    the implicit function theorem), the status code, the iterations, the residual
+    ``||P^k(x) - x||`` of the composed segments and the solver's last iterate ``(dim,)``.
     """
     optx = _optx()
     args = (params, t0)
     X0 = shoot.initial_states(params, t0, x0)
     X0 = jax.lax.stop_gradient(jnp.where(jnp.all(jnp.isfinite(X0)), X0, jnp.broadcast_to(x0, X0.shape)))
+    solver = options.root_finder
+    power, shift = options.deflation_power, options.deflation_shift
 
     def fn(Xf, a):
         X = Xf.reshape(X0.shape)
@@ -207,15 +180,15 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, *, solver: str, tol: flo
     # the solve itself is not differentiated: derivatives come from the implicit function
     # theorem, attached below by a zero-step solve at the root
     sargs = jax.lax.stop_gradient(args)
-    sol = optx.root_find(fn, make_solver(solver, tol), X0.reshape(-1), sargs, max_steps=int(max_iter), throw=False,
+    sol = optx.root_find(fn, solver, X0.reshape(-1), sargs, max_steps=int(options.max_iter), throw=False,
                          adjoint=optx.ImplicitAdjoint())
     Xs = jax.lax.stop_gradient(sol.value)
     x = Xs.reshape(X0.shape)[0]
     xk = shoot.integrator.flow(shoot.system, params, x, t0, shoot.k)
     r = jax.lax.stop_gradient(jnp.linalg.norm(xk - x))
     finite = jnp.all(jnp.isfinite(Xs)) & jnp.isfinite(r)
-    diverged = jnp.max(jnp.linalg.norm(jnp.where(jnp.isfinite(Xs), Xs, 0.0).reshape(X0.shape), axis=1)) > max_norm
-    st = optx_status(sol.result, finite, r, tol, diverged)
+    diverged = jnp.max(jnp.linalg.norm(jnp.where(jnp.isfinite(Xs), Xs, 0.0).reshape(X0.shape), axis=1)) > options.max_norm
+    st = optx_status(sol.result, finite, r, options.tol, diverged)
     # Implicit derivatives (optimistix.ImplicitAdjoint) at a converged root. A seed that did
     # not converge gets the residual X - X_end instead (identity Jacobian, zero derivative;
     # its point is NaN anyway): the adjoint's linear solve would otherwise raise on a
@@ -227,12 +200,12 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, *, solver: str, tol: flo
         p_, t_, ok, Xe = a
         return jnp.where(ok, fn(Xf, (p_, t_)), Xf - Xe)
 
-    sol_ad = optx.root_find(gated, make_solver(solver, tol), X_end, (params, t0, conv, X_end), max_steps=0,
+    sol_ad = optx.root_find(gated, solver, X_end, (params, t0, conv, X_end), max_steps=0,
                             throw=False, adjoint=optx.ImplicitAdjoint())
-    x = sol_ad.value.reshape(X0.shape)[0]
+    x_ad = sol_ad.value.reshape(X0.shape)[0]
     # a seed that already meets the tolerance counts no iteration (optimistix always takes
     # one step, a correction below the tolerance, before it tests for termination)
     x0s = jax.lax.stop_gradient(x0)
     r0 = jnp.linalg.norm(shoot.integrator.flow(shoot.system, params, x0s, t0, shoot.k) - x0s)
-    steps = jnp.where(r0 <= tol, 0, sol.stats["num_steps"])
-    return x, st, steps, jnp.where(finite, r, jnp.inf)
+    steps = jnp.where(r0 <= options.tol, 0, sol.stats["num_steps"])
+    return x_ad, st, steps, jnp.where(finite, r, jnp.inf), x

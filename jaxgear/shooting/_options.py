@@ -1,0 +1,190 @@
+"""Options of the shooting method (paper §4.1): one solve (:class:`ShootOptions`) and a search
+over many seeds and periods (:class:`SearchOptions`).
+
+Both are immutable ``eqx.Module``s checked at construction (a bad value raises a
+``ValueError`` naming the field). The solver is an optimistix object or ``None`` (the
+library's choice, :func:`default_solver`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import equinox as eqx
+
+from .._checks import check_int, check_number
+from ..integrate import AbstractIntegrator
+
+__all__ = ["ShootOptions", "SearchOptions", "default_solver", "check_solver", "with_changes"]
+
+STEP_RTOL, STEP_ATOL = 1e-10, 1e-12
+"""Step tolerances of the library's solver: steps below ``1e-12 + 1e-10 |x|`` end the iteration
+(whether a seed converged is then decided on the residual ``||P^k(x) - x|| <= tol``)."""
+
+
+def _optx():
+    """optimistix, imported on first use (it adds a tenth of a second to every ``import jaxgear``)."""
+    import optimistix
+
+    return optimistix
+
+
+def default_solver():
+    """The solver used when none is given: ``optimistix.LevenbergMarquardt``.
+
+    Measured on the paper preset (``benchmarks/shooting.py``): from 64 random seeds over
+    region D with a transient of 40 periods it reaches the unstable P-1 from 45 seeds
+    (``optimistix.Dogleg`` 44, ``optimistix.Newton`` 31: its full steps overshoot near the
+    flip-unstable P-1), and from seeds 0.05 off the stable P-4 it converges from every
+    seed, where Dogleg's trust region collapses on the kinks of the backlash map and stalls
+    on one of four seeds. Its damping keeps the iterates of far seeds bounded.
+    """
+    return _optx().LevenbergMarquardt(rtol=STEP_RTOL, atol=STEP_ATOL)
+
+
+def check_solver(solver) -> None:
+    """Raise ``ValueError`` unless ``solver`` is ``None`` or an optimistix root finder
+    (``optx.Newton``, ``optx.Chord``) or least-squares solver (``optx.Dogleg``,
+    ``optx.LevenbergMarquardt``, ``optx.GaussNewton``) instance."""
+    if solver is None:
+        return
+    optx = _optx()
+    allowed = (optx.AbstractRootFinder, optx.AbstractLeastSquaresSolver)
+    hint = ("must be None (the library's choice) or an optimistix solver instance such as "
+            "optimistix.Newton(rtol=1e-10, atol=1e-12), optimistix.Dogleg(...) or optimistix.LevenbergMarquardt(...)")
+    if isinstance(solver, str):
+        raise ValueError(f"solver={solver!r} {hint}; solver names are for the command line only.")
+    if isinstance(solver, type) and issubclass(solver, allowed):
+        raise ValueError(f"solver={solver.__name__} is a class: {hint} (call it with its tolerances).")
+    if isinstance(solver, optx.Bisection):
+        raise ValueError(f"solver={solver!r}: Bisection solves scalar equations only; the solver {hint}.")
+    if not isinstance(solver, allowed):
+        raise ValueError(f"solver={solver!r} {hint}.")
+
+
+class ShootOptions(eqx.Module):
+    """Options of one Newton-type solve of ``P^k(x) - x = 0`` (paper §4.1).
+
+    Attributes:
+        solver: an optimistix root finder (``optx.Newton``, ``optx.Dogleg``,
+            ``optx.LevenbergMarquardt`` instance) or ``None``: the library's choice
+            (:func:`default_solver`).
+        tol: convergence on ``||P^k(x) - x||`` (Euclidean, state units).
+        max_iter: iteration limit of the solver.
+        max_norm: an iterate with ``||x|| > max_norm`` is reported as diverged (state units).
+        period_tol: ``P^j(x*) = x*`` for a divisor ``j`` of ``k`` when
+            ``||P^j(x*) - x*|| <= period_tol (1 + ||x*||)`` (minimal period).
+        segments: ``M``, segments of the multiple shooting (1: single shooting).
+        deflation_power, deflation_shift: ``p`` and ``shift`` of the deflation operator
+            ``prod (1 / ||x - r_i||^p + shift)`` (Farrell, Birkisson & Funke 2015).
+    """
+
+    solver: Any = None
+    tol: float = 1e-10
+    max_iter: int = eqx.field(static=True, default=40)
+    max_norm: float = 1e6
+    period_tol: float = 1e-6
+    segments: int = eqx.field(static=True, default=1)
+    deflation_power: float = 2.0
+    deflation_shift: float = 1.0
+
+    def __check_init__(self):
+        check_solver(self.solver)
+        check_number(self.tol, "tol", 0, strict_min=True)
+        check_int(self.max_iter, "max_iter", 1)
+        check_number(self.max_norm, "max_norm", 0, strict_min=True)
+        check_number(self.period_tol, "period_tol", 0, strict_min=True)
+        check_int(self.segments, "segments", 1)
+        check_number(self.deflation_power, "deflation_power", 1, strict_min=True)
+        check_number(self.deflation_shift, "deflation_shift", 0)
+
+    @property
+    def root_finder(self):
+        """The optimistix solver itself (:func:`default_solver` when ``solver`` is ``None``)."""
+        return default_solver() if self.solver is None else self.solver
+
+    def shoot_options(self) -> ShootOptions:
+        """The options of one solve (these, without any search options)."""
+        return ShootOptions(**{f.name: getattr(self, f.name) for f in dataclasses.fields(ShootOptions)})
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every option, JSON-able (the solver as its class name and tolerances)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name == "solver":
+                s = self.root_finder
+                v = {"type": type(s).__name__, "rtol": float(s.rtol), "atol": float(s.atol),
+                     "default": self.solver is None}
+            elif isinstance(v, AbstractIntegrator):
+                v = v.to_dict()
+            out[f.name] = v
+        return out
+
+
+class SearchOptions(ShootOptions):
+    """Options of :func:`~jaxgear.find_periodic_orbits`: those of each solve
+    (:class:`ShootOptions`) and of the search over many seeds and periods.
+
+    The same options serve one period and a range of periods (``jaxgear shoot --period K``
+    and ``--periods K1-K2`` alike).
+
+    Attributes:
+        transient: forcing periods each seed is mapped forward (direct integration)
+            before shooting. Seeds drawn at random over a region need it: it brings them
+            near the attractors and the unstable orbits they are born from (on the paper
+            preset it lifts the converged fraction from about 1 % to about 80 %,
+            ``benchmarks/shooting.py``); seeds already near an orbit (a user's point, an
+            unstable orbit) do not, and would be carried away from an unstable one.
+            ``jaxgear shoot --random`` uses 40.
+        deflation_rounds: deflated rounds after the plain one: the same seeds shot again
+            with the orbits found so far deflated away (0: none; rounds stop when one
+            finds nothing new).
+        search_integrator: integrator of the rounds (``None``: the search's own
+            integrator). When it differs, each distinct orbit is re-converged (polished)
+            with the search's integrator and only orbits that re-converge are reported.
+        dedup_tol: two converged seeds give the same orbit when a point of one lies
+            within ``dedup_tol (1 + ||x||)`` of a point of the other (any cyclic shift).
+        chunk_size: seeds per batch (memory bound; results do not depend on it).
+        trajectory_samples: samples per forcing period of each orbit's stored
+            trajectory (0: none).
+        verify: when > 0, check each orbit by direct integration over ``verify``
+            periods (:func:`~jaxgear.verify_orbit`).
+    """
+
+    transient: int = eqx.field(static=True, default=0)
+    deflation_rounds: int = eqx.field(static=True, default=0)
+    search_integrator: AbstractIntegrator | None = eqx.field(static=True, default=None)
+    dedup_tol: float = 1e-6
+    chunk_size: int = eqx.field(static=True, default=256)
+    trajectory_samples: int = eqx.field(static=True, default=200)
+    verify: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        check_int(self.transient, "transient", 0)
+        check_int(self.deflation_rounds, "deflation_rounds", 0)
+        if self.search_integrator is not None and not isinstance(self.search_integrator, AbstractIntegrator):
+            raise ValueError(f"search_integrator={self.search_integrator!r} must be None or an integrator object "
+                             "(jaxgear.RK4(...), jaxgear.KinkAwareRK4(...), jaxgear.Adaptive(...)).")
+        check_number(self.dedup_tol, "dedup_tol", 0, strict_min=True)
+        check_int(self.chunk_size, "chunk_size", 1)
+        check_int(self.trajectory_samples, "trajectory_samples", 0)
+        check_int(self.verify, "verify", 0)
+
+
+def with_changes(options, cls, changes: dict):
+    """``options`` (an instance of ``cls``, or ``None`` for its defaults) with the fields in
+    ``changes`` replaced (checked again); an unknown name raises ``ValueError``."""
+    if options is None:
+        options = cls()
+    elif not isinstance(options, cls):
+        raise ValueError(f"options={options!r} must be a {cls.__name__} (or None for the defaults).")
+    if not changes:
+        return options
+    names = [f.name for f in dataclasses.fields(options)]
+    unknown = [n for n in changes if n not in names]
+    if unknown:
+        raise ValueError(f"unknown option {unknown[0]!r}; the fields of {type(options).__name__} are "
+                         f"{', '.join(names)}.")
+    return dataclasses.replace(options, **changes)
