@@ -16,7 +16,7 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_bool, check_int
-from .._lyapunov import classify_attractor, lyapunov_spectrum
+from .._lyapunov import AttractorType, classify_attractor, kaplan_yorke, lyapunov_spectrum
 from .._matching import group_attractors, minimal_cycle
 from .._params import params_to_dict
 from .._system import ForcedSystem, check_system
@@ -25,7 +25,7 @@ from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._fractal import basin_entropy
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import largest_multipliers, section_points_of
+from ._orbits import cycle_multipliers, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
 
@@ -190,21 +190,33 @@ LYAPUNOV_STRETCHES = 4
 """Independent stretches of those periods (the spread of their estimates is the error)."""
 
 
-def attractor_exponents(system, params, attractors, integrator, n_exponents: int = 2):
+def attractor_exponents(system, params, attractors, integrator, multipliers, n_exponents: int = 2):
     """Type and Lyapunov exponents of each attractor ``(points, period)`` (a cycle's points,
-    or the cloud of an attractor of boxes): the exponents of the stroboscopic map from its
-    first point (:func:`~jaxgear.lyapunov_spectrum`, :data:`LYAPUNOV_PERIODS` periods in
-    :data:`LYAPUNOV_STRETCHES` stretches, all attractors in one batch) and its
-    :class:`~jaxgear.AttractorType` (:func:`~jaxgear.classify_attractor`; a cycle is
-    periodic). Returns ``(types (A,), [(exponents, errors, kaplan_yorke)])``."""
-    if not attractors:
-        return np.zeros(0, np.int32), []
-    x0 = np.stack([np.asarray(p, np.float64)[0] for p, _ in attractors])
-    sp = lyapunov_spectrum(system, params, x0, n_exponents=min(int(n_exponents), system.dim),
-                           periods=LYAPUNOV_PERIODS, transient=0, stretches=LYAPUNOV_STRETCHES, integrator=integrator)
-    kinds = classify_attractor(sp, period=np.array([max(int(k), 0) for _, k in attractors]))
-    exps, errs, ky = (np.asarray(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
-    return np.asarray(kinds), [(exps[i], errs[i], ky[i]) for i in range(len(attractors))]
+    or the cloud of an attractor of boxes). A P-k cycle's exponents are ``ln |mu_i| / k``
+    of its Floquet multipliers ``multipliers[i]`` (exact for a cycle; error 0 here, the
+    finite differences' own error is near 1e-10); an attractor that repeats no point gets
+    the exponents of the stroboscopic map from its first cloud point
+    (:func:`~jaxgear.lyapunov_spectrum`, :data:`LYAPUNOV_PERIODS` periods in
+    :data:`LYAPUNOV_STRETCHES` stretches, all in one batch) and its
+    :class:`~jaxgear.AttractorType` from them (:func:`~jaxgear.classify_attractor`).
+    Returns ``(types (A,), [(exponents, errors, kaplan_yorke)])``."""
+    n = min(int(n_exponents), system.dim)
+    kinds = np.full(len(attractors), int(AttractorType.PERIODIC), np.int32)
+    out: list = [None] * len(attractors)
+    for i, ((_, k), mu) in enumerate(zip(attractors, multipliers)):
+        if k > 0:
+            lam = np.sort(np.log(np.abs(np.asarray(mu))))[::-1][:n] / int(k)
+            out[i] = (lam, np.zeros(n), float(kaplan_yorke(lam)))
+    free = [i for i, (_, k) in enumerate(attractors) if k <= 0]
+    if free:
+        x0 = np.stack([np.asarray(attractors[i][0], np.float64)[0] for i in free])
+        sp = lyapunov_spectrum(system, params, x0, n_exponents=n, periods=LYAPUNOV_PERIODS, transient=0,
+                               stretches=LYAPUNOV_STRETCHES, integrator=integrator)
+        kinds[free] = classify_attractor(sp, period=np.zeros(len(free), np.int64))
+        exps, errs, ky = (np.asarray(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
+        for j, i in enumerate(free):
+            out[i] = (exps[j], errs[j], float(ky[j]))
+    return kinds, out
 
 
 def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime) -> GlobalResult:
@@ -220,9 +232,11 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     secs = section_points_of(system, params, [raw[old][0] if raw[old][1] > 0 else np.zeros((0, system.dim))
                                               for old in order], method.integrator, sec_idx, method.direction)
     periodic = [old for old in order if raw[old][1] > 0]
-    mus = dict(zip(periodic, largest_multipliers(system, params, [(raw[old][0], raw[old][1]) for old in periodic],
+    mults = dict(zip(periodic, cycle_multipliers(system, params, [(raw[old][0], raw[old][1]) for old in periodic],
                                                  method.integrator, method.max_period)))
-    kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator)
+    mus = {old: float(np.abs(m).max()) if np.all(np.isfinite(m)) else np.inf for old, m in mults.items()}
+    kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator,
+                                         [mults.get(old) for old in order])
     for new, old in enumerate(order):
         pts, per, res = raw[old]
         sec = secs[new]

@@ -12,7 +12,8 @@ import numpy as np
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
-__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "section_points_of", "advance_states"]
+__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "section_points_of",
+           "advance_states"]
 
 
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
@@ -109,14 +110,22 @@ FD_STEP = 1e-6
 
 def largest_multipliers(system, params, cycles, integrator, max_period: int | None = None) -> np.ndarray:
     """The largest modulus of the Floquet multipliers of each cycle ``(points (k, dim), k)``
-    (paper §4.1: asymptotically stable when it is below 1): the eigenvalues of the
-    monodromy matrix of the k-fold stroboscopic map at the cycle's first point, by
-    central differences (step :data:`FD_STEP` ``(1 + max |x|)`` per coordinate). All
+    (paper §4.1: asymptotically stable when it is below 1), from :func:`cycle_multipliers`
+    (``inf`` where they are not finite). Returns ``(n,)``."""
+    return np.array([float(np.abs(mu).max()) if np.all(np.isfinite(mu)) else np.inf
+                     for mu in cycle_multipliers(system, params, cycles, integrator, max_period)])
+
+
+def cycle_multipliers(system, params, cycles, integrator, max_period: int | None = None) -> list[np.ndarray]:
+    """The Floquet multipliers of each cycle ``(points (k, dim), k)``: the eigenvalues
+    ``(dim,)`` of the monodromy matrix of the k-fold stroboscopic map at the cycle's first
+    point, by central differences (step :data:`FD_STEP` ``(1 + max |x|)`` per coordinate). All
     cycles run in one batch of ``2 dim`` states each, ``2 max_period`` periods long, as
     in :func:`refine_orbits` (``max_period`` bounds the periods, default the largest
-    ``k``). A cycle whose perturbed states blow up gets ``inf``. Returns ``(n,)``."""
+    ``k``). A cycle whose perturbed states blow up gets ``inf``. Returns one complex
+    ``(dim,)`` array per cycle."""
     if not cycles:
-        return np.zeros(0)
+        return []
     ks = [int(k) for _, k in cycles]
     x0 = np.stack([np.asarray(p, np.float64).reshape(k, -1)[0] for (p, _), k in zip(cycles, ks)])
     n, dim = x0.shape
@@ -126,12 +135,11 @@ def largest_multipliers(system, params, cycles, integrator, max_period: int | No
     K = max(ks) if max_period is None else int(max_period)
     orb = np.asarray(stroboscopic_orbit(system, params, jax.device_put(_pad_rows(X)), n_points=2 * K,
                                         integrator=integrator))
-    out = np.full(n, np.inf)
+    out = []
     for i, k in enumerate(ks):
         end = orb[2 * dim * i: 2 * dim * (i + 1), k - 1]  # P^k of x0 + h e_j, then of x0 - h e_j
         J = (end[:dim] - end[dim:]).T / (2.0 * h[i])  # column j: d P^k / d x_j
-        if np.all(np.isfinite(J)):
-            out[i] = float(np.abs(np.linalg.eigvals(J)).max())
+        out.append(np.linalg.eigvals(J) if np.all(np.isfinite(J)) else np.full(dim, np.inf + 0j))
     return out
 
 
