@@ -153,11 +153,17 @@ class LabelUncertainty:
         r = self.refined_integrator
         refined = (f"halved step ({r.steps_per_period} steps/period)" if isinstance(r, AbstractFixedStep)
                    else "16x smaller integration error")
-        line = (f"label uncertainty ({self.samples} sampled cells): {100 * self.step:.1f} % change with a "
-                f"{refined}, {100 * self.start:.1f} % when the start moves by {self.perturbation:g} cell")
+        line = (f"label uncertainty ({self.samples} sampled cells): {_percent(self.step, self.samples)} change with a "
+                f"{refined}, {_percent(self.start, self.samples)} when the start moves by {self.perturbation:g} cell")
         if np.isfinite(self.alpha):
             line += f"\nuncertainty exponent alpha = {self.alpha:.2f} +- {self.alpha_error:.2f} (1: smooth boundary)"
         return line
+
+
+def _percent(share: float, samples: int) -> str:
+    """A sampled share in percent with its binomial standard error ``sqrt(p (1 - p) / n)``."""
+    se = np.sqrt(share * (1.0 - share) / max(int(samples), 1))
+    return f"{100 * share:.1f} % +- {100 * se:.1f}"
 
 
 def _uncertainty_summary(u: LabelUncertainty) -> dict[str, Any]:
