@@ -23,6 +23,7 @@ from .common import (
     INT_MAX,
     SHOT_BYTES,
     add_param_options,
+    add_system_option,
     check_options,
     check_point,
     check_region,
@@ -30,6 +31,7 @@ from .common import (
     check_work,
     parse_point,
     parse_ranges,
+    resolve_cli_system,
 )
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
@@ -56,6 +58,7 @@ def add_parser(sub) -> None:
         "flip: real multiplier < -1; neimark-sacker: complex pair outside the unit circle).",
     )
     add_param_options(p)
+    add_system_option(p)
     src = p.add_mutually_exclusive_group(required=False)
     src.add_argument("--from", dest="points", type=parse_point, action="append", metavar="x1,x2,x3,x4",
                      help="a seed point (repeatable)")
@@ -64,9 +67,9 @@ def add_parser(sub) -> None:
                      "seeds a P-k orbit; the result's own parameters are used (--set overrides canonical names)")
     p.add_argument("--random", type=int, metavar="N",
                    help="N random seeds in --region (with --periods, also together with --seeds-from)")
-    p.add_argument("--region", type=parse_ranges, default=DEFAULT_REGION, metavar="LO:HI,...",
+    p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="box for --random, one LO:HI per coordinate (default the paper's D with x4 in [-5,5]: "
-                   "-25:25,-10:20,-10:50,-5:5)")
+                   "-25:25,-10:20,-10:50,-5:5; with --system the object's REGION if it has one per coordinate)")
     p.add_argument("--seed", type=int, default=0, help="random seed for --random (default 0)")
     p.add_argument("--period", type=int, action="append", metavar="K",
                    help="shoot for P-K orbits (fixed points of P^K); repeatable (default 1, or the attractors' "
@@ -132,10 +135,14 @@ def _parse_periods(text: str) -> list[int]:
 SEARCH_DEFAULTS = dict(solver="damped-newton", segments=1, deflation_rounds=0, transient=40)
 
 
-def _load_seeds(path: str):
+def _load_seeds(path: str, system=None):
+    """The saved result ``path`` and its attractors' points by period; ``ValueError`` when it
+    holds a result of another system than ``system`` (the gear model where ``None``)."""
     from .._io import load
-    from .._model import REDUCED
+    from .._model import REDUCED as GEAR
     from ..shooting import seeds_from_result
+
+    REDUCED = system or GEAR  # noqa: N806
 
     result = load(path, expected="GlobalResult")
     system = getattr(result, "system", None)
@@ -165,13 +172,19 @@ def _canonical_overrides(overrides) -> dict:
 def run(args) -> int:
     from .._checks import check_int
     from .._model import REDUCED
-    from .._params import GearParams
+    from .._params import GearParams, params_to_dict
     from .._presets import resolve_params
     from ..integrate import default_integrator
     from ..shooting import find_periodic_orbits, seeds_in_box, verify_orbit
 
     # every option is checked before any integration and before --out is touched
     check_options(args, OPTIONS)
+    user = resolve_cli_system(args)  # --system: its ForcedSystem replaces the gear model below
+    if user is not None:
+        REDUCED = user.system  # noqa: N806
+    if args.region is None:
+        args.region = (user.region if user is not None and user.region and len(user.region) == REDUCED.dim
+                       else DEFAULT_REGION)
     periods = args.period
     for k in periods or ():
         check_int(k, "--period", 1, INT_MAX)
@@ -193,8 +206,10 @@ def run(args) -> int:
         raise ValueError("--random cannot be combined with --from, nor with --seeds-from outside a --periods search.")
     source = None
     if args.seeds_from:
-        result, groups = _load_seeds(args.seeds_from)
-        if getattr(result, "params", None):
+        result, groups = _load_seeds(args.seeds_from, REDUCED)
+        if user is not None:
+            params, source = user.params, f"system {user.spec}"
+        elif getattr(result, "params", None):
             params = GearParams.from_dict(result.params)
             if args.overrides:
                 params = params.replace(**_canonical_overrides(args.overrides))
@@ -205,16 +220,19 @@ def run(args) -> int:
             raise ValueError(f"{args.seeds_from} has no periodic attractor to seed shooting from.")
         seeds = groups if periods is None else np.concatenate(list(groups.values()))
     else:
-        params = resolve_params(args.preset, args.overrides)[1]
+        params = resolve_params(args.preset, args.overrides)[1] if user is None else user.params
+        if user is not None:
+            source = f"system {user.spec}"
         if args.points:
             seeds = np.asarray(args.points, dtype=float)
         else:
             region = np.asarray(args.region, dtype=float)
             seeds = seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)
-    if not params.is_uniform:
-        raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
-                         "the given parameters differ per planet.")
-    params = params.uniform()
+    if user is None:
+        if not params.is_uniform:
+            raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
+                             "the given parameters differ per planet.")
+        params = params.uniform()
     integ = default_integrator(args.steps_per_period)
     search_mode = args.periods is not None
     opt = {name: getattr(args, name) for name in SEARCH_DEFAULTS}
@@ -254,7 +272,7 @@ def run(args) -> int:
             orbits.append(d)
         out = {
             "command": "shoot", "system": REDUCED.name, "state_names": list(REDUCED.state_names),
-            "params": params.to_dict(),
+            "params": params_to_dict(params),
             "settings": {"periods_tried": sorted(search.shots), "n_seeds": n_seeds,
                          "integrator": integ.to_dict(), "tol": args.tol, "max_iter": args.max_iter,
                          "t0": 0.0, "seeds_from": args.seeds_from, "random": args.random, "seed": args.seed},
@@ -269,7 +287,7 @@ def run(args) -> int:
 
     names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
     print(f"jaxgear shoot: {REDUCED.name} model, {source or 'preset ' + args.preset}, "
-          f"Omega={float(params.Omega):.4g}, {n_seeds} seed run{'s' if n_seeds != 1 else ''}, P^K for K in {sorted(search.shots)}, "
+          + (f"Omega={float(params.Omega):.4g}, " if user is None else "") + f"{n_seeds} seed run{'s' if n_seeds != 1 else ''}, P^K for K in {sorted(search.shots)}, "
           f"{integ.name} {integ.steps_per_period} steps/period, tol {args.tol:g}")
     print("Newton: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
     if search_mode:
