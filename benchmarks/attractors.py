@@ -66,7 +66,7 @@ def backlash_sweep(counts, folder: Path, say=print):
         labels = np.asarray(r.labels).reshape(r.grid.counts)
         box = 5 if min(r.grid.counts) >= 5 else 2
         ent = basin_entropy(labels, box=box)
-        boundary = f"S_bb {ent.S_bb:.3f} (box {box})" if ent.n_boundary_boxes else "one outcome"
+        boundary = f"S_bb {ent.S_bb:.3f} (box {box})" if ent.n_boundary_boxes else "no box with two outcomes"
         say(f"  b = {v:.3f}: {found}; unresolved {100 * r.n_unresolved / r.n_cells:.0f} %, "
             f"{r.mean_periods:.0f} periods per cell; {boundary}")
     return sweep, parts, wall

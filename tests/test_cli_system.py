@@ -142,7 +142,7 @@ def test_analyze_finds_ueda_chaotic_attractor(usermod, capsys):
     assert re.search(r"^0\s+chaotic\s+9\s+100\.00 %", text, flags=re.M), text
     (a,) = jaxgear.load(out / "result.nc").attractors
     assert a.period == 0 and a.largest_exponent > 0.3
-    assert a.exponents.sum() == pytest.approx(-0.05 * 2 * math.pi, abs=1e-6)
+    assert a.exponents.sum() == pytest.approx(-0.05 * 2 * math.pi, abs=1e-4)  # to RK4's error at 200 steps
 
 
 @pytest.mark.slow
