@@ -100,7 +100,7 @@ def test_analyze_runs_a_user_system_with_set_and_its_region(usermod, capsys):
     lambda_1 = -delta T / 2."""
     out = usermod / "out"
     rc = main(["analyze", "--system", "usermod:LINEAR", "--set", "gamma=2", "--uncertainty-samples", "0",
-               "--no-figures", "--quiet", "--out", str(out)])
+               "--quiet", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0, text
     assert "9 cells, system usermod:LINEAR (user-duffing)" in text
@@ -112,7 +112,7 @@ def test_analyze_runs_a_user_system_with_set_and_its_region(usermod, capsys):
     np.testing.assert_allclose(point, linear_point(2.0), atol=2e-4)
     lam = float(re.search(r"([+-]\d\.\d+) \+- ", row).group(1))
     assert lam == pytest.approx(-DELTA * math.pi / OMEGA, abs=2e-4)
-    assert (out / "result.nc").is_file()
+    assert {p.name for p in out.iterdir()} >= {"result.nc", "domains.png", "attractors.png"}  # figures of 2 coordinates
 
 
 def test_shoot_runs_a_user_system_given_by_a_function(usermod, capsys):
@@ -154,8 +154,9 @@ def test_sweep_bifurcation_of_a_user_system_follows_the_closed_form(usermod, cap
     out = usermod / "sweep"
     rc = main(["sweep", "--system", "usermod:LINEAR", "--param", "gamma", "--values", "0.5:1.5:3", "--from", "0,0",
                "--direction", "independent", "--transient", "200", "--record", "5", "--max-period", "2",
-               "--no-figures", "--quiet", "--out", str(out)])
+               "--quiet", "--out", str(out)])
     assert rc == 0, capsys.readouterr().out
+    assert (out / "bifurcation.png").is_file()
     d = jaxgear.load(out / "bifurcation.nc")
     assert d.system == "user-duffing" and list(d.period[0, :, 0]) == [1, 1, 1]
     for i, g in enumerate([0.5, 1.0, 1.5]):

@@ -248,8 +248,10 @@ def _figures(result, out) -> list[str]:
     if len(result.grid.axes) >= 3:
         figures.append(("domains_3d.png", lambda: plot_domains_3d(result)))
     figures.append(("shares.png", lambda: plot_shares(result)))
-    if result.attractors:
-        figures.append(("attractors.png", lambda: plot_attractors(result, section=result.method == "poincare-like")))
+    dim = result.grid.dim
+    if result.attractors and dim >= 2:  # the first two or three coordinates (a --system may have fewer than 4)
+        figures.append(("attractors.png", lambda: plot_attractors(result, coords=tuple(range(min(dim, 3))),
+                                                                  section=result.method == "poincare-like")))
     names = []
     for name, plot in figures:
         save_figure(plot(), out / name, dpi=120)
