@@ -85,7 +85,8 @@ def usermod(tmp_path, monkeypatch):
     yield tmp_path
     import sys
 
-    sys.modules.pop("usermod", None)
+    for name in [n for n, m in sys.modules.items() if str(getattr(m, "__file__", "")).startswith(str(tmp_path))]:
+        del sys.modules[name]  # the next test's usermod is another file
 
 
 def _rows(text: str) -> dict[str, str]:
@@ -205,6 +206,15 @@ def test_shoot_and_sweep_refuse_a_bad_system_in_one_line(usermod, capsys, comman
     assert rc == 2 and cap.out == ""
     (line,) = cap.err.strip().splitlines()
     assert line.startswith(f"jaxgear {command[0]}: error: --system usermod:NOT_A_SYSTEM: NOT_A_SYSTEM is"), line
+
+
+def test_shoot_random_needs_a_box_over_every_coordinate(usermod, capsys):
+    """``--random`` draws in the object's region only where it has one range per coordinate."""
+    (usermod / "onsection.py").write_text("from usermod import SYSTEM, PARAMS\nREGION = ((-4.0, 4.0),)\n")
+    rc = main(["shoot", "--system", "onsection:SYSTEM", "--random", "4", "--quiet"])
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and "--random needs a box over every coordinate: give --region with 2 LO:HI ranges (x, v)" in line
+    assert line.endswith("gives 1.")
 
 
 def test_sweep_refuses_a_parameter_the_system_does_not_have(usermod, capsys):

@@ -183,8 +183,11 @@ def run(args) -> int:
     if user is not None:
         REDUCED = user.system  # noqa: N806
     if args.region is None:
-        args.region = (user.region if user is not None and user.region and len(user.region) == REDUCED.dim
-                       else DEFAULT_REGION)
+        args.region = DEFAULT_REGION if user is None else user.region
+        if user is not None and args.random is not None and len(args.region or ()) != REDUCED.dim:
+            raise ValueError(f"--random needs a box over every coordinate: give --region with {REDUCED.dim} LO:HI "
+                             f"ranges ({', '.join(REDUCED.state_names)}); --system {user.spec} gives "
+                             + (f"{len(args.region)}." if args.region else "none."))
     periods = args.period
     for k in periods or ():
         check_int(k, "--period", 1, INT_MAX)
