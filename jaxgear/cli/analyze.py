@@ -16,6 +16,7 @@ from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
 from .common import (
     add_param_options,
+    add_system_option,
     cell_bytes,
     check_counts,
     check_options,
@@ -24,6 +25,7 @@ from .common import (
     escape_bound,
     parse_counts,
     parse_ranges,
+    resolve_cli_system,
     with_uncertainty_line,
 )
 
@@ -45,16 +47,19 @@ def add_parser(sub) -> None:
         "Writes result.nc (open with xarray), summary.json and PNG figures into --out.",
     )
     add_param_options(p)
+    add_system_option(p)
     p.add_argument("--method", default=DEFAULT_METHOD, choices=tuple(METHODS),
                    help=f"{DEFAULT_METHOD} (default): integrate every cell centre until its attractor is recognised; "
                    "poincare-like: the paper's map (l periods, then the next crossing of x4 = 0, restarted at "
                    "phase 0: it loses the forcing phase, see README); "
                    "stroboscopic: Hsu's simple cell mapping of the stroboscopic map (grid over x1..x4)")
     p.add_argument("--grid", type=parse_counts, default=None, metavar="N1,N2,N3[,N4]",
-                   help="cells per axis (default 50,30,60; stroboscopic default 25,15,30,12)")
+                   help="cells per axis (default 50,30,60; stroboscopic default 25,15,30,12; with --system the "
+                   "object's GRID, else 40 per axis on two axes, 20 on three)")
     p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="box bounds per gridded axis (default the paper's D: -25:25,-10:20,-10:50; "
-                   "stroboscopic adds x4 in -12:12)")
+                   "stroboscopic adds x4 in -12:12; with --system the object's REGION: one range per coordinate, "
+                   "or per coordinate but the section coordinate for cells on the section)")
     p.add_argument("--mapping-steps", type=int, default=None, metavar="L",
                    help=f"cell methods: forcing periods per cell-map step l (default "
                    f"{PoincareCellMap.mapping_steps} poincare-like, 1 stroboscopic)")
@@ -118,19 +123,20 @@ def run(args) -> int:
     return _run_checked(args)
 
 
-def _check_work(args, method, counts) -> None:
+def _check_work(args, method, counts, system=None) -> None:
     """The cells (and a lane's history of states) fit in memory, before anything is
-    allocated."""
+    allocated (``system``: the gear model where ``None``)."""
     import math
 
     from .._model import REDUCED
 
+    dim = (system or REDUCED).dim
     n_cells = math.prod(counts)
-    check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(REDUCED.dim), "cells")
+    check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(dim), "cells")
     if hasattr(method, "round_periods"):  # the lane pool: every lane keeps a ring of its last 2 K + 1 states
         lanes = min(int(method.chunk_size), n_cells)  # and a streak per period k <= K (K = --max-period)
         check_work("--max-period", method.max_period, int(method.max_period),
-                   2 * lanes * (2 * REDUCED.dim * 8 + 8), f"periods of history in each of {lanes:,} lanes")
+                   2 * lanes * (2 * dim * 8 + 8), f"periods of history in each of {lanes:,} lanes")
 
 
 def _run_checked(args) -> int:
@@ -138,6 +144,9 @@ def _run_checked(args) -> int:
     from .._model import REDUCED
     from .._presets import resolve_params
 
+    user = resolve_cli_system(args)
+    if user is not None:
+        return _run_user(args, user)
     gear_set, params = resolve_params(args.preset, args.overrides)
     if params.N and not params.is_uniform:
         raise ValueError("analyze uses the reduced 2-DOF model, which needs identical planets; "
@@ -156,6 +165,27 @@ def _run_checked(args) -> int:
     grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
     method.check(REDUCED, grid)
 
+    head = f"preset {args.preset}, Omega={float(params.Omega):.4g}"
+    return _run_on(args, REDUCED, params, grid, method, head)
+
+
+def _run_user(args, user) -> int:
+    """``--system``: the analysis of the user's system on its region (or ``--region``)."""
+    from ._system_spec import user_grid
+
+    system = user.system
+    method = build_method(args)
+    grid = user_grid(user, args.region, args.grid, args.method)
+    names = grid.axis_names
+    check_region(tuple(zip(grid.lower, grid.upper)), "--region", len(names), names, escape_bound(method))
+    _check_work(args, method, grid.counts, system)
+    method.check(system, grid)
+    return _run_on(args, system, user.params, grid, method, f"system {user.spec} ({system.name})")
+
+
+def _run_on(args, system, params, grid, method, head: str) -> int:
+    """Run the checked analysis and write ``--out`` (``head`` describes the system in the
+    first line printed)."""
     if args.distributed:
         from .._devices import process_index
 
@@ -165,25 +195,24 @@ def _run_checked(args) -> int:
 
             args.no_figures, args.quiet = True, True
             with contextlib.redirect_stdout(io.StringIO()):
-                _analyze(args, params, grid, method, None)
+                _analyze(args, system, params, grid, method, None)
             return 0
-    print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, preset {args.preset}, Omega={float(params.Omega):.4g}")
+    print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, {head}")
     with OutputFolder(args.out, OWNED) as out:
-        written = _analyze(args, params, grid, method, out)
+        written = _analyze(args, system, params, grid, method, out)
     print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0
 
 
-def _analyze(args, params, grid, method, out: Path | None) -> list[str]:
+def _analyze(args, system, params, grid, method, out: Path | None) -> list[str]:
     """The analysis, its report and its files (written into the staging folder ``out``,
     none when ``out`` is ``None``: a process of a multi-process run other than 0)."""
     import numpy as np
 
-    from .._model import REDUCED
     from ..analysis import analyze_global, compare_with_direct
 
     t0 = time.perf_counter()
-    result = analyze_global(REDUCED, params, grid, method, progress=not args.quiet,
+    result = analyze_global(system, params, grid, method, progress=not args.quiet,
                             uncertainty=args.uncertainty_samples)
     result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
     print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
@@ -196,7 +225,7 @@ def _analyze(args, params, grid, method, out: Path | None) -> list[str]:
         if not args.no_figures:
             written += _figures(result, out)
     if args.compare:
-        rep = compare_with_direct(result, REDUCED, params, n_samples=args.compare, progress=not args.quiet)
+        rep = compare_with_direct(result, system, params, n_samples=args.compare, progress=not args.quiet)
         if out is not None:
             write_json(rep, out / "compare.json")
             written.append("compare.json")
@@ -220,8 +249,10 @@ def _figures(result, out) -> list[str]:
     if len(result.grid.axes) >= 3:
         figures.append(("domains_3d.png", lambda: plot_domains_3d(result)))
     figures.append(("shares.png", lambda: plot_shares(result)))
-    if result.attractors:
-        figures.append(("attractors.png", lambda: plot_attractors(result, section=isinstance(result.method, PoincareCellMap))))
+    dim = result.grid.dim
+    if result.attractors and dim >= 2:  # the first two or three coordinates (a --system may have fewer than 4)
+        figures.append(("attractors.png", lambda: plot_attractors(result, coords=tuple(range(min(dim, 3))),
+                                                                  section=isinstance(result.method, PoincareCellMap))))
     names = []
     for name, plot in figures:
         save_figure(plot(), out / name, dpi=120)

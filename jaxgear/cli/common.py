@@ -19,6 +19,34 @@ def add_param_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_system_option(p: argparse.ArgumentParser) -> None:
+    """``--system MODULE:ATTRIBUTE``: run the command on a user's ``ForcedSystem``
+    (:mod:`jaxgear.cli._system_spec` says what the attribute may be)."""
+    p.add_argument(
+        "--system", default=None, metavar="MODULE:ATTRIBUTE",
+        help="run on your own jaxgear.ForcedSystem instead of the gear model: MODULE is a module in the current "
+        "folder or on PYTHONPATH, or a file path/to/model.py; ATTRIBUTE a ForcedSystem (parameters, region and "
+        "cell counts from the module's PARAMS, REGION, GRID), an object or dict with 'system' and optional "
+        "'params', 'region', 'grid', or a function returning either; --set then sets fields of its parameters, "
+        "--region and --grid replace its region and counts",
+    )
+
+
+def resolve_cli_system(args):
+    """The :class:`~jaxgear.cli._system_spec.UserSystem` of ``--system`` with the
+    ``--set`` overrides applied, or ``None`` without ``--system``; ``ValueError`` for a
+    ``--preset`` other than the default next to ``--system`` (a preset is a gear set)."""
+    spec = getattr(args, "system", None)
+    if spec is None:
+        return None
+    if getattr(args, "preset", "paper") != "paper":
+        raise ValueError(f"--preset {args.preset} is a gear set; with --system {spec} the parameters come from "
+                         "the system's object (change them with --set NAME=VALUE).")
+    from ._system_spec import resolve_system
+
+    return resolve_system(spec, getattr(args, "overrides", ()) or ())
+
+
 def _set_fields(item: str) -> set[str]:
     """The parameter fields a ``--set NAME=VALUE`` item sets (an alias sets several)."""
     from .._params import PARAM_ALIASES

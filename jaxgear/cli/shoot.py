@@ -21,7 +21,20 @@ import numpy as np
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from .common import add_param_options, check_options, check_point, check_region, parse_point, parse_ranges
+from .common import (
+    INT_MAX,
+    SHOT_BYTES,
+    add_param_options,
+    add_system_option,
+    check_options,
+    check_point,
+    check_region,
+    check_shoot_work,
+    check_work,
+    parse_point,
+    parse_ranges,
+    resolve_cli_system,
+)
 
 # The paper's region D (x1, x2, x3) with x4 in [-5, 5].
 DEFAULT_REGION = ((-25.0, 25.0), (-10.0, 20.0), (-10.0, 50.0), (-5.0, 5.0))
@@ -47,6 +60,7 @@ def add_parser(sub) -> None:
         "flip: real multiplier < -1; neimark-sacker: complex pair outside the unit circle).",
     )
     add_param_options(p)
+    add_system_option(p)
     src = p.add_mutually_exclusive_group(required=False)
     src.add_argument("--from", dest="points", type=parse_point, action="append", metavar="x1,x2,x3,x4",
                      help="a seed point (repeatable)")
@@ -55,7 +69,7 @@ def add_parser(sub) -> None:
                      "seeds a P-k orbit; the result's own parameters are used (--set overrides canonical names)")
     p.add_argument("--random", type=int, metavar="N",
                    help="N random seeds in --region (with --periods, also together with --seeds-from)")
-    p.add_argument("--region", type=parse_ranges, default=DEFAULT_REGION, metavar="LO:HI,...",
+    p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="box for --random, one LO:HI per coordinate (default the paper's D with x4 in [-5,5]: "
                    "-25:25,-10:20,-10:50,-5:5)")
     p.add_argument("--seed", type=int, default=0, help="random seed for --random (default 0)")
@@ -91,14 +105,21 @@ def add_parser(sub) -> None:
 
 
 def _parse_periods(text: str) -> list[int]:
-    """``"1-8"`` -> ``[1, ..., 8]``; ``"4"`` -> ``[4]``."""
+    """``"1-8"`` -> ``[1, ..., 8]``; ``"4"`` -> ``[4]`` (``argparse.ArgumentTypeError``, a
+    one-line refusal naming ``--periods``, for anything else)."""
+    import argparse
+
     try:
         lo, _, hi = text.partition("-")
         a, b = int(lo), int(hi or lo)
     except ValueError:
-        raise ValueError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
-    if not 1 <= a <= b:
-        raise ValueError(f"--periods needs 1 <= K1 <= K2, got {text!r}")
+        raise argparse.ArgumentTypeError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
+    if not 1 <= a <= b <= INT_MAX:
+        raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2 <= {INT_MAX}, got {text!r}")
+    try:
+        check_work("--periods", text, b - a + 1, SHOT_BYTES, "periods per seed")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return list(range(a, b + 1))
 
 
@@ -125,11 +146,17 @@ SOLVERS = ("newton", "dogleg", "levenberg-marquardt")
 """``--solver`` names, mapped to optimistix solver objects by :func:`_solvers` (names exist only here)."""
 
 
-def _load_seeds(path: str):
+def _load_seeds(path: str, system):
+    """The saved result ``path`` and its attractors' points by period; ``ValueError`` when it
+    holds a result of another system than ``system``."""
     from .._io import load
     from ..shooting import seeds_from_result
 
     result = load(path, expected="GlobalResult")
+    saved = getattr(result, "system", None)
+    if saved and saved != system.name:  # "" in files written before the name was saved
+        raise ValueError(f"--seeds-from {path} holds a result of another system ({saved!r}); jaxgear shoot "
+                         f"shoots on {system.name!r}: give a result of jaxgear analyze on that system.")
     return result, seeds_from_result(result)
 
 
@@ -150,24 +177,29 @@ def _canonical_overrides(overrides) -> dict:
     return out
 
 
-def _check_args(args) -> list[int] | None:
+def _check_args(args, system, user) -> list[int] | None:
     """Check every option before any integration and before ``--out`` is touched; return the
     periods asked for (``None``: one per attractor period of ``--seeds-from``, else ``[1]``)."""
     from .._checks import check_int
-    from .._model import REDUCED
 
-    check_options(args, OPTIONS)
+    if args.region is None:
+        args.region = DEFAULT_REGION if user is None else user.region
+        if user is not None and args.random is not None and len(args.region or ()) != system.dim:
+            raise ValueError(f"--random needs a box over every coordinate: give --region with {system.dim} LO:HI "
+                             f"ranges ({', '.join(system.state_names)}); --system {user.spec} gives "
+                             + (f"{len(args.region)}." if args.region else "none."))
     for k in args.period or ():
-        check_int(k, "--period", 1)
+        check_int(k, "--period", 1, INT_MAX)
     for pt in args.points or ():
-        check_point(pt, "--from", REDUCED.dim)
+        check_point(pt, "--from", system.dim)
     if args.random is not None:
-        check_region(args.region, "--region", REDUCED.dim, REDUCED.state_names)
+        check_region(args.region, "--region", system.dim, system.state_names)
     if args.out is not None:
         check_output_folder(args.out)
     if args.periods is not None and args.period is not None:
         raise ValueError("give either --period (repeatable) or --periods K1-K2, not both.")
     periods = args.periods if args.periods is not None else args.period
+    check_shoot_work(args, periods)
     if not (args.points or args.seeds_from or args.random is not None):
         raise ValueError("give seeds: --from, --seeds-from or --random N.")
     if args.random is not None and (args.points or (args.seeds_from and periods is None)):
@@ -183,16 +215,19 @@ def _random_seeds(args):
     return seeds_in_box(args.random, region[:, 0], region[:, 1], seed=args.seed)
 
 
-def _params_and_seeds(args, periods):
-    """The uniform gear parameters, the seeds (an array, or ``{k: seeds}`` from
-    ``--seeds-from`` when no period is given) and where the parameters came from."""
+def _params_and_seeds(args, periods, system, user):
+    """The parameters (the uniform gear parameters, or those of ``--system``), the seeds (an
+    array, or ``{k: seeds}`` from ``--seeds-from`` when no period is given) and where the
+    parameters came from."""
     from .._params import GearParams
     from .._presets import resolve_params
 
-    source = None
+    source = None if user is None else f"system {user.spec}"
     if args.seeds_from:
-        result, groups = _load_seeds(args.seeds_from)
-        if getattr(result, "params", None):
+        result, groups = _load_seeds(args.seeds_from, system)
+        if user is not None:
+            params = user.params
+        elif getattr(result, "params", None):
             params = GearParams.from_dict(result.params)
             if args.overrides:
                 params = params.replace(**_canonical_overrides(args.overrides))
@@ -205,8 +240,10 @@ def _params_and_seeds(args, periods):
         if args.random:
             seeds = np.concatenate([seeds, _random_seeds(args)])
     else:
-        params = resolve_params(args.preset, args.overrides)[1]
+        params = resolve_params(args.preset, args.overrides)[1] if user is None else user.params
         seeds = np.asarray(args.points, dtype=float) if args.points else _random_seeds(args)
+    if user is not None:
+        return params, seeds, source
     if not params.is_uniform:
         raise ValueError("shoot uses the reduced 2-DOF model, which needs identical planets; "
                          "the given parameters differ per planet.")
@@ -230,30 +267,33 @@ def run(args) -> int:
     from ..integrate import default_integrator
     from ..shooting import find_periodic_orbits
 
-    periods = _check_args(args)
-    params, seeds, source = _params_and_seeds(args, periods)
+    check_options(args, OPTIONS)
+    user = resolve_cli_system(args)  # --system: its ForcedSystem replaces the gear model
+    system = REDUCED if user is None else user.system
+    periods = _check_args(args, system, user)
+    params, seeds, source = _params_and_seeds(args, periods, system, user)
     integ = default_integrator(args.steps_per_period)
-    search = find_periodic_orbits(REDUCED, params, seeds, period=periods or [1], integrator=integ,
+    search = find_periodic_orbits(system, params, seeds, period=periods or [1], integrator=integ,
                                   options=_search_options(args, integ), progress=not (args.quiet or args.json))
-    summary = _summary(search, params, args) if (args.json or args.out) else {}
+    summary = _summary(search, system, params, args) if (args.json or args.out) else {}
     if args.json:
         print(json.dumps(summary))
     written = _write_outputs(search, summary, args) if args.out else []
     if not args.json:
-        _print_search(search, params, args, source)
+        _print_search(search, system, params, args, source)
         if written:
             print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0
 
 
-def _summary(search, params, args) -> dict:
+def _summary(search, system, params, args) -> dict:
     """The ``--json`` object (also ``orbits.json``)."""
-    from .._model import REDUCED
+    from .._params import params_to_dict
 
     st = search.settings
     return {
-        "command": "shoot", "system": REDUCED.name, "state_names": list(REDUCED.state_names),
-        "params": params.to_dict(),
+        "command": "shoot", "system": system.name, "state_names": list(system.state_names),
+        "params": params_to_dict(params),
         "settings": {"periods_tried": sorted(search.shots), "n_seeds": search.n_seeds, "integrator": st["integrator"],
                      "tol": args.tol, "max_iter": args.max_iter, "t0": 0.0, "seeds_from": args.seeds_from,
                      "random": args.random, "seed": args.seed, "search": st},
@@ -262,14 +302,13 @@ def _summary(search, params, args) -> dict:
     }
 
 
-def _print_search(search, params, args, source) -> None:
+def _print_search(search, system, params, args, source) -> None:
     """The text report: the search's settings, its convergence per period, every orbit."""
-    from .._model import REDUCED
-
     st = search.settings
     n = search.n_seeds
-    print(f"jaxgear shoot: {REDUCED.name} model, {source or 'preset ' + args.preset}, "
-          f"Omega={float(params.Omega):.4g}, {n} seed run{'s' if n != 1 else ''}, P^K for K in {sorted(search.shots)}, "
+    omega = f"Omega={float(params.Omega):.4g}, " if hasattr(params, "Omega") else ""
+    print(f"jaxgear shoot: {system.name} model, {source or 'preset ' + args.preset}, "
+          f"{omega}{n} seed run{'s' if n != 1 else ''}, P^K for K in {sorted(search.shots)}, "
           f"{st['integrator']['type']} {st['integrator']['steps_per_period']} steps/period, tol {args.tol:g}")
     print("solver: " + ", ".join(f"{v} {k}" for k, v in search.status_counts.items()))
     print(f"search: {st['solver']['type']}, {st['segments']} segment(s), {st['deflation_rounds']} deflated round(s), "
@@ -279,13 +318,11 @@ def _print_search(search, params, args, source) -> None:
     if not search.orbits:
         print("no periodic orbit converged from these seeds.")
     for i, o in enumerate(search.orbits):
-        _print_orbit(i, o, search.checks.get(str(i)))
+        _print_orbit(i, o, search.checks.get(str(i)), system)
 
 
-def _print_orbit(i: int, o, check) -> None:
-    from .._model import REDUCED
-
-    names = " ".join(f"{n:>11s}" for n in REDUCED.state_names)
+def _print_orbit(i: int, o, check, system) -> None:
+    names = " ".join(f"{n:>11s}" for n in system.state_names)
     kind = "stable" if o.stable else f"unstable ({o.instability})"
     print(f"\norbit {i + 1}: P-{o.period}, {kind}, max |multiplier| {o.max_multiplier:.4f}, "
           f"residual {o.residual:.1e}, from {o.n_seeds} seed(s)")
@@ -313,7 +350,8 @@ def _write_files(search, summary: dict, args, out: Path) -> list[str]:
     if not args.no_figures and search.orbits:
         from ..plotting import plot_multipliers, plot_orbit
 
-        figs = {f"orbit_{i + 1}_P-{o.period}.png": plot_orbit(search, i, coords=(0, 1, 2))
+        coords = tuple(range(min(3, len(search.state_names))))
+        figs = {f"orbit_{i + 1}_P-{o.period}.png": plot_orbit(search, i, coords=coords)
                 for i, o in enumerate(search.orbits)}
         figs["multipliers.png"] = plot_multipliers(search)
         for name, fig in figs.items():

@@ -20,6 +20,7 @@ from .._outdir import OutputFolder, check_output_folder
 from .common import (
     ESCAPE_BOUND,
     add_param_options,
+    add_system_option,
     cell_bytes,
     check_counts,
     check_options,
@@ -31,6 +32,7 @@ from .common import (
     parse_counts,
     parse_point,
     parse_ranges,
+    resolve_cli_system,
     shares_uncertainty_line,
     with_uncertainty_line,
 )
@@ -90,7 +92,9 @@ def add_parser(sub) -> None:
         "summary.json and figures into --out. Run the same command again after an interruption to resume.",
     )
     add_param_options(p)
-    p.add_argument("--param", required=True, metavar="NAME", help="the parameter to sweep")
+    add_system_option(p)
+    p.add_argument("--param", required=True, metavar="NAME",
+                   help="the parameter to sweep (with --system a field of the system's parameters)")
     p.add_argument("--values", required=True, metavar="START:STOP:COUNT",
                    help="COUNT evenly spaced values from START to STOP (COUNT >= 2)")
     p.add_argument("--param2", default=None, metavar="NAME",
@@ -165,6 +169,8 @@ def run(args) -> int:
     # every option is checked before any integration and before --out is touched
     start, stop, count = _range(args.values)
     check_options(args, OPTIONS)
+    user = resolve_cli_system(args)
+    system = REDUCED if user is None else user.system
     if args.kind != "continuation" and start > stop:
         raise ValueError(f"--values={args.values}: START must be < STOP for --kind {args.kind} (the values are "
                          "swept up and down by --direction); only --kind continuation runs from START to STOP.")
@@ -182,63 +188,76 @@ def run(args) -> int:
         raise ValueError(f"--uncertainty-samples measures the label uncertainty of a basin sweep: it needs --kind "
                          f"basins (got --kind {args.kind}).")
     for pt in args.points or ():
-        check_point(pt, "--from", REDUCED.dim)
-    xyz = REDUCED.state_names[:3]
+        check_point(pt, "--from", system.dim)
+    if user is not None:
+        grid = _user_grid(args, user) if args.kind == "basins" else None
     if args.kind == "bifurcation" and args.region is not None:
-        check_region(args.region, "--region (the box of the starts)", 3, xyz, ESCAPE_BOUND)
+        if user is None:
+            check_region(args.region, "--region (the box of the starts)", 3, REDUCED.state_names[:3], ESCAPE_BOUND)
+        else:
+            _user_starts_box(args, user)
     if args.kind == "bifurcation":
-        _check_bifurcation_work(args, count)
+        _check_bifurcation_work(args, count, system.dim)
     elif args.kind == "continuation":
-        per_step = 8 * REDUCED.dim * (args.period + 4) * 4  # points of the orbit, multipliers, tangent
+        per_step = 8 * system.dim * (args.period + 4) * 4  # points of the orbit, multipliers, tangent
         check_work("--max-steps", args.max_steps, args.max_steps, per_step, "continuation steps")
     else:  # the grid as given or the method's default (checked against the method below)
-        counts = args.grid or (STROBOSCOPIC_COUNTS if args.method == "stroboscopic" else SECTION_COUNTS)
-        _check_basins_work(args, counts, count * (1 if args.values2 is None else count2))
+        counts = (grid.counts if user is not None else args.grid
+                  or (STROBOSCOPIC_COUNTS if args.method == "stroboscopic" else SECTION_COUNTS))
+        _check_basins_work(args, counts, count * (1 if args.values2 is None else count2), system.dim)
     values = np.linspace(start, stop, count)
     if args.values2 is not None:
         values2 = np.linspace(start2, stop2, count2)
     check_output_folder(args.out)
-    _, params = resolve_params(args.preset, args.overrides)
-    if not params.is_uniform:
-        raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
-                         "the given parameters differ per planet.")
-    params = params.uniform()
+    if user is not None:
+        params = user.params
+    else:
+        _, params = resolve_params(args.preset, args.overrides)
+        if not params.is_uniform:
+            raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
+                             "the given parameters differ per planet.")
+        params = params.uniform()
     param_targets(params, args.param)  # unknown name -> the list of valid ones
     integ = default_integrator(args.steps_per_period)
     if args.kind == "continuation":
         if not args.points or len(args.points) != 1:
             raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
                              "at the start value (e.g. from jaxgear shoot).")
-        check_values(REDUCED, params, (args.param,), np.array([[start], [stop]]))
+        check_values(system, params, (args.param,), np.array([[start], [stop]]))
     elif args.kind == "bifurcation":
         check_int(args.record, "--record", 2 * args.max_period + 1)
-        check_values(REDUCED, params, (args.param,), values[:, None])
+        check_values(system, params, (args.param,), values[:, None])
     else:
         method = method_from_name(args.method, integrator=integ, max_period=args.max_period)
-        default = method.default_grid(REDUCED)
-        names = default.axis_names
-        where = f"(--method {args.method} grids {', '.join(names)})"
-        region = args.region or tuple(zip(default.lower, default.upper))
-        counts = args.grid or (STROBOSCOPIC_COUNTS if len(names) == 4 else SECTION_COUNTS)
-        check_region(region, f"--region {where}", len(names), names, escape_bound(method),
-                     [b for i, b in enumerate(default.base) if i not in default.axes])
-        check_counts(counts, f"--grid {where}", len(names), names)
-        grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
-        method.check(REDUCED, grid)
+        if user is not None:
+            names = grid.axis_names
+            check_region(tuple(zip(grid.lower, grid.upper)), "--region", len(names), names, escape_bound(method))
+        else:
+            default = method.default_grid(REDUCED)
+            names = default.axis_names
+            where = f"(--method {args.method} grids {', '.join(names)})"
+            region = args.region or tuple(zip(default.lower, default.upper))
+            counts = args.grid or (STROBOSCOPIC_COUNTS if len(names) == 4 else SECTION_COUNTS)
+            check_region(region, f"--region {where}", len(names), names, escape_bound(method),
+                         [b for i, b in enumerate(default.base) if i not in default.axes])
+            check_counts(counts, f"--grid {where}", len(names), names)
+            grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
+        method.check(system, grid)
         if values2 is None:
-            check_values(REDUCED, params, (args.param,), values[:, None])
+            check_values(system, params, (args.param,), values[:, None])
         else:
             if set(param_targets(params, args.param)) & set(param_targets(params, args.param2)):
                 raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
-            check_values(REDUCED, params, (args.param, args.param2),
+            check_values(system, params, (args.param, args.param2),
                          np.stack(np.meshgrid(values, values2), axis=-1).reshape(-1, 2))
     if args.kind != "continuation" and not args.restart:  # a sweep of other settings in --out: refused now
-        check_resume(args.out, _resume_settings(args, params, values, values2, integ,
+        check_resume(args.out, _resume_settings(args, user, params, values, values2, integ,
                                                 *((grid, method) if args.kind == "basins" else (None, None))))
     head = f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values)"
     if values2 is not None:
         head += f" x {args.param2} = {values2[0]:g} .. {values2[-1]:g} ({len(values2)} values)"
-    head += f", preset {args.preset}, {REDUCED.name} model"
+    head += (f", preset {args.preset}, {REDUCED.name} model" if user is None
+             else f", system {user.spec} ({system.name})")
     if args.distributed:
         from .._devices import process_index
 
@@ -246,9 +265,9 @@ def run(args) -> int:
             from ..sweep import bifurcation_diagram
 
             if args.kind == "basins":
-                _basins(args, params, values, values2, grid, method, progress=False)
+                _basins(args, system, params, values, values2, grid, method, progress=False)
             else:
-                bifurcation_diagram(REDUCED, params, args.param, values, _starts(args), transient=args.transient,
+                bifurcation_diagram(system, params, args.param, values, _starts(args, user), transient=args.transient,
                                     record=args.record, direction=args.direction, integrator=integ,
                                     max_period=args.max_period, progress=False, out=Path(args.out),
                                     restart=args.restart, save=False)
@@ -257,22 +276,43 @@ def run(args) -> int:
     with OutputFolder(args.out, OWNED, create=True) as work:
         t0 = time.perf_counter()
         if args.kind == "continuation":
-            files = _continuation(args, params, start, stop, count, integ, work, head)
+            files = _continuation(args, system, params, start, stop, count, integ, work, head)
         else:
-            files = _sweep(args, params, values, integ, work, head, t0, grid if args.kind == "basins" else None,
+            files = _sweep(args, user, params, values, integ, work, head, t0, grid if args.kind == "basins" else None,
                            method if args.kind == "basins" else None, values2)
     print(f"\nwrote {', '.join(files)} to {args.out}/")
     return 0
 
 
-def _check_bifurcation_work(args, count: int) -> None:
-    """The points a bifurcation sweep keeps (values x starts x record x directions) fit in
-    memory."""
-    from .._model import REDUCED
+def _user_grid(args, user):
+    """``--system`` basin sweep: the cells of the user's region (or ``--region``)."""
+    from ._system_spec import user_grid
 
+    return user_grid(user, args.region, args.grid, args.method)
+
+
+def _user_starts_box(args, user):
+    """``--system`` bifurcation: the box of the random starts (``--region`` or the
+    object's region, over every coordinate or every one but the section coordinate) and
+    its coordinates; ``ValueError`` where there is none."""
+    from ._system_spec import axes_of
+
+    region = args.region or user.region
+    if region is None:
+        raise ValueError(f"--system {user.spec}: --kind bifurcation needs starts: give --from x1,..., or a box "
+                         "for --starts N: --region LO:HI,... or REGION in the module (region in the object).")
+    axes, _ = axes_of(user.system, len(region), "--region (the box of the starts)")
+    names = [user.system.state_names[i] for i in axes]
+    check_region(region, "--region (the box of the starts)", len(axes), names, ESCAPE_BOUND)
+    return region, axes
+
+
+def _check_bifurcation_work(args, count: int, dim: int = 4) -> None:
+    """The points a bifurcation sweep keeps (values x starts x record x directions) fit in
+    memory (``dim`` coordinates per point)."""
     n_dirs = {"independent": 1, "up": 1, "down": 1, "both": 2, "all": 3}[args.direction]
     starts = len(args.points) if args.points else (16 if args.starts is None else args.starts)
-    point = 8 * REDUCED.dim * n_dirs  # one recorded point of one start at one value, every direction
+    point = 8 * dim * n_dirs  # one recorded point of one start at one value, every direction
     flag, value = ("--from", f"{starts} points") if args.points else ("--starts", starts)
     checks = {  # option: (its count over a typical one, the check with the others as given)
         "--values": (count / 41, lambda: check_work(
@@ -288,22 +328,20 @@ def _check_bifurcation_work(args, count: int) -> None:
         check()
 
 
-def _check_basins_work(args, counts, n_values: int) -> None:
+def _check_basins_work(args, counts, n_values: int, dim: int = 4) -> None:
     """The cells of one analysis, and the labels kept for every value (every cell of every
-    value at once with --one-pool), fit in memory."""
+    value at once with --one-pool), fit in memory (``dim`` state coordinates)."""
     import math
 
-    from .._model import REDUCED
-
     n_cells = math.prod(counts)
-    check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(REDUCED.dim), "cells per value")
-    per_value = n_cells * (cell_bytes(REDUCED.dim) if args.one_pool else 16)
+    check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(dim), "cells per value")
+    per_value = n_cells * (cell_bytes(dim) if args.one_pool else 16)
     flag, text = ("--values2", args.values2) if args.values2 is not None else ("--values", args.values)
     check_work(flag, text, n_values, per_value, f"values of {n_cells:,} cells"
                + (" in one pool" if args.one_pool else "") + (" (both parameters)" if args.values2 else ""))
 
 
-def _resume_settings(args, params, values, values2, integ, grid, method) -> dict:
+def _resume_settings(args, user, params, values, values2, integ, grid, method) -> dict:
     """The settings of the sweep this command would resume that the command line decides
     alone (as the sweep functions record them in the manifest of --out), for
     :func:`~jaxgear.cli.common.check_resume`; the sweep functions compare every setting
@@ -312,9 +350,9 @@ def _resume_settings(args, params, values, values2, integ, grid, method) -> dict
     from .._params import params_to_dict
     from ..sweep._basins import uncertainty_setting
 
-    s = {"system": REDUCED.name, "params": params_to_dict(params)}
+    s = {"system": (REDUCED if user is None else user.system).name, "params": params_to_dict(params)}
     if args.kind == "bifurcation":
-        s.update(kind="bifurcation", param=args.param, values=values.tolist(), starts=_starts(args).tolist(),
+        s.update(kind="bifurcation", param=args.param, values=values.tolist(), starts=_starts(args, user).tolist(),
                  transient=int(args.transient), record=int(args.record), direction=args.direction,
                  max_period=int(args.max_period), integrator=integ.to_dict())
         return s
@@ -329,9 +367,10 @@ def _resume_settings(args, params, values, values2, integ, grid, method) -> dict
     return s
 
 
-def _starts(args):
+def _starts(args, user=None):
     """The starts of a bifurcation sweep: ``--from`` points, or ``--starts`` seeded points of
-    the region on the section x4 = 0 (the same on every process)."""
+    the region on the section x4 = 0 (the same on every process); with ``--system`` (``user``)
+    seeded points of its box, over every coordinate or on its section."""
     import numpy as np
 
     from .._cells import PAPER_REGION
@@ -340,16 +379,21 @@ def _starts(args):
     if args.points:
         return np.asarray(args.points, dtype=float)
     n = 16 if args.starts is None else args.starts
+    if user is not None:
+        region, axes = _user_starts_box(args, user)
+        region = np.asarray(region, dtype=float)
+        X0 = np.zeros((n, user.system.dim))  # the coordinate left out (the section's) is 0
+        X0[:, list(axes)] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
+        return X0
     region = np.asarray(args.region or PAPER_REGION, dtype=float)
     X0 = np.zeros((n, 4))  # on the section x4 = 0, like the paper's cells
     X0[:, :3] = seeds_in_box(n, region[:, 0], region[:, 1], seed=args.seed)
     return X0
 
 
-def _basins(args, params, values, values2, grid, method, progress: bool):
+def _basins(args, system, params, values, values2, grid, method, progress: bool):
     """The basin sweep over ``--param`` (``values2`` None) or the basin map over ``--param``
     x ``--param2``, resumable in ``--out`` (the result file is written by the caller)."""
-    from .._model import REDUCED
     from ..sweep import basin_map, basin_sweep
 
     kw = dict(method=method, progress=progress, out=Path(args.out), restart=args.restart, save=False,
@@ -357,21 +401,24 @@ def _basins(args, params, values, values2, grid, method, progress: bool):
     if args.uncertainty_samples is not None:
         kw["uncertainty"] = args.uncertainty_samples
     if values2 is None:
-        return basin_sweep(REDUCED, params, args.param, values, grid, **kw)
-    return basin_map(REDUCED, params, args.param, values, args.param2, values2, grid, **kw)
+        return basin_sweep(system, params, args.param, values, grid, **kw)
+    return basin_map(system, params, args.param, values, args.param2, values2, grid, **kw)
 
 
-def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, method, values2=None) -> list[str]:
-    """A bifurcation or basin sweep (or map): resume parts in ``--out``, its files into ``work``."""
+def _sweep(args, user, params, values, integ, work: Path, head: str, t0: float, grid, method,
+           values2=None) -> list[str]:
+    """A bifurcation or basin sweep (or map) of the gear model (``user`` None) or of the
+    ``--system``: resume parts in ``--out``, its files into ``work``."""
 
     from .._model import REDUCED
     from ..sweep import bifurcation_diagram
 
+    system = REDUCED if user is None else user.system
     out = Path(args.out)
     if args.kind == "bifurcation":
-        X0 = _starts(args)
+        X0 = _starts(args, user)
         print(head + f", {len(X0)} starts, direction {args.direction}")
-        result = bifurcation_diagram(REDUCED, params, args.param, values, X0, transient=args.transient,
+        result = bifurcation_diagram(system, params, args.param, values, X0, transient=args.transient,
                                      record=args.record, direction=args.direction, integrator=integ,
                                      max_period=args.max_period, progress=not args.quiet, out=out,
                                      restart=args.restart, save=False)
@@ -387,11 +434,14 @@ def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, 
         if not args.no_figures:
             from ..plotting import plot_bifurcation
 
-            figs = {"bifurcation.png": plot_bifurcation(result, "x1"),
-                    "bifurcation_x3.png": plot_bifurcation(result, "x3")}
+            if user is None:
+                figs = {"bifurcation.png": plot_bifurcation(result, "x1"),
+                        "bifurcation_x3.png": plot_bifurcation(result, "x3")}
+            else:  # the first coordinate of the user's system
+                figs = {"bifurcation.png": plot_bifurcation(result, system.state_names[0])}
     else:  # basins
         print(head + f", {args.method} on {grid.n_cells} cells per value")
-        result = _basins(args, params, values, values2, grid, method, progress=not args.quiet)
+        result = _basins(args, system, params, values, values2, grid, method, progress=not args.quiet)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         figs = {}
         if values2 is None:
@@ -422,11 +472,10 @@ def _sweep(args, params, values, integ, work: Path, head: str, t0: float, grid, 
     return files + list(figs)
 
 
-def _continuation(args, params, start, stop, count, integ, out, head) -> list[str]:
+def _continuation(args, system, params, start, stop, count, integ, out, head) -> list[str]:
     import numpy as np
 
-    from .._model import REDUCED
-    from .._params import with_param
+    from .._params import params_to_dict, with_param
     from ..continuation import continue_orbit
 
     x0 = np.asarray(args.points[0], dtype=float)
@@ -434,14 +483,14 @@ def _continuation(args, params, start, stop, count, integ, out, head) -> list[st
     ds = abs(stop - start) / (count - 1)
     print(head + f", P-{args.period} orbit from {x0.tolist()}, step {ds:g}")
     t0 = time.perf_counter()
-    branch = continue_orbit(REDUCED, p0, x0, param=args.param, stop=stop, period=args.period, ds=ds,
+    branch = continue_orbit(system, p0, x0, param=args.param, stop=stop, period=args.period, ds=ds,
                             max_steps=args.max_steps, integrator=integ, progress=not args.quiet)
     print(f"done in {time.perf_counter() - t0:.1f} s\n")
     table = branch.table()
     print(table)
     branch.save(out / "branch.nc")
     summary = dict(kind="continuation", param=args.param, start=start, stop=stop, ds=ds, period=args.period,
-                   seed_point=x0.tolist(), params=params.to_dict(), table=table,
+                   seed_point=x0.tolist(), params=params_to_dict(params), table=table,
                    runtime_s=time.perf_counter() - t0)
     if hasattr(branch, "summary"):
         summary["branch"] = branch.summary()
