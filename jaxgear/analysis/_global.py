@@ -25,7 +25,7 @@ from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._fractal import basin_entropy
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import cycle_multipliers, section_points_of
+from ._orbits import exact_cycle_multipliers, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
 
@@ -193,8 +193,8 @@ LYAPUNOV_STRETCHES = 4
 def attractor_exponents(system, params, attractors, integrator, multipliers, n_exponents: int = 2):
     """Type and Lyapunov exponents of each attractor ``(points, period)`` (a cycle's points,
     or the cloud of an attractor of boxes). A P-k cycle's exponents are ``ln |mu_i| / k``
-    of its Floquet multipliers ``multipliers[i]`` (exact for a cycle; error 0 here, the
-    finite differences' own error is near 1e-10); an attractor that repeats no point gets
+    of its Floquet multipliers ``multipliers[i]`` (exact for a cycle: error 0; the
+    multipliers come from autodiff Jacobians, to round-off); an attractor that repeats no point gets
     the exponents of the stroboscopic map from its first cloud point
     (:func:`~jaxgear.lyapunov_spectrum`, :data:`LYAPUNOV_PERIODS` periods in
     :data:`LYAPUNOV_STRETCHES` stretches, all in one batch) and its
@@ -232,8 +232,8 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     secs = section_points_of(system, params, [raw[old][0] if raw[old][1] > 0 else np.zeros((0, system.dim))
                                               for old in order], method.integrator, sec_idx, method.direction)
     periodic = [old for old in order if raw[old][1] > 0]
-    mults = dict(zip(periodic, cycle_multipliers(system, params, [(raw[old][0], raw[old][1]) for old in periodic],
-                                                 method.integrator, method.max_period)))
+    mults = dict(zip(periodic, exact_cycle_multipliers(system, params, [raw[old][:2] for old in periodic],
+                                                       method.integrator)))
     mus = {old: float(np.abs(m).max()) if np.all(np.isfinite(m)) else np.inf for old, m in mults.items()}
     kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator,
                                          [mults.get(old) for old in order])

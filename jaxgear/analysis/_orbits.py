@@ -12,7 +12,7 @@ import numpy as np
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
-__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "section_points_of",
+__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "exact_cycle_multipliers", "section_points_of",
            "advance_states"]
 
 
@@ -114,6 +114,38 @@ def largest_multipliers(system, params, cycles, integrator, max_period: int | No
     (``inf`` where they are not finite). Returns ``(n,)``."""
     return np.array([float(np.abs(mu).max()) if np.all(np.isfinite(mu)) else np.inf
                      for mu in cycle_multipliers(system, params, cycles, integrator, max_period)])
+
+
+@functools.partial(jax.jit, static_argnames=("system", "integrator"))
+def _period_jacobians(system, params, X, integrator):
+    """``D P(x)`` of the one-period stroboscopic map at each state of ``X (n, dim)``:
+    ``(n, dim, dim)``, by ``jax.jacfwd`` through the integrator (the kink-aware steps'
+    derivatives: exact at the backlash kinks)."""
+    def one(x):
+        return integrator.advance(system, params, x[:, None], jnp.asarray(0.0), 1)[:, 0]
+
+    return jax.vmap(jax.jacfwd(one))(X)
+
+
+def exact_cycle_multipliers(system, params, cycles, integrator) -> list[np.ndarray]:
+    """The Floquet multipliers of each cycle ``(points (k, dim) in cycle order, k)``: the
+    eigenvalues of the monodromy matrix ``D P(p_(k-1)) ... D P(p_0)`` of the k-fold map, the
+    product of the one-period Jacobians at its points (autodiff, one batch for every point
+    of every cycle: exact to round-off, even for multipliers near 0). Returns one complex
+    ``(dim,)`` array per cycle (``inf`` where not finite)."""
+    if not cycles:
+        return []
+    pts = [np.asarray(p, np.float64).reshape(int(k), -1) for p, k in cycles]
+    X = np.concatenate(pts)
+    J = np.asarray(_period_jacobians(system, params, jax.device_put(_pad_rows(X)), integrator))[: len(X)]
+    out, start = [], 0
+    for p in pts:
+        M = np.eye(p.shape[1])
+        for j in range(len(p)):
+            M = J[start + j] @ M
+        start += len(p)
+        out.append(np.linalg.eigvals(M) if np.all(np.isfinite(M)) else np.full(p.shape[1], np.inf + 0j))
+    return out
 
 
 def cycle_multipliers(system, params, cycles, integrator, max_period: int | None = None) -> list[np.ndarray]:

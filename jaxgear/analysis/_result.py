@@ -46,9 +46,8 @@ class Attractor:
         residual: ``max_i |P^k(p_i) - p_i|`` of the reported points (integration-level).
         periodic_cells: indices of the cells of its periodic group(s) (cell methods).
         multiplier: the largest modulus of its Floquet multipliers (paper §4.1: the
-            cycle is asymptotically stable when it is below 1), from central differences
-            of the k-fold stroboscopic map at its first point; NaN for period 0 (and in
-            files written before it was recorded).
+            cycle is asymptotically stable when it is below 1), the eigenvalues of the
+            product of the one-period Jacobians (autodiff) along the cycle; NaN for period 0.
         kind: its :class:`~jaxgear.AttractorType` (periodic, quasi-periodic, chaotic), from
             its period and Lyapunov exponents (-1, unknown, where not measured).
         exponents: ``(n,)`` its largest Lyapunov exponents of the stroboscopic map, per
