@@ -340,12 +340,12 @@ def test_resume_check_of_the_command_line_agrees_with_the_sweep(kind, tmp_path, 
 
 # ----------------------------------------------------------------- label uncertainty
 def test_label_uncertainty_is_not_measured_without_resolved_cells():
-    from jaxgear.analysis._result import describe_uncertainty
+    import jaxgear as jg
+    from jaxgear.analysis import LabelUncertainty
     from jaxgear.cli.common import NOT_MEASURED, with_uncertainty_line
 
-    u = {"samples": 64, "step": 0.0, "start": 0.0, "perturbation": 1e-3,
-         "refined_integrator": {"steps_per_period": 400}}
-    table = "id period cells\nunresolved - 12 100.00 %\n" + describe_uncertainty(u)
+    u = LabelUncertainty(samples=64, step=0.0, start=0.0, perturbation=1e-3, refined_integrator=jg.KinkAwareRK4(400))
+    table = "id period cells\nunresolved - 12 100.00 %\n" + u.describe()
     chaotic = SimpleNamespace(uncertainty=u, n_cells=12, n_unresolved=12)
     text = with_uncertainty_line(table, chaotic)
     assert text.splitlines()[-1] == NOT_MEASURED == "label uncertainty: not measured: no resolved cells"
