@@ -109,6 +109,8 @@ def _exponent_text(a: Attractor) -> str:
     if not np.isfinite(lam):
         return "-"
     err = float(a.exponent_errors[0]) if len(a.exponent_errors) else float("nan")
+    if a.period > 0 and err == 0.0:  # a cycle's, from its Floquet multipliers
+        return f"{lam:+.4f} (Floquet)"
     return f"{lam:+.4f}" + (f" +- {err:.1e}" if np.isfinite(err) else "")
 
 
