@@ -26,13 +26,18 @@ def _strict_dtype_promotion():
             jax.config.update("jax_numpy_dtype_promotion", old)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="session", autouse=True)
 def jaxgear_cache_dir(tmp_path_factory):
-    """One ``JAXGEAR_CACHE_DIR`` for the commands a test session starts (its compilation
-    cache, the compiled C++ kernel, the kept computations), apart from the user's own
-    cache: the kernel is built with ``g++ -O3`` once per session (per xdist worker), not
-    once per command."""
-    return tmp_path_factory.mktemp("jaxgear-cache")
+    """One ``JAXGEAR_CACHE_DIR`` for the whole test session (per xdist worker), apart from
+    the user's own cache: the commands the tests run, in-process or as subprocesses, keep
+    their compiled computations there (an in-process command switches JAX's persistent
+    cache on for the rest of its worker), never in the user's folder, which other
+    programs on the machine may be writing at the same time. (The compiled C++ kernel
+    lives in the user's private kernel folder, built once per machine.)"""
+    path = tmp_path_factory.mktemp("jaxgear-cache")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("JAXGEAR_CACHE_DIR", str(path))
+        yield path
 
 
 @contextlib.contextmanager

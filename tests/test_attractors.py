@@ -10,6 +10,8 @@ multipliers of the shooting module, and the round trip of a saved result.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -356,3 +358,23 @@ def test_gear_periodic_exponents_equal_floquet_multipliers(gear_cycles):
     for got, want, err in gear_cycles[1]:
         np.testing.assert_array_less(np.abs(got - want), 3 * err + 1e-6)
         np.testing.assert_allclose(got, want, atol=1e-6, rtol=0)
+
+
+# --------------------------------------------------------------------------- fractal basin measures
+def test_basin_measures_of_an_analysis_and_their_figure(duffing_result):
+    """The analysis's basin entropy is that of its own labels (boxes of at most 5 cells),
+    and the figure draws the stored uncertain fractions at the stored start moves."""
+    from jaxgear.analysis import basin_entropy
+    from jaxgear.plotting import plot_basin_measures
+
+    r = duffing_result
+    e = basin_entropy(np.asarray(r.labels), box=min(5, *r.grid.counts))
+    assert (r.basin_entropy.S_b, r.basin_entropy.box) == (e.S_b, e.box)
+    u = jaxgear.with_label_uncertainty(r, DUFFING, DuffingParams(**DUFF), METHOD, 64).uncertainty
+    assert len(u.perturbations) == 4 and u.perturbations[0] == u.perturbation and u.start_fractions[0] == u.start
+    assert all(0.0 <= f <= 1.0 for f in u.start_fractions)
+    if np.isfinite(u.alpha):
+        fig = plot_basin_measures(dataclasses.replace(r, uncertainty=u))
+        (line,) = [c for c in fig.axes[0].containers]
+        drawn = np.asarray(line.lines[0].get_ydata())
+        np.testing.assert_allclose(drawn, [f for f in u.start_fractions if f > 0])

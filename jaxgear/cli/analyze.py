@@ -30,7 +30,7 @@ from .common import (
 )
 
 OWNED = ("result.nc", "summary.json", "compare.json", "domains.png", "shares.png", "domains_3d.png",
-         "attractors.png")
+         "attractors.png", "basin_measures.png")
 """Files ``jaxgear analyze`` writes into ``--out`` (replaced as a whole by the next run)."""
 
 
@@ -242,7 +242,7 @@ def _analyze(args, system, params, grid, method, out: Path | None) -> list[str]:
 def _figures(result, out) -> list[str]:
     """Draw the analysis's figures into ``out``: the names of the files written."""
     from ..analysis import PoincareCellMap
-    from ..plotting import plot_attractors, plot_domains, plot_domains_3d, plot_shares
+    from ..plotting import plot_attractors, plot_basin_measures, plot_domains, plot_domains_3d, plot_shares
 
     out = Path(out)
     figures = [("domains.png", lambda: plot_domains(result, axis=-1, n_slices=4))]
@@ -253,6 +253,9 @@ def _figures(result, out) -> list[str]:
     if result.attractors and dim >= 2:  # the first two or three coordinates (a --system may have fewer than 4)
         figures.append(("attractors.png", lambda: plot_attractors(result, coords=tuple(range(min(dim, 3))),
                                                                   section=isinstance(result.method, PoincareCellMap))))
+    u = result.uncertainty
+    if u is not None and u.alpha == u.alpha:  # (not NaN) the uncertain fraction over three decades and its fit
+        figures.append(("basin_measures.png", lambda: plot_basin_measures(result)))
     names = []
     for name, plot in figures:
         save_figure(plot(), out / name, dpi=120)

@@ -8,6 +8,9 @@ from ._basins import (
     plot_attractors as plot_attractors,
 )
 from ._basins import (
+    plot_basin_measures as plot_basin_measures,
+)
+from ._basins import (
     plot_domains as plot_domains,
 )
 from ._basins import (

@@ -138,7 +138,8 @@ def plot_domains_3d(result: GlobalResult, attractors=None, *, max_cells: int = 2
 
 def plot_attractors(result: GlobalResult, coords=(0, 1, 2), *, section: bool = True):
     """The attractors' points: section crossings (``section=True``) or stroboscopic points,
-    projected on two or three state coordinates (paper Fig. 3-6 markers).
+    projected on two or three state coordinates (paper Fig. 3-6 markers); a chaotic or
+    quasi-periodic attractor (period 0) as the cloud of its stroboscopic points.
 
     ``coords``: 2 or 3 state indices (e.g. ``(0, 1, 2)`` for x1, x2, x3; state units).
     Reads only the result (works on a loaded one). Returns a Figure with one axes
@@ -153,8 +154,12 @@ def plot_attractors(result: GlobalResult, coords=(0, 1, 2), *, section: bool = T
         pts = np.asarray(a.section_points if section and len(a.section_points) else a.points)
         if not len(pts):
             continue
-        ax.scatter(*[pts[:, c] for c in coords], color=attractor_color(a.id), marker="*", s=80,
-                   label=f"{a.id}: {a.label}")
+        if a.period > 0:  # a cycle's points
+            ax.scatter(*[pts[:, c] for c in coords], color=attractor_color(a.id), marker="*", s=80,
+                       label=f"{a.id}: {a.label}")
+        else:  # the cloud of a chaotic or quasi-periodic attractor
+            ax.scatter(*[pts[:, c] for c in coords], color=attractor_color(a.id), marker=".", s=3, alpha=0.6,
+                       linewidths=0, label=f"{a.id}: {a.label} ({len(pts)} points)")
     n = result.state_names
     ax.set_xlabel(n[coords[0]])
     ax.set_ylabel(n[coords[1]])
@@ -182,4 +187,63 @@ def plot_shares(result: GlobalResult):
     ax.set_ylabel("share of cells [%]")
     ax.set_ylim(0, 105)
     ax.set_title(f"Basin shares ({result.method.name})")
+    return fig
+
+
+def plot_basin_measures(result):
+    """The fractal basin measures of a :class:`~jaxgear.GlobalResult`, or of every value of
+    a :class:`~jaxgear.BasinSweep`.
+
+    For one result: the uncertain fraction ``f(eps)`` of its label uncertainty against the
+    start move ``eps`` (cell sizes) on log-log axes, with the fit ``f ~ eps**alpha`` and
+    the slope 1 of a smooth boundary for comparison (Grebogi et al. 1983), and the basin
+    entropies in the title (Daza et al. 2016). For a sweep: ``S_b``, ``S_bb`` (with the
+    log 2 line) and ``alpha`` (with its error) against the parameter. Returns a Figure.
+    """
+    from ..sweep import BasinSweep
+
+    if isinstance(result, BasinSweep):
+        return _sweep_measures(result)
+    u = result.uncertainty
+    if u is None or not u.perturbations:
+        raise ValueError("plot_basin_measures needs a result with its label uncertainty (uncertainty > 0).")
+    fig = new_figure(figsize=(5.5, 4.0), layout="constrained")
+    ax = fig.add_subplot()
+    eps, f = np.asarray(u.perturbations), np.asarray(u.start_fractions)
+    keep = f > 0
+    err = np.sqrt(f * (1 - f) / u.samples)
+    ax.errorbar(eps[keep], f[keep], yerr=err[keep], fmt="o", color="k", label=f"f(eps), {u.samples} cells")
+    if np.isfinite(u.alpha) and keep.any():
+        c = np.exp(np.mean(np.log(f[keep]) - u.alpha * np.log(eps[keep])))
+        ax.plot(eps, c * eps ** u.alpha, "-", color=attractor_color(0),
+                label=f"fit: alpha = {u.alpha:.2f} +- {u.alpha_error:.2f}")
+        ax.plot(eps, c * eps[0] ** u.alpha * (eps / eps[0]), ":", color="grey", label="slope 1 (smooth boundary)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_ylim(top=1.0)  # a share
+    ax.set_xlabel("start move eps [cell sizes]")
+    ax.set_ylabel("share of uncertain cells f(eps)")
+    e = result.basin_entropy
+    title = "Uncertain fraction"
+    if e is not None and np.isfinite(e.S_b):
+        title += f"; S_b = {e.S_b:.3f}, S_bb = {e.S_bb:.3f}"
+    ax.set_title(title, fontsize="medium")
+    ax.legend(fontsize="small")
+    return fig
+
+
+def _sweep_measures(sweep):
+    fig = new_figure(figsize=(6.5, 5.0), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    v = np.asarray(sweep.values)
+    top.plot(v, sweep.basin_entropy, "o-", color=attractor_color(0), label="S_b")
+    top.plot(v, sweep.boundary_basin_entropy, "s-", color=attractor_color(1), label="S_bb")
+    top.axhline(np.log(2.0), color="grey", ls=":", label="log 2")
+    top.set_ylabel("basin entropy")
+    top.legend(fontsize="small")
+    bottom.errorbar(v, sweep.uncertainty_exponent, yerr=sweep.uncertainty_exponent_error, fmt="o-", color="k")
+    bottom.axhline(1.0, color="grey", ls=":")
+    bottom.set_ylabel("uncertainty exponent alpha")
+    bottom.set_xlabel(sweep.param)
+    top.set_title("Fractal basin measures", fontsize="medium")
     return fig

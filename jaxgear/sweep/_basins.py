@@ -102,6 +102,10 @@ class GlobalShares:
     attractor_type: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
     largest_exponent: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
     exponent_error: np.ndarray | None = array_field(_at("attractor"), later=True, default=None)
+    basin_entropy: np.ndarray | None = array_field(_at(), later=True, default=None)
+    boundary_basin_entropy: np.ndarray | None = array_field(_at(), later=True, default=None)
+    uncertainty_exponent: np.ndarray | None = array_field(_at(), later=True, default=None)
+    uncertainty_exponent_error: np.ndarray | None = array_field(_at(), later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
     method: AbstractGlobalMethod = custom_field(lambda m: m.to_dict(), method_from_dict)
     match_tol: float = 0.0
@@ -114,7 +118,8 @@ class GlobalShares:
     def __post_init__(self):
         self._unmeasured_as_nan()
         for f in ("shares", "sink_share", "unresolved_share", "period", "multiplier", "points", "n_points", "labels",
-                  "uncertainty_step", "uncertainty_start", "attractor_type", "largest_exponent", "exponent_error"):
+                  "uncertainty_step", "uncertainty_start", "attractor_type", "largest_exponent", "exponent_error",
+                  *_MEASURES):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
@@ -135,7 +140,7 @@ class GlobalShares:
     def _unmeasured_as_nan(self) -> None:
         """The label uncertainties and multipliers of a file written before they were
         recorded: NaN."""
-        for f in ("uncertainty_step", "uncertainty_start"):
+        for f in ("uncertainty_step", "uncertainty_start", *_MEASURES):
             if getattr(self, f) is None:
                 object.__setattr__(self, f, np.full(np.shape(self.sink_share), np.nan))
         if self.multiplier is None:
@@ -192,7 +197,8 @@ class GlobalShares:
     def _per_value_summary(self) -> dict[str, list]:
         """The per-value arrays of :meth:`summary` (shares, multipliers, sink and
         unresolved shares, label uncertainties) as nested lists."""
-        return {f: getattr(self, f).tolist() for f in ("shares", "multiplier", "attractor_type", "largest_exponent",
+        return {f: getattr(self, f).tolist() for f in (*_MEASURES, "shares", "multiplier", "attractor_type",
+                                                        "largest_exponent",
                                                         "exponent_error", "sink_share", "unresolved_share",
                                                         "uncertainty_step", "uncertainty_start")}
 
@@ -305,8 +311,10 @@ class BasinSweep(GlobalShares):
         label uncertainties (percent of the sampled cells) where measured."""
         unres = bool(np.any(self.unresolved_share > 0))
         unc = bool(np.isfinite(self.uncertainty_step).any())
+        fractal = bool(np.isfinite(self.boundary_basin_entropy).any() or np.isfinite(self.uncertainty_exponent).any())
         head = ((self.param,) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors))
-                + ("sink",) + (("unresolved",) if unres else ()) + (("unc. step", "unc. start") if unc else ()))
+                + ("sink",) + (("unresolved",) if unres else ()) + (("unc. step", "unc. start") if unc else ())
+                + (("S_bb", "alpha") if fractal else ()))
 
         def pct(x):
             return "-" if np.isnan(x) else f"{100 * x:.1f}"
@@ -315,6 +323,7 @@ class BasinSweep(GlobalShares):
                                       for g, s in enumerate(self.shares[i])) + (f"{100 * self.sink_share[i]:.1f}",)
                 + ((f"{100 * self.unresolved_share[i]:.1f}",) if unres else ())
                 + ((pct(self.uncertainty_step[i]), pct(self.uncertainty_start[i])) if unc else ())
+                + ((_num(self.boundary_basin_entropy[i]), _num(self.uncertainty_exponent[i])) if fractal else ())
                 for i, v in enumerate(self.values)]
         return format_table(rows, head)
 
@@ -521,6 +530,16 @@ def analyses_at(system, params_list, grid, method, out, kind: str, settings: dic
     return results
 
 
+def _num(x) -> str:
+    return "-" if not np.isfinite(x) else f"{x:.3f}"
+
+
+_MEASURES = ("basin_entropy", "boundary_basin_entropy", "uncertainty_exponent", "uncertainty_exponent_error")
+"""The fractal basin measures of each value ``(V,)`` (NaN where not measured): basin
+entropy ``S_b`` and boundary basin entropy ``S_bb`` (:func:`~jaxgear.basin_entropy`) and
+the uncertainty exponent ``alpha`` with its error (:class:`~jaxgear.analysis.LabelUncertainty`)."""
+
+
 def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarray]:
     """The per-result arrays of a sweep or map from the analyses ``results`` and the global
     ids of their attractors ``gids`` (:func:`match_across_values`): ``shares``, ``period``
@@ -531,7 +550,7 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
     ``(n,)`` (NaN where not measured), and each attractor's type ``attractor_type`` (an
     :class:`~jaxgear.AttractorType` value, -1 where absent or unknown),
     ``largest_exponent`` and its ``exponent_error`` (per forcing period, NaN where absent
-    or not measured) ``(n, G)``."""
+    or not measured) ``(n, G)``, and the fractal basin measures :data:`_MEASURES` ``(n,)``."""
     n = len(results)
     G = int(max([g.max(initial=-1) for g in gids] + [-1])) + 1
     K = max([len(a.points) for r in results for a in r.attractors] + [1])
@@ -540,7 +559,7 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
                labels=np.empty((n, *grid.counts), dtype=np.int16), sink_share=np.empty(n),
                unresolved_share=np.empty(n), uncertainty_step=np.full(n, np.nan), uncertainty_start=np.full(n, np.nan),
                attractor_type=np.full((n, G), int(AttractorType.UNKNOWN), dtype=np.int64), largest_exponent=np.full((n, G), np.nan),
-               exponent_error=np.full((n, G), np.nan))
+               exponent_error=np.full((n, G), np.nan), **{f: np.full(n, np.nan) for f in _MEASURES})
     for i, (r, g) in enumerate(zip(results, gids)):
         lut = np.full(len(r.attractors) + 2, -1, dtype=np.int64)  # index local id + 2
         lut[0], lut[1] = -2, -1
@@ -558,6 +577,10 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
         out["unresolved_share"][i] = r.n_unresolved / r.n_cells
         if r.uncertainty is not None:
             out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty.step, r.uncertainty.start
+            out["uncertainty_exponent"][i] = r.uncertainty.alpha
+            out["uncertainty_exponent_error"][i] = r.uncertainty.alpha_error
+        if r.basin_entropy is not None:
+            out["basin_entropy"][i], out["boundary_basin_entropy"][i] = r.basin_entropy.S_b, r.basin_entropy.S_bb
     return out
 
 
