@@ -270,9 +270,9 @@ def test_capture_radius_stays_below_attractor_separation():
 
     a = np.array([[0.0, 0.0], [1.0, 0.0]])
     b = np.array([[0.0, 0.04], [1.0, 1.0]])
-    pts, ks, _ = seed_tables([[(a, 2), (b, 2)]], 2, 2)
+    pts, ks, _, _ = seed_tables([[(a, 2), (b, 2)]], 2, 2)
     assert float(capture_radius(pts[0], ks[0], None)) == pytest.approx(0.01)  # a quarter of the 0.04 gap
-    pts, ks, _ = seed_tables([[(a, 2)]], 2, 2)
+    pts, ks, _, _ = seed_tables([[(a, 2)]], 2, 2)
     assert float(capture_radius(pts[0], ks[0], None)) == pytest.approx(0.02)  # 1 % of 1 + max|x|
     assert float(capture_radius(pts[0], ks[0], 0.3)) == 0.3
     with pytest.raises(ValueError, match="capture_radius"):

@@ -119,7 +119,7 @@ def _fake_result(atts, grid):
     labels = np.concatenate([np.full(c, i) for i, (*_, c) in enumerate(atts)] + [np.zeros(0, int)])
     labels = np.concatenate([labels, np.full(grid.n_cells - len(labels), -1)])
     return type("R", (), dict(attractors=a, labels=labels, n_sink=int((labels == -1).sum()), n_cells=grid.n_cells,
-                              n_unresolved=0, uncertainty={}))()
+                              n_unresolved=0, uncertainty=None, basin_entropy=None))()
 
 
 def test_sweep_records_types_and_exponents_and_counts_every_type():
@@ -138,8 +138,8 @@ def test_sweep_records_types_and_exponents_and_counts_every_type():
                         grid),
            _fake_result([(_ring((0.1, 0.0), 1.2), 0, C, 0.4, 0.03, 10), (_ring((0.0, 30.0), 0.5), 0, Q, 0.0, 1e-4, 10)],
                         grid)]
-    s = _basins._assemble_basins(res, "gamma", ("gamma",), np.array([1.0, 2.0, 3.0]), grid, "direct", 2.0,
-                                 jg.DUFFING, {}, {}, "test")
+    s = _basins._assemble_basins(res, "gamma", ("gamma",), np.array([1.0, 2.0, 3.0]), grid, jg.Direct(), 2.0, 0,
+                                 jg.DUFFING, {}, "test")
     assert s.n_attractors == 3
     assert s.period.tolist() == [[4, 0, -1], [4, 0, -1], [-1, 0, 0]]
     assert s.attractor_type.tolist() == [[P, C, -1], [P, C, -1], [-1, C, Q]]

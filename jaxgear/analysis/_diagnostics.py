@@ -49,13 +49,14 @@ def warn_if_unreliable(r: GlobalResult) -> None:
                       stacklevel=3)
     g = r.grid
     for a in r.attractors:
-        if a.period == 0 and a.type == AttractorType.PERIODIC:
-            warnings.warn(f"attractor {a.id} repeats no point within max_period={m.max_period} periods but its "
-                          "largest Lyapunov exponent is negative: a cycle of a longer period; raise max_period to "
-                          "get its exact points.", stacklevel=3)
-        elif a.period == 0 and a.type == AttractorType.UNKNOWN:
-            warnings.warn(f"attractor {a.id} repeats no point and its Lyapunov exponents could not be measured "
-                          "(the trajectory left the bounded region).", stacklevel=3)
+        typed = getattr(m, "recurrence", None) is not None and a.type in (AttractorType.CHAOTIC,
+                                                                         AttractorType.QUASI_PERIODIC)
+        if a.period == 0 and not typed:  # a cell group with no period, or a cycle found by its boxes
+            warnings.warn(f"attractor {a.id} showed no period <= max_period={m.max_period}"
+                          + (" and its largest Lyapunov exponent is negative: a cycle of a longer period"
+                             if a.type == AttractorType.PERIODIC else
+                             ": it may have a longer period, be quasi-periodic or chaotic, or be a slow transient")
+                          + "; raise max_period (or settle_periods).", stacklevel=3)
         pts = np.asarray(a.points)
         if len(pts):
             for j, ax in enumerate(g.axes):

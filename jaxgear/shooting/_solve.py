@@ -139,6 +139,11 @@ def _segment_map_jvp(primals, tangents):
 _segment_map.defjvp(_segment_map_jvp, symbolic_zeros=True)
 
 
+SINGULAR_RCOND = 1e-10
+"""A converged root whose Jacobian's smallest singular value is below this share of its
+largest (at least 1) is reported as singular (:func:`solve_orbit`)."""
+
+
 def optx_status(result, finite, residual, tol, diverged):
     """A :class:`~jaxgear.Status` code from an optimistix ``RESULTS`` and the residual check."""
     optx = _optx()
@@ -189,6 +194,12 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, options: ShootOptions):
     finite = jnp.all(jnp.isfinite(Xs)) & jnp.isfinite(r)
     diverged = jnp.max(jnp.linalg.norm(jnp.where(jnp.isfinite(Xs), Xs, 0.0).reshape(X0.shape), axis=1)) > options.max_norm
     st = optx_status(sol.result, finite, r, options.tol, diverged)
+    # a root where G' is singular is no isolated orbit (a continuum of them, e.g. free
+    # flight): reported as SINGULAR, whatever a regularised solver (Levenberg-Marquardt)
+    # converged to; its implicit derivatives would not exist
+    sv = jnp.linalg.svd(jax.jacfwd(fn)(jnp.where(finite, Xs, X0.reshape(-1)), sargs), compute_uv=False)
+    singular_root = ~(sv[-1] > SINGULAR_RCOND * jnp.maximum(sv[0], 1.0))
+    st = jnp.where((st == Status.CONVERGED) & singular_root, Status.SINGULAR, st)
     # Implicit derivatives (optimistix.ImplicitAdjoint) at a converged root. A seed that did
     # not converge gets the residual X - X_end instead (identity Jacobian, zero derivative;
     # its point is NaN anyway): the adjoint's linear solve would otherwise raise on a
