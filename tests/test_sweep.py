@@ -630,9 +630,10 @@ def test_cli_sweep_killed_and_restarted(tmp_path):
         return [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", "3:7:24", "--starts", "4",
                 "--transient", "300", "--record", "33", "--out", str(out), "--quiet", "--no-figures"]
 
-    assert subprocess.run(cmd(tmp_path / "full"), cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    env = dict(os.environ, JAXGEAR_CACHE_DIR=str(tmp_path / "cache"))  # a killed run may leave a half-written entry
+    assert subprocess.run(cmd(tmp_path / "full"), cwd=ROOT, capture_output=True, timeout=600, env=env).returncode == 0
     run = tmp_path / "run"
-    proc = subprocess.Popen(cmd(run), cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd(run), cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     t0 = time.time()
     while time.time() - t0 < 300 and proc.poll() is None and not list((run / "parts").glob("*.npz")):
         time.sleep(0.005)
