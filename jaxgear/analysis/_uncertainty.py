@@ -14,7 +14,7 @@ result's attractors as the known ones:
 - ``start``: the share whose label changes when the start moves by ``perturbation``
   cell widths (uniformly in that box along the gridded coordinates): the basin-boundary
   uncertainty at that scale. The same samples moved by :data:`EXPONENT_SCALES` times
-  that (three decades, one pool) give the uncertain fraction ``f(eps)`` and the
+  that (three decades, a pool each) give the uncertain fraction ``f(eps)`` and the
   uncertainty exponent ``alpha`` of ``f ~ eps**alpha`` (Grebogi, McDonald, Ott & Yorke,
   Phys. Lett. A 99, 415, 1983): 1 for a smooth basin boundary, below 1 for a fractal one.
 """
@@ -106,7 +106,8 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
 
     fine = direct.integrator.refined()
     (steps,) = relabel([X], fine, "uncertainty: step halved")
-    starts = relabel(moved, direct.integrator, "uncertainty: start moved")
+    # one pool per start move (each holds the values' rows, as the step pool does)
+    starts = [relabel([Xm], direct.integrator, "uncertainty: start moved")[0] for Xm in moved]
     out = []
     for v, (step, ref) in enumerate(zip(steps, refs)):
         f = np.array([float(np.mean(starts[j][v] != ref)) for j in range(len(scales))])
