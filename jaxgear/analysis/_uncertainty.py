@@ -88,26 +88,23 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
             for atts in attractors_list]
     boxes = direct.boxes(grid.centres())
 
-    def relabel(Xs, integrator, name):
-        """The labels of the states ``Xs[j]`` for every value (one pool for all), in the
-        result's ids: ``outs[j][v]``."""
-        V = len(params_list)
-        pooled = run_pools(system, list(params_list) * len(Xs), [X for X in Xs for _ in range(V)], integrator,
-                           direct.pool_options(pilot=0), boxes=boxes, attractors=knowns * len(Xs),
-                           progress=progress, label=name)
+    def relabel(X, integrator, name):
+        """The labels of the states ``X`` under every value (one pool), in the result's ids."""
+        pooled = run_pools(system, params_list, [X] * len(params_list), integrator, direct.pool_options(pilot=0),
+                           boxes=boxes, attractors=knowns, progress=progress, label=name)
         outs = []
-        for (lab, _, _), ids in zip(pooled, idss * len(Xs)):
+        for (lab, _, _), ids in zip(pooled, idss):
             out = lab.copy()
             seeded = (lab >= 0) & (lab < len(ids))
             out[seeded] = ids[lab[seeded]]
             out[lab >= len(ids)] = np.iinfo(np.int64).max  # an attractor the result does not have
             outs.append(out)
-        return [outs[j * V:(j + 1) * V] for j in range(len(Xs))]
+        return outs
 
     fine = direct.integrator.refined()
-    (steps,) = relabel([X], fine, "uncertainty: step halved")
+    steps = relabel(X, fine, "uncertainty: step halved")
     # one pool per start move (each holds the values' rows, as the step pool does)
-    starts = [relabel([Xm], direct.integrator, "uncertainty: start moved")[0] for Xm in moved]
+    starts = [relabel(Xm, direct.integrator, "uncertainty: start moved") for Xm in moved]
     out = []
     for v, (step, ref) in enumerate(zip(steps, refs)):
         f = np.array([float(np.mean(starts[j][v] != ref)) for j in range(len(scales))])
