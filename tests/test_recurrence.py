@@ -151,28 +151,43 @@ def test_recurrence_share_tells_attractors_from_transients():
 
 
 def test_near_periodic_sees_cycles_not_rotations():
-    """A P-3 cycle (with noise below a box) is a cycle; the irrational rotation is not."""
+    """A P-3 cycle approached geometrically (its distance to the cycle times 0.97 per
+    period) is a cycle, and so is the cycle itself (errors at round-off do not shrink any
+    more); the same cycle with noise that does not die out (three bands a third of a box
+    wide: an attractor that repeats within a box but never converges, as a narrow-banded
+    chaotic one) is not, nor the irrational rotation."""
     part = rec.partition_from_box([-1, -1], [1, 1], 40)
-    rng = np.random.default_rng(2)
-    cyc = np.array([[0.5, 0.1], [-0.3, 0.7], [0.2, -0.6]])[np.arange(600) % 3] + rng.normal(0, 1e-4, (600, 2))
-    t = np.arange(600) * 2 * np.pi * (np.sqrt(5) - 1) / 2
-    rot = np.column_stack([np.cos(t), np.sin(t)])
-    assert bool(rec.near_periodic(part, _cloud(cyc), 8))
+    w = float(part.width[0])
+    t = np.arange(600)
+    cyc = np.array([[0.5, 0.1], [-0.3, 0.7], [0.2, -0.6]])[t % 3]
+    approach = cyc + 0.8 * w * 0.97 ** t[:, None] * np.column_stack([np.cos(t), np.sin(t)])
+    reached = cyc + 1e-15 * np.random.default_rng(1).standard_normal((600, 2))
+    bands = cyc + np.random.default_rng(2).uniform(-w / 6, w / 6, (600, 2))
+    th = t * 2 * np.pi * (np.sqrt(5) - 1) / 2
+    rot = np.column_stack([np.cos(th), np.sin(th)])
+    assert bool(rec.near_periodic(part, _cloud(approach), 8))
+    assert bool(rec.near_periodic(part, _cloud(reached), 8))
+    assert not bool(rec.near_periodic(part, _cloud(bands), 8))
     assert not bool(rec.near_periodic(part, _cloud(rot), 8))
 
 
 def test_near_cycle_lanes():
-    """Rings of the last 2 M points (newest first): a lane settling on a P-2 cycle (its
-    points within a box of the cycle's) is near a cycle, one on the irrational rotation and
-    one without history yet (NaN) are not."""
+    """Rings of the last 2 M points (newest first): a lane settling on a P-2 cycle (within a
+    box of it, closer every period) is near a cycle; one moving away from the cycle, one
+    on noisy bands around it whose newest errors exceed the older ones, one on the
+    irrational rotation and one without history yet (NaN) are not."""
     M = 4
     part = rec.partition_from_box([-1, -1], [1, 1], 40)
-    t = np.arange(2 * M)
-    p2 = np.array([[0.5, 0.1], [-0.3, 0.7]])[t % 2] + 1e-3 * 0.9 ** t[:, None]
+    w = float(part.width[0])
+    t = np.arange(2 * M)  # periods back
+    cyc = np.array([[0.5, 0.1], [-0.3, 0.7]])[t % 2]
+    settling = cyc + 0.3 * w * 0.8 ** (2 * M - t)[:, None]
+    leaving = cyc + 0.3 * w * 0.8 ** t[:, None]
+    noisy = cyc + np.where(t < M // 2, 0.3, 0.05)[:, None] * w * np.array([1.0, -1.0]) * (-1) ** (t // 2)[:, None]
     rot = np.column_stack([np.cos(2.4 * t), np.sin(2.4 * t)])
     young = np.full((2 * M, 2), np.nan)
-    ring = jnp.asarray(np.stack([p2, rot, young], axis=-1))  # (2M, 2, 3)
-    assert np.asarray(rec.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False]
+    ring = jnp.asarray(np.stack([settling, leaving, noisy, rot, young], axis=-1))  # (2M, 2, 5)
+    assert np.asarray(rec.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False, False, False]
 
 
 def test_overlap_shares_match_clouds_by_boxes():

@@ -25,10 +25,11 @@ on a fine partition of the state space (:mod:`jaxgear.analysis._recurrence`, Dat
 Wagemakers 2022) when the pool is given :class:`Boxes`: every period a lane's point
 looks up its box in a device hash table of the known attractors' boxes and counts its
 consecutive hits on one attractor (enough hits decide it); once per round the oldest
-lane still undecided after ``transient`` periods, and not approaching a cycle, is the
-candidate: a cloud of its trajectory is integrated, and when the cloud recurs in its own
-boxes it is an attractor (a new slot of its value's table, marked :func:`aperiodic_mark`,
-its cloud kept), or joins the attractor of boxes it overlaps; its boxes enter the table.
+lane still undecided after ``transient`` periods, and not approaching a cycle (its
+repetition errors within a box and shrinking), is the candidate: a cloud of its
+trajectory is integrated, and when the cloud recurs in its own boxes it is an attractor
+(a new slot of its value's table, marked :func:`aperiodic_mark`, its cloud kept), or
+joins the attractor of boxes it overlaps; its boxes enter the table.
 
 Several parameter sets (the values of a sweep) share one pool: each cell carries its
 value's row, a lane integrates with its row's parameters (``integrator.advance_rows``)
@@ -60,8 +61,8 @@ from ._recurrence import (
     empty_table,
     insert,
     lookup,
-    near_cycle_lanes,
     near_periodic,
+    oldest_off_cycle,
     recurrence_share,
     row_keys,
     track_hits,
@@ -478,7 +479,8 @@ def _refill(s: PoolState, decided, X, Xrow, n) -> PoolState:
 def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes, label):
     """The round's candidate for a new attractor of boxes (at most one in the pool): the
     oldest live undecided lane past the transient (and as long since its last try), in no
-    run of box hits, not recurring and not approaching a cycle. Its cloud
+    run of box hits, not recurring and not approaching a cycle (among the oldest such lanes,
+    :func:`~jaxgear.analysis._recurrence.oldest_off_cycle`). Its cloud
     (:func:`~jaxgear.analysis._recurrence.attractor_cloud`, staged, stopped on a cycle or
     an escape) is accepted when it recurs in its own boxes; it then joins the attractor of
     boxes of its value that it overlaps, or takes a new slot; its boxes enter the table and
@@ -486,13 +488,12 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
     opt, part = boxes.options, boxes.partition
     M, V = o.max_period, s.att_k.shape[0]
     mark = aperiodic_mark(M)
-    recent = _back(s.hist, s.clock, 0, 2 * M)  # (2M, dim, L), newest first
-    cand = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
-            & (s.age - s.tried >= opt.transient) & (s.hits == 0) & ~near_cycle_lanes(recent, part.width, M))
+    eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
+                & (s.age - s.tried >= opt.transient) & (s.hits == 0))
+    l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
 
     def characterise(c):
         s, label = c
-        l0 = jnp.argmax(jnp.where(cand, s.age, -1))
         v0 = s.row[l0]
         p0 = params if V == 1 else jax.tree.map(lambda a: a[v0], params)
         P, A, Q = opt.cloud_periods, s.att_k.shape[1], s.att_cloud.shape[2]
@@ -528,7 +529,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
             age=s.age.at[l0].add(jnp.where(taken, ran, 0)))
         return s, label.at[l0].set(jnp.where(taken, slot, label[l0])).astype(jnp.int32)
 
-    return jax.lax.cond(jnp.any(cand), characterise, lambda c: c, (s, label))
+    return jax.lax.cond(found, characterise, lambda c: c, (s, label))
 
 
 def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: PoolState, X, Xrow, n) -> PoolState:

@@ -19,7 +19,9 @@ Pure functions the direct method's lane pool calls per period or per round:
   open-addressing hash table on the device from box keys to attractor labels (bounded
   memory; an overflow is counted, never silent);
 - :func:`track_hits` — per lane, the run of consecutive hits on one attractor's boxes;
-- :func:`near_cycle_lanes` — per lane, whether it is approaching a cycle (then no candidate);
+- :func:`near_cycle_lanes`, :func:`oldest_off_cycle` — per lane, whether it is approaching a
+  cycle (its repetition errors within a box and shrinking; then no candidate), and the
+  round's candidate among the oldest eligible lanes;
 - :func:`attractor_cloud`, :func:`recurrence_share`, :func:`near_periodic`,
   :func:`overlap_shares` — a candidate's point cloud, whether it recurs, whether it is a
   cycle the point-level recognition will take, and which known attractor it overlaps;
@@ -33,11 +35,18 @@ Wiring into the lane pool (:mod:`jaxgear.analysis._pool`), as the classifier doe
   :func:`track_hits` on three ``(L,)`` int32 lane arrays (attractor, hits, misses); a
   fourth, ``tried``, holds the age of a lane's last candidacy. They are reset with the lane.
 - per round: ``hits >= options.hits`` decides a lane with its run's attractor; then at most
-  one candidate (the oldest live undecided lane with ``age >= transient``, ``age - tried >=
-  transient``, no run of hits, not periodic, and not :func:`near_cycle_lanes` on the last
-  ``2 M`` points of the pool's ring) gets a staged cloud (``CLOUD_STAGES``, stopped on a
-  cycle or an escape); an accepted cloud joins the attractor of boxes it overlaps or takes
-  a new slot, and its boxes enter the table in the round's one :func:`insert`.
+  one candidate (:func:`oldest_off_cycle`: the oldest live undecided lane with ``age >=
+  transient``, ``age - tried >= transient``, no run of hits, not periodic, and not
+  :func:`near_cycle_lanes` on its last ``2 M`` points of the pool's ring, looked for among
+  the :data:`CANDIDATE_POOL` oldest) gets a staged cloud (``CLOUD_STAGES``, stopped on a
+  cycle, :func:`near_periodic`, or an escape); an accepted cloud joins the attractor of
+  boxes it overlaps or takes a new slot, and its boxes enter the table in the round's one
+  :func:`insert`.
+- "approaching a cycle" means repetition errors within one box that shrink, not within
+  one box alone: an attractor that spans only a few boxes (near the edge of a chaotic
+  band the gear model's chaotic attractor has two narrow bands, each within about a box
+  of the partition over region D) repeats within a box with some period, yet never
+  converges, and the point-level recognition never takes it.
 - labels are one space for cycles and attractors of boxes: a cycle registered by point
   recurrence also enters its ``k`` boxes (a chaotic lane visiting them resets its run);
   a repeller's boxes never do. The pool's ``att_k = 0`` means an empty slot, so an
@@ -66,7 +75,8 @@ from .._checks import check_int, check_number
 from ..integrate import resolve_integrator
 
 __all__ = ["FinePartition", "partition_from_box", "cell_keys", "row_keys", "CellTable", "empty_table", "lookup", "insert",
-           "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "overlap_shares",
+           "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "oldest_off_cycle",
+           "overlap_shares",
            "RecurrenceOptions", "RecurrenceResult", "classify_by_recurrence", "APERIODIC", "INDEX_BITS",
            "MAX_PROBES"]
 
@@ -339,38 +349,90 @@ def recurrence_share(partition: FinePartition, cloud):
     return jnp.mean(((k1[pos] == k2) & (k2 >= 0)).astype(jnp.float64))
 
 
-@functools.partial(jax.jit, static_argnames="max_period")
-def near_periodic(partition: FinePartition, cloud, max_period: int):
-    """Whether copy 0 of ``cloud (P, dim, K)`` repeats with some period ``k <= max_period``
-    to within one box width on every coordinate over its last quarter: a cycle (or a slow
-    approach to one) that the point-level recognition of periodic attractors will take,
-    not an attractor of boxes."""
-    P = cloud.shape[0]
-    tail = cloud[P - max(P // 4, 2 * max_period + 1):, :, 0]  # (m, dim)
-    w = partition.width
+SHRINK = 0.5
+"""A motion approaches a cycle when its largest repetition error over the second half of a
+window is at most this share of that over the first half (a stable cycle's multiplier
+``rho`` per period gives ``rho ** (window / 2)``: below 0.5 for ``|rho| < 0.99`` over a
+150-period stage); a chaotic or quasi-periodic motion's largest error stays."""
+
+ON_CYCLE = 1e-6
+"""Repetition errors at most this many box widths are a cycle already (they stopped
+shrinking at round-off): far below the point-level recognition's tolerance."""
+
+
+def _shrinking_repeats(points, width, max_period: int, split: int, ratio: float, newest_first: bool):
+    """Per period ``k = 1 .. max_period``, whether ``points (m, dim, ...)`` repeat within one
+    box ``width (dim,)`` on every coordinate over their later part, and shrink there:
+    ``(max_period, ...)`` bool. The repetition errors ``e_t = max_d |x_(t+k) - x_t|_d /
+    width_d`` (``t = 0 .. m - max_period - 1``) split at ``split``; the later part (the
+    second, or the first when the points are ``newest_first``) has ``max e <= 1`` and
+    ``max e <= ratio`` times the other part's (or ``max e <=`` :data:`ON_CYCLE`: converged).
+    NaN points (no history yet) never repeat."""
+    n = points.shape[0] - max_period
+    w = width.reshape((1, -1) + (1,) * (points.ndim - 2))
 
     def rep(k):
-        a = jax.lax.dynamic_slice_in_dim(tail, k, tail.shape[0] - max_period, axis=0)
-        b = tail[: tail.shape[0] - max_period]
-        return jnp.all(jnp.abs(a - b) <= w)
+        later = jax.lax.dynamic_slice_in_dim(points, k, n, axis=0)
+        e = jnp.max(jnp.abs(later - points[:n]) / w, axis=1)  # (n, ...)
+        first = jnp.max(e[:split], axis=0)
+        second = jnp.max(e[split:], axis=0) if split < n else jnp.full_like(first, jnp.inf)
+        late, early = (first, second) if newest_first else (second, first)
+        return (late <= 1.0) & ((late <= ratio * early) | (late <= ON_CYCLE))
 
-    return jnp.any(jax.vmap(rep)(jnp.arange(1, max_period + 1)))
+    return jax.vmap(rep)(jnp.arange(1, max_period + 1))
+
+
+@functools.partial(jax.jit, static_argnames="max_period")
+def near_periodic(partition: FinePartition, cloud, max_period: int):
+    """Whether copy 0 of ``cloud (P, dim, K)`` (a stage of a candidate's cloud, oldest first)
+    approaches a cycle: for some period ``k <= max_period`` its repetition errors
+    ``|x_(t+k) - x_t|`` stay within one box width on every coordinate over the second half
+    of the stage and have shrunk there to at most :data:`SHRINK` times their largest value
+    over the first half (or are at round-off, :data:`ON_CYCLE`). Such a motion is a cycle
+    (or an approach to one) that the point-level recognition of periodic attractors will
+    take, not an attractor of boxes.
+
+    The shrinking, not the box width alone, decides: an attractor smaller than a few
+    boxes (a chaotic attractor of narrow bands near the edge of a chaotic band, a small
+    torus) repeats within a box with some period too, but its errors do not die out."""
+    P = cloud.shape[0]
+    M = min(max_period, P - 2)
+    if M < 1:
+        return jnp.asarray(False)
+    return jnp.any(_shrinking_repeats(cloud[:, :, 0], partition.width, M, (P - M) // 2, SHRINK, False))
 
 
 def near_cycle_lanes(points, width, max_period: int):
     """Per lane, whether its last points ``points (2 max_period, dim, L)`` (newest first; NaN
-    before the lane has them) repeat with some period ``k <= max_period`` to within one box
-    ``width (dim,)`` on every coordinate: a lane approaching a cycle, which the point-level
+    before the lane has them) approach a cycle of some period ``k <= max_period``: the
+    repetition errors ``|x_t - x_(t-k)|`` of the newest half of its last ``max_period``
+    points stay within one box ``width (dim,)`` on every coordinate and are at most the
+    largest of the older half. A lane approaching a cycle, which the point-level
     recognition will take, is no candidate for an attractor of boxes (its cloud would be
-    integrated for nothing). ``(L,)`` bool."""
-    M = max_period
-    w = width[:, None]
+    integrated for nothing); a lane on an attractor smaller than a few boxes (repeating
+    within a box without converging) is one in about every other round. ``(L,)`` bool."""
+    near = _shrinking_repeats(points, width, max_period, (max_period + 1) // 2, 1.0, True)  # (M, L)
+    return jnp.any(near, axis=0)
 
-    def rep(k):
-        a = jax.lax.dynamic_slice_in_dim(points, k, M, axis=0)
-        return jnp.all(jnp.abs(points[:M] - a) <= w[None], axis=(0, 1))
 
-    return jnp.any(jax.vmap(rep)(jnp.arange(1, M + 1)), axis=0)
+CANDIDATE_POOL = 64
+"""A round's candidate is the oldest lane not approaching a cycle (:func:`near_cycle_lanes`)
+among this many oldest eligible lanes: the test runs on these few lanes, not on every lane
+of the pool (a round whose oldest eligible lanes all approach cycles has no candidate;
+they are recognised by their points soon)."""
+
+
+def oldest_off_cycle(eligible, age, ring, width, max_period: int):
+    """The round's candidate: ``(lane, found)``, the oldest of the lanes ``eligible (L,)``
+    (by ``age (L,)``) whose last ``2 max_period`` points do not approach a cycle, looked for
+    among the :data:`CANDIDATE_POOL` oldest eligible ones. ``ring``: a function of lane
+    indices ``(K,)`` giving their last points ``(2 max_period, dim, K)`` newest first (so
+    only those lanes' points are read)."""
+    K = min(CANDIDATE_POOL, age.shape[0])
+    oldest, lanes = jax.lax.top_k(jnp.where(eligible, age, -1), K)  # oldest first
+    ok = (oldest >= 0) & ~near_cycle_lanes(ring(lanes), width, max_period)
+    j = jnp.argmax(ok)
+    return lanes[j].astype(jnp.int32), ok[j]
 
 
 @functools.partial(jax.jit, static_argnames="n_labels")
@@ -583,12 +645,12 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
     label = jnp.where(live & (label < 0) & (s.att >= 0) & (s.hits >= opt.hits), s.att, label).astype(jnp.int32)
 
     # one candidate per round: the oldest undecided lane past the transient, not in a run of hits
-    cand = live & (label < 0) & (per > M) & (s.age >= opt.transient) & (s.age - s.tried >= opt.transient) \
-        & (s.hits == 0) & ~near_cycle_lanes(s.ring, part.width, M)
+    eligible = live & (label < 0) & (per > M) & (s.age >= opt.transient) & (s.age - s.tried >= opt.transient) \
+        & (s.hits == 0)
+    l0, found = oldest_off_cycle(eligible, s.age, lambda i: s.ring[:, :, i], part.width, M)
 
     def characterise(c):
         s, label = c
-        l0 = jnp.argmax(jnp.where(cand, s.age, -1))
         P = opt.cloud_periods
 
         def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
@@ -618,7 +680,7 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         return s, label.at[l0].set(jnp.where(a >= 0, a, label[l0])), jnp.where(a >= 0, keys, -1), a
 
     KP = opt.cloud_periods * opt.cloud_lanes
-    s, label, vkeys, vlabel = jax.lax.cond(jnp.any(cand), characterise,
+    s, label, vkeys, vlabel = jax.lax.cond(found, characterise,
                                            lambda c: (*c, jnp.full(KP, -1, jnp.int64), jnp.asarray(-1, jnp.int32)),
                                            (s, label))
     # the boxes of this round's new cycle and cloud enter the table (one insertion per round)
