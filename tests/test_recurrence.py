@@ -190,6 +190,40 @@ def test_near_cycle_lanes():
     assert np.asarray(rec.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False, False, False]
 
 
+def test_oldest_off_cycle_picks_the_oldest_lane_not_settling():
+    """Of 100 lanes with random ages, some eligible, some settling on a P-2 cycle (their
+    rings shrink onto it), the candidate is the oldest eligible lane not settling (a
+    sort in numpy); with more than CANDIDATE_POOL older eligible lanes all settling,
+    there is none this round."""
+    M, L = 4, 100
+    rng = np.random.default_rng(7)
+    t = np.arange(2 * M)
+    cyc = np.array([[0.5, 0.1], [-0.3, 0.7]])[t % 2]
+    settling = cyc + 1e-3 * 0.8 ** (2 * M - t)[:, None]
+    wander = rng.uniform(-1, 1, (2 * M, 2, L))
+    width = jnp.asarray([0.05, 0.05])
+    ages = rng.permutation(L).astype(np.int32) + 100
+    eligible = rng.random(L) < 0.6
+    near = rng.random(L) < 0.5
+    ring = np.where(near[None, None], settling[:, :, None], wander)
+    lane, found = rec.oldest_off_cycle(jnp.asarray(eligible), jnp.asarray(ages), lambda i: jnp.asarray(ring)[:, :, i],
+                                       width, M)
+    ok = np.flatnonzero(eligible & ~near)
+    assert bool(found) and int(lane) == ok[np.argmax(ages[ok])]
+    # the CANDIDATE_POOL oldest eligible lanes settle; the only lane that does not is younger
+    K = rec.CANDIDATE_POOL
+    L2 = K + 8
+    ages2 = np.arange(L2, dtype=np.int32)[::-1] + 100  # lane 0 oldest
+    ring2 = np.repeat(settling[:, :, None], L2, axis=2)
+    ring2[:, :, L2 - 1] = wander[:, :, 0]
+    lane, found = rec.oldest_off_cycle(jnp.ones(L2, bool), jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
+                                       width, M)
+    assert not bool(found)
+    lane, found = rec.oldest_off_cycle(jnp.arange(L2) >= 8, jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
+                                       width, M)  # now it is among the pool's oldest eligible lanes
+    assert bool(found) and int(lane) == L2 - 1
+
+
 def test_overlap_shares_match_clouds_by_boxes():
     """Boxes of a circle registered as attractor 0 and of a smaller circle as attractor 1: a
     new sampling of the first circle lies in 0's boxes, a disjoint circle in none."""
