@@ -205,9 +205,9 @@ def test_bifurcation_diagram_labels_chaos_tori_and_cycles():
 
 def test_backlash_band_every_cell_decided():
     """The band sweep in the default suite (the slow one below is the heavy check): b =
-    16/11 (about 1.455), where the chaotic attractor has two narrow bands, each about a box
-    of the partition wide, so that it repeats within a box with period 2 and 4 without ever
-    converging, and b = 2 inside the band; 5 x 3 x 6 cells of region D with boxes as coarse
+    16/11 (about 1.455), where the chaotic attractor is about a box of the partition wide in
+    x1 and x2 and comes back within about a box every 4 periods without ever converging,
+    and b = 2 inside the band; 5 x 3 x 6 cells of region D with boxes as coarse
     as those of the default partition on the 25 x 15 x 30 grid (85 boxes across these
     centres' span). At both values every cell is decided, on a chaotic attractor (period 0,
     largest exponent positive beyond its error). Independently of the analysis and of the

@@ -43,10 +43,10 @@ Wiring into the lane pool (:mod:`jaxgear.analysis._pool`), as the classifier doe
   boxes it overlaps or takes a new slot, and its boxes enter the table in the round's one
   :func:`insert`.
 - "approaching a cycle" means repetition errors within one box that shrink, not within
-  one box alone: an attractor that spans only a few boxes (near the edge of a chaotic
-  band the gear model's chaotic attractor has two narrow bands, each within about a box
-  of the partition over region D) repeats within a box with some period, yet never
-  converges, and the point-level recognition never takes it.
+  one box alone: an attractor that spans only a few boxes (the gear model's chaotic
+  attractor at b = 1.455 is about one box of the partition over region D wide in x1 and
+  x2, 9 boxes in all) comes back within a box with some period, yet never converges, and
+  the point-level recognition never takes it.
 - labels are one space for cycles and attractors of boxes: a cycle registered by point
   recurrence also enters its ``k`` boxes (a chaotic lane visiting them resets its run);
   a repeller's boxes never do. The pool's ``att_k = 0`` means an empty slot, so an
@@ -393,8 +393,8 @@ def near_periodic(partition: FinePartition, cloud, max_period: int):
     take, not an attractor of boxes.
 
     The shrinking, not the box width alone, decides: an attractor smaller than a few
-    boxes (a chaotic attractor of narrow bands near the edge of a chaotic band, a small
-    torus) repeats within a box with some period too, but its errors do not die out."""
+    boxes (a small chaotic attractor, a small torus) comes back within a box with some
+    period too, but its errors do not die out."""
     P = cloud.shape[0]
     M = min(max_period, P - 2)
     if M < 1:
