@@ -53,6 +53,7 @@ def _confirm_by_shooting(system, params, result, integrator, atol):
 
 
 # --------------------------------------------------------------------------- Duffing, multistable
+@pytest.mark.slow
 def test_duffing_multistable_all_methods_confirmed_by_shooting():
     p = MyDuffing(delta=0.1, beta=1.0, gamma=0.3, omega=1.4)
     grid = jg.CellGrid.box([(-2.5, 2.5), (-2.5, 2.5)], (20, 20), names=MY_DUFFING.state_names)

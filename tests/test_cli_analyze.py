@@ -4,6 +4,7 @@ import inspect
 import json
 
 import numpy as np
+import pytest
 
 import jaxgear as jg
 from jaxgear.cli import main
@@ -37,8 +38,6 @@ def test_analyze_writes_result_summary_and_figures(tmp_path, capsys, gear_refere
 
 
 def test_analyze_bad_input_exit_code(capsys):
-    import pytest
-
     with pytest.raises(SystemExit) as exc:  # argparse rejects malformed options with exit code 2
         main(["analyze", "--grid", "0,3,6", "--quiet", "--no-figures"])
     assert exc.value.code == 2
@@ -67,6 +66,7 @@ def test_library_cli_and_readme_share_the_default_method_and_integrator():
     assert f"`jaxgear.{type(lib.integrator).__name__}({lib.integrator.steps_per_period})`" in readme
 
 
+@pytest.mark.slow
 def test_sweep_in_one_pool_writes_the_sweep_of_separate_analyses(tmp_path, monkeypatch):
     """``jaxgear sweep --kind basins --one-pool`` (all values in one lane pool) writes the
     labels and shares of the sweep that analyses the values one after another."""

@@ -27,6 +27,7 @@ def paper_p4():
 
 
 # --------------------------------------------------------------------------- gradients
+@pytest.mark.slow
 def test_implicit_gradients_of_gear_orbit_scalars_match_finite_differences(paper_p4):
     """d/dp of the RMS and peak-to-peak dynamic mesh forces, the dynamic transmission error and
     the largest Floquet multiplier of the paper's P-4, for four parameters, against central
@@ -182,6 +183,7 @@ def test_design_stops_at_the_stability_boundary():
     assert 0.98 < r.orbit.max_multiplier < 1.0
 
 
+@pytest.mark.slow
 def test_design_stops_at_a_fold():
     """Hardening Duffing, small-amplitude orbit, maximise its amplitude over omega: it grows
     toward lower omega until the orbit dies in a fold (jump-up). The design stops there;
@@ -206,8 +208,8 @@ def test_design_stops_at_a_fold():
 
 
 # --------------------------------------------------------------------------- input checks
-def test_design_input_errors(paper_p4):
-    p, x4 = paper_p4
+def test_design_input_errors():
+    p, x4 = jg.paper_params(), P4_SEED  # refused before any orbit is sought
     obj = lambda q, o: jg.mesh_force_rms(q, o)
     bad = [
         (dict(free={"nope": (0, 1)}), "not a field"),
@@ -230,6 +232,7 @@ def test_design_input_errors(paper_p4):
         jg.mesh_forces(q, (jnp.zeros(3), jnp.zeros((3, 2))))
 
 
+@pytest.mark.slow
 def test_design_upper_bound_is_exact_and_can_be_left():
     # the 2-DOF chain's response falls with damping here: c ends exactly on its upper bound;
     # started on that bound with the phase far from psi*, psi still moves to psi*

@@ -14,6 +14,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy.integrate import solve_ivp
 
 import jaxgear as jg
@@ -333,6 +334,7 @@ def _orbits(p, seeds, n):
     return np.asarray(r.point), np.stack([m[np.lexsort((m.imag, -np.abs(m)))] for m in mu]), np.asarray(r.min_period)
 
 
+@pytest.mark.slow
 def test_paper_preset_orbits_converged_at_the_default_steps():
     """Model document §8: halving the default step moves the P-1 and P-4 points and the
     multipliers of ``P^4`` there by less than 1e-6, and the moves shrink at fourth order."""
@@ -351,10 +353,13 @@ def test_paper_preset_orbits_converged_at_the_default_steps():
         assert 12 < dx[0] / dx[1] < 22 and 12 < dmu[0] / dmu[1] < 22, (k, dx, dmu)
 
 
-def test_paper_preset_monodromy_determinant_is_the_liouville_value():
+@pytest.mark.parametrize("steps", [pytest.param((200, 400, 800, 3200), marks=pytest.mark.slow, id="ladder"),
+                                   pytest.param((200, 400), id="order")])
+def test_paper_preset_monodromy_determinant_is_the_liouville_value(steps):
     """det DP^k(x) = exp(trace(df/dx) k T) at any state (Liouville): the trace of the
     reduced field is the constant -(N + mu_p) c_sp - (mu_p - N mu_c) c_rp - 2 N mu_c c_rp,
-    and the backlash only kinks (every saltation matrix has determinant 1)."""
+    and the backlash only kinks (every saltation matrix has determinant 1). The deviation
+    falls at fourth order in the step (``order``), to 1e-10 at 3,200 steps (``ladder``)."""
     p = jg.paper_params()
     N, mu_p, mu_c, c_sp, c_rp = (float(np.ravel(np.asarray(v))[0]) for v in (p.N, p.mu_p, p.mu_c, p.c_sp, p.c_rp))
     trace = -(N + mu_p) * c_sp - (mu_p - N * mu_c) * c_rp - 2 * N * mu_c * c_rp
@@ -363,9 +368,9 @@ def test_paper_preset_monodromy_determinant_is_the_liouville_value():
     liouville = math.exp(trace * k * T)
     X = np.stack([P1_SEED, P4_SEED, np.array([-20.0, 5.0, 30.0, 0.0])])
     dev = []
-    for n in (200, 400, 800, 3200):
+    for n in steps:
         M = np.asarray(jg.monodromy(jg.REDUCED, p, X, period=k, integrator=jg.KinkAwareRK4(n)))
         dev.append(np.abs(np.linalg.det(M) / liouville - 1.0))
     dev = np.asarray(dev)  # (n, state)
     assert np.all((dev[0] / dev[1] > 12) & (dev[0] / dev[1] < 22)), dev
-    assert np.all(dev[-1] <= 1e-10), dev
+    assert len(steps) == 2 or np.all(dev[-1] <= 1e-10), dev

@@ -69,6 +69,26 @@ print(sorted(t.name for t in threading.enumerate()), len(multiprocessing.active_
 '''
 
 
+def test_import_starts_no_backend_so_a_multi_process_run_can_begin():
+    """``jax.distributed.initialize`` must come before any JAX computation; a package whose
+    import builds an array (a default option, a constant) makes every multi-process run
+    fail. A one-process JAX program starts after ``import jaxgear``, and its analysis runs."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    r = _python(f"""
+import jax, jaxgear
+jax.config.update("jax_cpu_collectives_implementation", "gloo")
+jax.distributed.initialize(coordinator_address="127.0.0.1:{port}", num_processes=1, process_id=0)
+print(jax.process_count(), float(jax.numpy.sum(jax.numpy.ones(3))))
+jax.distributed.shutdown()
+""", timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == ["1", "3.0"]
+
+
 def test_an_analysis_starts_no_threads_or_processes():
     r = _python(ANALYSIS_SCRIPT)
     assert r.returncode == 0, r.stderr[-2000:]

@@ -62,7 +62,7 @@ def rel_diff(a, b):
     return np.max(np.abs(a - b) / (1.0 + np.abs(b)))
 
 
-@pytest.mark.parametrize("shape", ["sine", "rectangular"])
+@pytest.mark.parametrize("shape", ["sine", pytest.param("rectangular", marks=pytest.mark.slow)])
 def test_kernel_equals_pure_jax_on_random_states_and_parameters(shape):
     rng = np.random.default_rng(7 if shape == "sine" else 8)
     for _ in range(3):

@@ -22,7 +22,7 @@ ROOT = Path(__file__).parent.parent
 NOTEBOOK_DIR = ROOT / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 IDS = [p.stem for p in NOTEBOOKS]
-HEAVY = {"01_global_analysis", "02_shooting_and_floquet", "05_design"}
+HEAVY = {"01_global_analysis", "02_shooting_and_floquet", "04_custom_gear_set", "05_design"}
 """Notebooks that take minutes each on the 2-core CI machine even at their reduced size:
 run by ``pytest -m slow`` (with the other heavier checks)."""
 COVERED = {

@@ -225,7 +225,12 @@ def _kill_runs(tmp_path, cache, old_cmd, new_cmd, kind, kills: int):
 _NEW = {"analyze": (4, 2, 3), "sweep": 3}
 
 
-def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path):
+KILLS = [pytest.param(1, id="one-kill"), pytest.param(3, marks=pytest.mark.slow, id="three-kills")]
+"""Kills per test: one by default (each a whole command run), three behind the slow marker."""
+
+
+@pytest.mark.parametrize("kills", KILLS)
+def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path, kills):
     def cmd(grid, figures):
         return lambda out: [sys.executable, "-m", "jaxgear", "analyze", "--grid", grid, "--steps-per-period", "40",
                             "--uncertainty-samples", "0", "--quiet", "--out", str(out)] + \
@@ -233,13 +238,14 @@ def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path):
 
     # a cache of their own: a command killed while JAX writes a cache entry may leave it
     # half written, and no other test may read it (the kernel lives in its private folder)
-    _kill_runs(tmp_path, tmp_path / "cache", cmd("3,2,3", False), cmd("4,2,3", True), "analyze", kills=3)
+    _kill_runs(tmp_path, tmp_path / "cache", cmd("3,2,3", False), cmd("4,2,3", True), "analyze", kills=kills)
 
 
-def test_sweep_killed_at_random_moments_leaves_a_whole_result(tmp_path):
+@pytest.mark.parametrize("kills", KILLS)
+def test_sweep_killed_at_random_moments_leaves_a_whole_result(tmp_path, kills):
     def cmd(values, restart):
         return lambda out: [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", values,
                             "--starts", "2", "--transient", "10", "--record", "33", "--steps-per-period", "30",
                             "--quiet", "--no-figures", "--out", str(out)] + (["--restart"] if restart else [])
 
-    _kill_runs(tmp_path, tmp_path / "cache", cmd("4:6:2", False), cmd("4:6:3", True), "sweep", kills=3)
+    _kill_runs(tmp_path, tmp_path / "cache", cmd("4:6:2", False), cmd("4:6:3", True), "sweep", kills=kills)

@@ -201,6 +201,7 @@ def paper_p4():
     return p, pts[:4]
 
 
+@pytest.mark.slow
 def test_paper_preset_stable_p4(paper_p4):
     p, pts = paper_p4
     rng = np.random.default_rng(0)
@@ -217,6 +218,7 @@ def test_paper_preset_stable_p4(paper_p4):
     assert len(search.orbits) == 1 and search.orbits[0].period == 4 and search.orbits[0].n_seeds == 4
 
 
+@pytest.mark.slow
 def test_cli_shoot_json(paper_p4, monkeypatch):
     from jaxgear.cli import main
 
@@ -355,6 +357,7 @@ def test_find_periodic_orbits_stores_settings_and_trajectories():
     np.testing.assert_allclose(o.trajectory, np.asarray(xs), rtol=0, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_cli_shoot_out_writes_orbits_json_and_figures(tmp_path):
     from jaxgear.cli import main
 

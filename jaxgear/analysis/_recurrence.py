@@ -446,7 +446,10 @@ def overlap_shares(table: CellTable, partition: FinePartition, points, n_labels:
 
 # --------------------------------------------------------------------------- options and result
 def _as(dtype):
-    return lambda x: jnp.asarray(x, dtype=dtype)
+    """Field converter: a JAX array (or tracer) stays one; anything else becomes a numpy array,
+    so that building the default options at import starts no JAX backend (a multi-process run
+    calls ``jax.distributed.initialize`` after ``import jaxgear``)."""
+    return lambda x: jnp.asarray(x, dtype=dtype) if isinstance(x, jax.Array) else np.asarray(x, dtype=dtype)
 
 
 class RecurrenceOptions(eqx.Module):
