@@ -115,6 +115,7 @@ from .shooting import (
     SearchOptions as SearchOptions,
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
+    SearchSettings as SearchSettings,
     OrbitCheck as OrbitCheck,
 )
 from .continuation import (
@@ -137,6 +138,7 @@ from .design import (
     design as design,
     DesignResult as DesignResult,
     DesignOptions as DesignOptions,
+    DesignSettings as DesignSettings,
     OrbitSamples as OrbitSamples,
     sample_orbit as sample_orbit,
     MeshForces as MeshForces,

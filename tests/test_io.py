@@ -124,7 +124,7 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         np.testing.assert_array_equal(ds["x3"].values, r.grid.axis_centres(2))
         assert list(ds["state"].values) == ["x1", "x2", "x3", "x4"]
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
-        assert ds.attrs["jaxgear_format"] == 3
+        assert ds.attrs["jaxgear_format"] == 4
         for name, v in jg.paper_params().to_dict().items():  # the canonical set, one attribute each
             assert ds.attrs[f"param_{name}"] == v
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
