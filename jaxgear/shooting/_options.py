@@ -16,7 +16,7 @@ import equinox as eqx
 from .._checks import check_int, check_number, split_changes, with_changes
 from ..integrate import AbstractIntegrator, integrator_from_dict
 
-__all__ = ["ShootOptions", "SearchOptions", "default_solver", "check_solver", "with_changes", "split_changes",
+__all__ = ["ShootOptions", "SearchOptions", "VerifyOptions", "default_solver", "check_solver", "with_changes", "split_changes",
            "solver_to_dict", "solver_from_dict"]
 
 STEP_RTOL, STEP_ATOL = 1e-10, 1e-12
@@ -200,3 +200,33 @@ class SearchOptions(ShootOptions):
         check_int(self.chunk_size, "chunk_size", 1)
         check_int(self.trajectory_samples, "trajectory_samples", 0)
         check_int(self.verify, "verify", 0)
+
+
+class VerifyOptions(eqx.Module):
+    """Options of :func:`~jaxgear.verify_orbit`, the paper's check of an orbit by direct
+    integration from perturbed starts (§4.1).
+
+    Attributes:
+        periods: forcing periods integrated per trial.
+        perturbation: relative size of the initial perturbation (dimensionless): the
+            starts are ``x* + perturbation (1 + ||x*||) u`` for random unit vectors ``u``.
+        n_trials: number of perturbed starts.
+        leave_tol: distance (state units) above which the motion has left the orbit.
+        n_final: number of final stroboscopic points returned per trial (at most ``periods``).
+        seed: seed of the random directions ``u``.
+    """
+
+    periods: int = eqx.field(static=True, default=300)
+    perturbation: float = 1e-6
+    n_trials: int = eqx.field(static=True, default=4)
+    leave_tol: float = 1e-3
+    n_final: int = eqx.field(static=True, default=8)
+    seed: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        check_int(self.periods, "periods", 1)
+        check_number(self.perturbation, "perturbation", 0)
+        check_int(self.n_trials, "n_trials", 1)
+        check_number(self.leave_tol, "leave_tol", 0, strict_min=True)
+        check_int(self.n_final, "n_final", 1, int(self.periods))
+        check_int(self.seed, "seed", 0)
