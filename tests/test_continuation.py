@@ -308,15 +308,15 @@ def test_typed_options_are_the_branch_settings(mathieu, doubled):
     assert (br.settings.stop, br.settings.origin, br.settings.amplitude) == (2.15, "start", None)
     assert doubled.settings.options == br.settings.options and doubled.settings.amplitude == 0.02
     assert doubled.settings.origin.startswith("PD of the P-1 branch")
-    opts = jg.ContinuationOptions(ds=0.05, max_steps=4)
+    opts = jg.ContinuationOptions(ds=0.05, max_steps=2)
     shoot = jg.ShootOptions(tol=1e-9, max_iter=8)
     a = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15, options=opts, shoot=shoot,
                        progress=False)
-    b = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15, ds=0.05, max_steps=4, tol=1e-9,
+    b = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15, ds=0.05, max_steps=2, tol=1e-9,
                        max_iter=8, progress=False)
     assert a.settings == b.settings and (a.settings.options, a.settings.shoot) == (opts, shoot)
     np.testing.assert_array_equal(a.values, b.values)
-    assert len(a) == 5 and a.status == "max_steps"
+    assert len(a) == 3 and a.status == "max_steps"
 
 
 def test_with_param_and_get_param():

@@ -59,7 +59,7 @@ class ContinuationOptions(eqx.Module):
     locate_tol: float = 1e-10
 
     def __check_init__(self):
-        check_number(self.ds, "ds (arclength step in (x, p))", 0, strict_min=True)
+        check_number(self.ds, "ds", 0, strict_min=True)
         for name in ("ds_min", "ds_max"):
             if getattr(self, name) is not None:
                 check_number(getattr(self, name), f"{name} (or None for the default)", 0, strict_min=True)
