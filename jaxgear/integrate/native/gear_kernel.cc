@@ -4,16 +4,22 @@
 // vector field of jaxgear/_model.py), written for the CPU: lanes in blocks of struct-of-
 // arrays that stay in cache for all steps of a call, the time-only terms of the vector
 // field (mesh stiffness, transmission errors) tabulated once per stage time and shared
-// by every lane with the same parameters, the trial step vectorised over a block, and
-// the few lanes whose step holds a backlash crossing or a known time break split one
-// by one. Blocks run in parallel (OpenMP).
+// by every lane with the same parameters, the trial step vectorised over a block in one
+// pass, and the few lanes whose step holds a backlash crossing gathered and split together
+// (vectorised over them; lane by lane for a known time break or a further event in the
+// step). Blocks run in parallel (OpenMP).
 //
 // Built by jaxgear/integrate/_native.py on first use; the pure-JAX path stays the
 // reference (for derivatives, GPUs, and machines without a C++ compiler).
 
+// Floating-point exceptions are never read: comparisons under a branch may become selects
+// (what lets the split loops vectorise); no result changes.
+#pragma GCC optimize("no-trapping-math")
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <omp.h>
@@ -50,6 +56,13 @@ struct Model {
 struct Terms {  // time-only terms at one time
   double ksp, krp, E, dE, L1;
 };
+
+// A lane's parameter row as the pure-JAX path reads it (params[r]: a negative index counts
+// from the end, and an index out of range is clamped to the nearest row): never out of bounds.
+inline int row_index(int64_t r, int64_t rows) {
+  if (r < 0) r += rows;
+  return static_cast<int>(std::min<int64_t>(std::max<int64_t>(r, 0), rows - 1));
+}
 
 inline double floor_mod(double x, double m) { return x - m * std::floor(x / m); }
 
@@ -473,80 +486,377 @@ Model make_model(const double* row, int shape) {
 }
 
 // The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
-// lanes: x (4 x L) -> x1, with k1 kept for the lanes that split. Stage s > 1 starts from
-// x + w k_{s-1}; the position components of k_s are the stage's own velocities.
+// lanes in one pass (the four stages of a lane in registers): x (4 x L) -> x1, and whether
+// the step holds an event (a switching function changes sign, or a known time break).
 inline void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
-                          double (*x)[kBlock], double (*x1)[kBlock], double (*k1)[kBlock], double E0, double E1,
-                          bool brk, unsigned char* need) {
-  alignas(64) double kp[4][kBlock], acc[4][kBlock];
+                          const double (*x)[kBlock], double (*x1)[kBlock], double E0, double E1, bool brk,
+                          unsigned char* need) {
   const double h2 = 0.5 * h, h6 = h / 6.0;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
-#pragma omp simd
-  for (int j = 0; j < L; ++j) {
-    const double z0 = x[0][j], z1 = x[1][j], z2 = x[2][j], z3 = x[3][j];
-    const double X = z2 - z0 - q0.E, V = z3 - z1 - q0.dE;
+  auto f = [&](const Terms& q, double z0, double z1, double z2, double z3, double& v1, double& v3) {
+    const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
     const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
     const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
-    const double gsp = q0.ksp * fsp + csp * z1, grp = q0.krp * frp + crp * V;
-    const double v1 = a2sp * gsp + a2rp * grp + q0.L1, v3 = a4sp * gsp + a4rp * grp + L2;
-    k1[0][j] = kp[0][j] = acc[0][j] = z1;
-    k1[1][j] = kp[1][j] = acc[1][j] = v1;
-    k1[2][j] = kp[2][j] = acc[2][j] = z3;
-    k1[3][j] = kp[3][j] = acc[3][j] = v3;
-  }
-  for (int st = 1; st < 4; ++st) {
-    const Terms& q = st == 3 ? q2 : q1;
-    const double w = st == 3 ? h : h2;
-    const double m = st == 3 ? 1.0 : 2.0;
-#pragma omp simd
-    for (int j = 0; j < L; ++j) {
-      const double z0 = x[0][j] + w * kp[0][j], z1 = x[1][j] + w * kp[1][j];
-      const double z2 = x[2][j] + w * kp[2][j], z3 = x[3][j] + w * kp[3][j];
-      const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-      const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
-      const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
-      const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
-      const double v1 = a2sp * gsp + a2rp * grp + q.L1, v3 = a4sp * gsp + a4rp * grp + L2;
-      kp[0][j] = z1;
-      kp[1][j] = v1;
-      kp[2][j] = z3;
-      kp[3][j] = v3;
-      acc[0][j] += m * z1;
-      acc[1][j] += m * v1;
-      acc[2][j] += m * z3;
-      acc[3][j] += m * v3;
-    }
-  }
-  // the new state, and whether the step holds an event (a switching function changes sign)
+    const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+    v1 = a2sp * gsp + a2rp * grp + q.L1;
+    v3 = a4sp * gsp + a4rp * grp + L2;
+  };
 #pragma omp simd
   for (int j = 0; j < L; ++j) {
-    const double y0 = x[0][j] + h6 * acc[0][j], y1 = x[1][j] + h6 * acc[1][j];
-    const double y2 = x[2][j] + h6 * acc[2][j], y3 = x[3][j] + h6 * acc[3][j];
-    x1[0][j] = y0;
-    x1[1][j] = y1;
-    x1[2][j] = y2;
-    x1[3][j] = y3;
-    const double X0 = x[2][j] - x[0][j] - E0, X1 = y2 - y0 - E1;
-    const bool fin = (y0 - y0 == 0.0) & (X1 - X1 == 0.0) & (x[0][j] - x[0][j] == 0.0) & (X0 - X0 == 0.0);
-    const bool cr = ((x[0][j] - bsp >= 0) != (y0 - bsp >= 0)) | ((x[0][j] + bsp >= 0) != (y0 + bsp >= 0)) |
+    const double y0 = x[0][j], y1 = x[1][j], y2 = x[2][j], y3 = x[3][j];
+    double a1, a3, b1, b3, c1, c3, d1, d3;
+    f(q0, y0, y1, y2, y3, a1, a3);
+    const double u0 = y0 + h2 * y1, u1 = y1 + h2 * a1, u2 = y2 + h2 * y3, u3 = y3 + h2 * a3;
+    f(q1, u0, u1, u2, u3, b1, b3);
+    const double v0 = y0 + h2 * u1, v1 = y1 + h2 * b1, v2 = y2 + h2 * u3, v3 = y3 + h2 * b3;
+    f(q1, v0, v1, v2, v3, c1, c3);
+    const double w0 = y0 + h * v1, w1 = y1 + h * c1, w2 = y2 + h * v3, w3 = y3 + h * c3;
+    f(q2, w0, w1, w2, w3, d1, d3);
+    const double e0 = y0 + h6 * (y1 + 2.0 * (u1 + v1) + w1);
+    const double e1 = y1 + h6 * (a1 + 2.0 * (b1 + c1) + d1);
+    const double e2 = y2 + h6 * (y3 + 2.0 * (u3 + v3) + w3);
+    const double e3 = y3 + h6 * (a3 + 2.0 * (b3 + c3) + d3);
+    x1[0][j] = e0;
+    x1[1][j] = e1;
+    x1[2][j] = e2;
+    x1[3][j] = e3;
+    const double X0 = y2 - y0 - E0, X1 = e2 - e0 - E1;
+    const bool fin = (e0 - e0 == 0.0) & (X1 - X1 == 0.0) & (y0 - y0 == 0.0) & (X0 - X0 == 0.0);
+    const bool cr = ((y0 - bsp >= 0) != (e0 - bsp >= 0)) | ((y0 + bsp >= 0) != (e0 + bsp >= 0)) |
                     ((X0 - brp >= 0) != (X1 - brp >= 0)) | ((X0 + brp >= 0) != (X1 + brp >= 0));
     need[j] = (cr & fin) | brk;
+  }
+}
+
+// Whether the split of a row's lanes can run vectorised (split_block): no time breaks (the
+// sine mesh stiffness), and every time met inside a step close enough to its start for the
+// short series of small_sincos (|W (tau - t)| <= 1.25 W h plus round-off, below 0.2).
+inline bool vector_split_ok(const Model& m, double h) { return m.n_breaks == 0 && 1.3 * m.p[OMEGA] * h <= 0.2; }
+
+// The time terms of split_block: those of terms_at for the sine shape, and at the step's
+// own ends the tabulated ones (as the TermCache of the lane-by-lane split holds them).
+inline Terms terms_sine(const double* p, const Clock& ck, double t, double te, const Terms& q0, const Terms& q2,
+                        double tau) {
+  const double W = p[OMEGA];
+  const double x = W * (tau - ck.t);
+  const double x2 = x * x;
+  const double sx = x * (1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 + x2 * (-1.0 / 39916800))))));
+  const double cx = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320 + x2 * (-1.0 / 3628800 +
+                                                                                         x2 * (1.0 / 479001600))))));
+  const double S0 = ck.sn[0] * cx + ck.cs[0] * sx, S1 = ck.sn[1] * cx + ck.cs[1] * sx;
+  const double S2 = ck.sn[2] * cx + ck.cs[2] * sx, C2 = ck.cs[2] * cx - ck.sn[2] * sx;
+  const double S3 = ck.sn[3] * cx + ck.cs[3] * sx, C3 = ck.cs[3] * cx - ck.sn[3] * sx;
+  const double e_sp = p[ESA] * S2;
+  const double de_sp = p[ESA] * W * C2;
+  const double dde_sp = -p[ESA] * W * W * S2;
+  const bool a = tau == t, b = tau == te;
+  Terms q;
+  // (every value computed, then selected: no arithmetic under a branch, so loops vectorise)
+  const double ksp = p[KSM] + p[KSA] * S0, krp = p[KRM] + p[KRA] * S1, E = e_sp + p[ERA] * S3;
+  const double dE = de_sp + p[ERA] * W * C3, L1 = p[MU_S] * p[F_D] + p[MU_C] * p[F_L] - dde_sp;
+  q.ksp = b ? q2.ksp : (a ? q0.ksp : ksp);
+  q.krp = b ? q2.krp : (a ? q0.krp : krp);
+  q.E = b ? q2.E : (a ? q0.E : E);
+  q.dE = b ? q2.dE : (a ? q0.dE : dE);
+  q.L1 = b ? q2.L1 : (a ? q0.L1 : L1);
+  return q;
+}
+
+// Pick entry `w` (0..3) of four values without indexing (vectorisable).
+inline double pick4(int w, double a0, double a1, double a2, double a3) {
+  return w == 0 ? a0 : (w == 1 ? a1 : (w == 2 ? a2 : a3));
+}
+
+// Scratch of split_block: the lanes of a block that split in one step, struct of arrays.
+struct SplitScratch {
+  alignas(64) double y[4][kBlock], k1[4][kBlock], ym[4][kBlock], y1[4][kBlock], sd[4][kBlock];
+  alignas(64) double th[kBlock], tt[kBlock], hh[kBlock];
+  alignas(64) double s0[4 * kBlock], s1[4 * kBlock], d0[4 * kBlock], d1[4 * kBlock], root[4 * kBlock];
+  alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
+  alignas(64) double wh[kBlock], fl[4][kBlock];
+  alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock], act[4 * kBlock];
+};
+
+// Roots of the Hermite cubics of `np` crossings at once: hermite_root vectorised over
+// them, iterated until every one has converged (each keeps its own iterations).
+inline void hermite_roots(SplitScratch& w, int np) {
+  double* s0 = w.s0;
+  double* s1 = w.s1;
+  double* d0 = w.d0;
+  double* d1 = w.d1;
+  double* th = w.root;
+  double* lo = w.lo;
+  double* hi = w.hi;
+  double* sg0 = w.sg0;
+  int* act = w.act;
+#pragma omp simd
+  for (int k = 0; k < np; ++k) {
+    const double denom = s0[k] - s1[k];
+    double t0 = denom != 0 ? s0[k] / denom : 0.5;
+    th[k] = std::min(std::max(t0, 0.0), 1.0);
+    lo[k] = 0.0;
+    hi[k] = 1.0;
+    sg0[k] = sgn(s0[k]);
+    act[k] = 1;
+  }
+  for (int it = 0; it < kHermiteIters; ++it) {
+    int left = 0;
+#pragma omp simd reduction(+ : left)
+    for (int k = 0; k < np; ++k) {
+      const double a = th[k], t2 = a * a, t3 = t2 * a;
+      const double v = (2 * t3 - 3 * t2 + 1) * s0[k] + (t3 - 2 * t2 + a) * d0[k] + (-2 * t3 + 3 * t2) * s1[k] +
+                       (t3 - t2) * d1[k];
+      const double d = (6 * t2 - 6 * a) * s0[k] + (3 * t2 - 4 * a + 1) * d0[k] + (-6 * t2 + 6 * a) * s1[k] +
+                       (3 * t2 - 2 * a) * d1[k];
+      const bool on = act[k] != 0;
+      const bool same = sgn(v) == sg0[k];
+      const double nlo = same ? a : lo[k], nhi = same ? hi[k] : a;
+      const double nn = a - v / (d != 0 ? d : 1.0), mid = 0.5 * (nlo + nhi);
+      const bool done = (v == 0) | ((d != 0) & (std::fabs(nn - a) <= 4.0 * kEps));
+      const double nt = (nn > nlo) & (nn < nhi) & (d != 0) ? nn : mid;
+      lo[k] = on ? nlo : lo[k];
+      hi[k] = on ? nhi : hi[k];
+      th[k] = on & !done ? nt : a;
+      const int still = on & !done;
+      act[k] = still;
+      left += still;
+    }
+    if (left == 0) break;
+  }
+#pragma omp simd
+  for (int k = 0; k < np; ++k) {
+    const double a = th[k], t2 = a * a, t3 = t2 * a;
+    const double v = (2 * t3 - 3 * t2 + 1) * s0[k] + (t3 - 2 * t2 + a) * d0[k] + (-2 * t3 + 3 * t2) * s1[k] +
+                     (t3 - t2) * d1[k];
+    const double d = (6 * t2 - 6 * a) * s0[k] + (3 * t2 - 4 * a + 1) * d0[k] + (-6 * t2 + 6 * a) * s1[k] +
+                     (3 * t2 - 2 * a) * d1[k];
+    th[k] = a - v / (d != 0 ? d : 1.0);
+  }
+}
+
+// The split of the lanes `idx[0..K)` of a block (all of one parameter row, vector_split_ok)
+// in step s from t: the same arithmetic as first_crossing and split_lane lane by lane (the
+// results are the same to the bit), with the crossing, the sub-step to it, the landing and
+// the rest of the step vectorised over the lanes; the few lanes with a further event in the
+// same step (or max_splits > 2) continue lane by lane. x: the states at t, x1: the trial
+// states at t + h, overwritten with the split ones.
+void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t, double h, int max_splits,
+                 const int* idx, int K, const double (*x)[kBlock], double (*x1)[kBlock], SplitScratch& w) {
+  const double* p = m.p;
+  const Clock& ck = tb.clock[s];
+  const Terms q0 = tb.stage[3 * s], q2 = tb.stage[3 * s + 2];
+  const double te = t + h, E0 = tb.E0[s], E1 = tb.E1[s];
+  // the crossing of the trial step (first_crossing): switching functions and rates at both ends
+  int np = 0;
+  for (int g = 0; g < K; ++g) {
+    const int j = idx[g];
+    double y[4], y1[4], k1[4], F1[4], S0[4], S1[4], D0[4], D1[4];
+    for (int i = 0; i < 4; ++i) {
+      y[i] = x[i][j];
+      y1[i] = x1[i][j];
+    }
+    field(c, q0, y, k1);
+    switching(c, E0, y, S0);
+    switching(c, E1, y1, S1);
+    field(c, q2, y1, F1);
+    switching_rate(q0.dE, k1, D0);
+    switching_rate(q2.dE, F1, D1);
+    for (int i = 0; i < 4; ++i) {
+      w.y[i][g] = y[i];
+      w.k1[i][g] = k1[i];
+      w.sd[i][g] = side(S0[i]);
+      w.thl[i][g] = 2.0;
+      if (side(S1[i]) != w.sd[i][g] && std::isfinite(S1[i]) && std::isfinite(S0[i])) {
+        w.s0[np] = S0[i];
+        w.s1[np] = S1[i];
+        w.d0[np] = D0[i] * h;
+        w.d1[np] = D1[i] * h;
+        w.pair_lane[np] = g;
+        w.pair_fn[np++] = i;
+      }
+    }
+  }
+  hermite_roots(w, np);
+  for (int k = 0; k < np; ++k) w.thl[w.pair_fn[k]][w.pair_lane[k]] = std::min(std::max(w.root[k], 0.0), 1.0);
+  const double thb = tb.thb[s];
+#pragma omp simd
+  for (int g = 0; g < K; ++g) {
+    double th_s = 2.0;
+    int jf = 0;
+    for (int i = 0; i < 4; ++i) {
+      const bool lt = w.thl[i][g] < th_s;
+      th_s = lt ? w.thl[i][g] : th_s;
+      jf = lt ? i : jf;
+    }
+    const bool use_break = thb < th_s;
+    const int which = (use_break | (th_s > 1.0)) ? -1 : jf;
+    w.wh[g] = which;
+    w.th[g] = std::min(use_break ? thb : th_s, 1.0);
+    const double lim = th_s + kSimultaneous;
+    for (int i = 0; i < 4; ++i) w.fl[i][g] = (which >= 0) & (w.thl[i][g] <= lim) ? -1.0 : 1.0;  // factor of the side
+  }
+  // the sub-step to the crossing on the piece being left (rk4_lane with k1 known), the
+  // landing on the surface (land), the flip, and the rest of the step on the new piece
+  // (field_piece, switching and switching_rate written out on scalars, the same arithmetic)
+  const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
+  const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
+  auto piece = [&](const Terms& q, double z0, double z1, double z2, double z3, double s0, double s1, double s2,
+                   double s3, double& v1, double& v3) {
+    const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
+    const double zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
+    const double fsp = s0 > 0 ? zl : (s1 < 0 ? zh : 0.0);  // (sides are +-1: never NaN)
+    const double frp = s2 > 0 ? Xl : (s3 < 0 ? Xh : 0.0);
+    const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+    v1 = a2sp * gsp + a2rp * grp + q.L1;
+    v3 = a4sp * gsp + a4rp * grp + L2;
+  };
+  const int more_allowed = max_splits >= 2, always_more = max_splits > 2;
+#pragma omp simd
+  for (int g = 0; g < K; ++g) {
+    double sd0 = w.sd[0][g], sd1 = w.sd[1][g], sd2 = w.sd[2][g], sd3 = w.sd[3][g];
+    const double y0 = w.y[0][g], y1 = w.y[1][g], y2 = w.y[2][g], y3 = w.y[3][g];
+    const double a0 = w.k1[0][g], a1 = w.k1[1][g], a2 = w.k1[2][g], a3 = w.k1[3][g];
+    double h1 = w.th[g] * h;
+    const double hm = 0.5 * h1;
+    double b1, b3, c1, c3, d1, d3;
+    const Terms qm = terms_sine(p, ck, t, te, q0, q2, t + hm);
+    const double u0 = y0 + hm * a0, u1 = y1 + hm * a1, u2 = y2 + hm * a2, u3 = y3 + hm * a3;
+    piece(qm, u0, u1, u2, u3, sd0, sd1, sd2, sd3, b1, b3);
+    const double v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
+    piece(qm, v0, v1, v2, v3, sd0, sd1, sd2, sd3, c1, c3);
+    const double z0 = y0 + h1 * v1, z1 = y1 + h1 * c1, z2 = y2 + h1 * v3, z3 = y3 + h1 * c3;
+    const Terms qe = terms_sine(p, ck, t, te, q0, q2, t + h1);
+    piece(qe, z0, z1, z2, z3, sd0, sd1, sd2, sd3, d1, d3);
+    const double h16 = h1 / 6.0;
+    double m0 = y0 + h16 * (a0 + 2.0 * (u1 + v1) + z1);
+    double m1 = y1 + h16 * (a1 + 2.0 * (b1 + c1) + d1);
+    double m2 = y2 + h16 * (a2 + 2.0 * (u3 + v3) + z3);
+    double m3 = y3 + h16 * (a3 + 2.0 * (b3 + c3) + d3);
+    // land: one Newton correction along the piece being left
+    {
+      const double wh = w.wh[g];
+      double F1, F3;
+      piece(qe, m0, m1, m2, m3, sd0, sd1, sd2, sd3, F1, F3);
+      const double F0 = m1, F2 = m3;
+      const double Xr = m2 - m0 - qe.E;
+      const double r2 = F2 - F0 - qe.dE;
+      const double rate = wh < 2.0 ? F0 : r2;
+      const double Sa = m0 - bsp, Sb = m0 + bsp, Sc = Xr - brp, Sd = Xr + brp;
+      const double Sw = wh == 0.0 ? Sa : (wh == 1.0 ? Sb : (wh == 2.0 ? Sc : Sd));
+      const double dt = -Sw / (rate != 0 ? rate : 1.0);
+      const bool ok = (wh >= 0.0) & (rate != 0) & (dt - dt == 0.0) & (std::fabs(dt) <= 0.25 * std::fabs(h));
+      const double n0 = m0 + F0 * dt, n1 = m1 + F1 * dt, n2 = m2 + F2 * dt, n3 = m3 + F3 * dt, nh = h1 + dt;
+      m0 = ok ? n0 : m0;
+      m1 = ok ? n1 : m1;
+      m2 = ok ? n2 : m2;
+      m3 = ok ? n3 : m3;
+      h1 = ok ? nh : h1;
+    }
+    sd0 = sd0 * w.fl[0][g];
+    sd1 = sd1 * w.fl[1][g];
+    sd2 = sd2 * w.fl[2][g];
+    sd3 = sd3 * w.fl[3][g];
+    // the rest of the step (rk4_lane from the surface)
+    const double tt = t + h1, hh = h - h1, hh2 = 0.5 * hh;
+    double e1, e3;
+    const Terms qa = terms_sine(p, ck, t, te, q0, q2, tt);
+    piece(qa, m0, m1, m2, m3, sd0, sd1, sd2, sd3, e1, e3);
+    const double K0 = m1, K1 = e1, K2 = m3, K3 = e3;
+    const Terms qb = terms_sine(p, ck, t, te, q0, q2, tt + hh2);
+    const double p0 = m0 + hh2 * K0, p1 = m1 + hh2 * K1, p2 = m2 + hh2 * K2, p3 = m3 + hh2 * K3;
+    piece(qb, p0, p1, p2, p3, sd0, sd1, sd2, sd3, b1, b3);
+    const double r0 = m0 + hh2 * p1, r1 = m1 + hh2 * b1, r2 = m2 + hh2 * p3, r3 = m3 + hh2 * b3;
+    piece(qb, r0, r1, r2, r3, sd0, sd1, sd2, sd3, c1, c3);
+    const double s0 = m0 + hh * r1, s1 = m1 + hh * c1, s2 = m2 + hh * r3, s3 = m3 + hh * c3;
+    const Terms qc = terms_sine(p, ck, t, te, q0, q2, tt + hh);
+    piece(qc, s0, s1, s2, s3, sd0, sd1, sd2, sd3, d1, d3);
+    const double hh6 = hh / 6.0;
+    const double Y0 = m0 + hh6 * (K0 + 2.0 * (p1 + r1) + s1);
+    const double Y1 = m1 + hh6 * (K1 + 2.0 * (b1 + c1) + d1);
+    const double Y2 = m2 + hh6 * (K2 + 2.0 * (p3 + r3) + s3);
+    const double Y3 = m3 + hh6 * (K3 + 2.0 * (b3 + c3) + d3);
+    // a further event in the rest of the step? (the sign test of first_crossing)
+    const double X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
+    const double T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
+    const double T0[4] = {m0 - bsp, m0 + bsp, X0 - brp, X0 + brp};
+    const double SD[4] = {sd0, sd1, sd2, sd3};
+    int more = 0;
+    for (int i = 0; i < 4; ++i)
+      more |= ((T1[i] >= 0.0 ? 1.0 : -1.0) != SD[i]) & (T1[i] - T1[i] == 0.0) & (T0[i] - T0[i] == 0.0);
+    w.ym[0][g] = m0;
+    w.ym[1][g] = m1;
+    w.ym[2][g] = m2;
+    w.ym[3][g] = m3;
+    w.y1[0][g] = Y0;
+    w.y1[1][g] = Y1;
+    w.y1[2][g] = Y2;
+    w.y1[3][g] = Y3;
+    w.k1[0][g] = K0;
+    w.k1[1][g] = K1;
+    w.k1[2][g] = K2;
+    w.k1[3][g] = K3;
+    w.sd[0][g] = sd0;
+    w.sd[1][g] = sd1;
+    w.sd[2][g] = sd2;
+    w.sd[3][g] = sd3;
+    w.tt[g] = tt;
+    w.hh[g] = hh;
+    w.cont[g] = more_allowed & (more | always_more);  // continues lane by lane
+  }
+  for (int g = 0; g < K; ++g) {
+    const int j = idx[g];
+    if (!w.cont[g]) {
+      for (int i = 0; i < 4; ++i) x1[i][j] = w.y1[i][g];
+      continue;
+    }
+    // the rest of split_lane from its second event on, lane by lane
+    TermCache tc;
+    tc.t[0] = t;
+    tc.q[0] = q0;
+    tc.t[1] = te;
+    tc.q[1] = q2;
+    tc.n = 2;
+    const double tt = w.tt[g], hh = w.hh[g];
+    double Ym[4], Y1[4], K1[4], sides[4], S0[4], S1[4], out4[4];
+    for (int i = 0; i < 4; ++i) {
+      Ym[i] = w.ym[i][g];
+      Y1[i] = w.y1[i][g];
+      K1[i] = w.k1[i][g];
+      sides[i] = w.sd[i][g];
+    }
+    switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
+    switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
+    double th2;
+    int which2;
+    bool flips2[4];
+    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, break_fraction(m, tt, hh), &th2, &which2,
+                   flips2);
+    const bool more = th2 < 1.0;
+    if (!more && max_splits == 2) {
+      for (int i = 0; i < 4; ++i) x1[i][j] = Y1[i];
+      continue;
+    }
+    for (int i = 0; i < 4; ++i) flips2[i] = more && flips2[i];
+    split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides, max_splits - 1,
+               out4);
+    for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
   }
 }
 
 // Advance one block of lanes [a, b) by `periods` periods.
 void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, const int32_t* lane_row,
                const std::vector<Model>& models, const std::vector<Coef>& coefs, const std::vector<Table>& tables,
-               double t0, int periods, int steps, int max_splits) {
+               double t0, int periods, int steps, int max_splits, SplitScratch& w) {
   const int L = static_cast<int>(b - a);
-  alignas(64) double xa[4][kBlock], xb[4][kBlock], k1[4][kBlock];
+  const int rows = static_cast<int>(models.size());
+  alignas(64) double xa[4][kBlock], xb[4][kBlock];
   double (*x)[kBlock] = xa;
   double (*x1)[kBlock] = xb;
   int row[kBlock], lane[kBlock];  // lane j of the block is lane a + lane[j] of the batch
   for (int j = 0; j < L; ++j) {
     lane[j] = j;
-    row[j] = lane_row ? lane_row[a + j] : 0;
+    row[j] = lane_row ? row_index(lane_row[a + j], rows) : 0;
   }
   bool uniform = true;
   for (int j = 1; j < L; ++j) uniform &= row[j] == row[0];
@@ -558,60 +868,62 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
     row[j] = row_sorted[j];
     for (int i = 0; i < 4; ++i) x[i][j] = Y[i * n + a + lane[j]];
   }
+  // runs of one parameter row: [run[k], run[k + 1])
+  int run[kBlock + 1], nrun = 0;
+  for (int j = 0; j < L; ++j)
+    if (j == 0 || row[j] != row[j - 1]) run[nrun++] = j;
+  run[nrun] = L;
   alignas(64) unsigned char need[kBlock];
+  int idx[kBlock];
   for (int per = 0; per < periods; ++per) {
     for (int s = 0; s < steps; ++s) {
-      if (uniform) {
-        const int r = row[0];
-        const Table& tb = tables[r];
-        const double h = models[r].T / steps;
-        trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, L, x, x1, k1,
-                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
-      } else {
-        // lanes with different parameter rows: each run of one row vectorised as above
-        for (int j0 = 0; j0 < L;) {
-          int j1 = j0 + 1;
-          while (j1 < L && row[j1] == row[j0]) ++j1;
-          const int r = row[j0];
-          const Table& tb = tables[r];
-          const double h = models[r].T / steps;
-          auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
-          trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x),
-                        at(x1), at(k1), tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
-          j0 = j1;
-        }
-      }
-      // lanes with an event: split them one by one
-      for (int j = 0; j < L; ++j) {
-        if (!need[j]) continue;
-        const int r = uniform ? row[0] : row[j];
+      for (int k = 0; k < nrun; ++k) {
+        const int j0 = run[k], j1 = run[k + 1];
+        const int r = row[j0];
         const Model& m = models[r];
         const Coef& c = coefs[r];
         const Table& tb = tables[r];
         const double h = m.T / steps;
         const double t = t0 + s * h;
-        double y[4], y1[4], kl[4], S0[4], S1[4], sides[4], th, out4[4];
-        int which;
-        for (int i = 0; i < 4; ++i) {
-          y[i] = x[i][j];
-          y1[i] = x1[i][j];
-          kl[i] = k1[i][j];
+        auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
+        trial_uniform(c, tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x), at(x1),
+                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
+        // lanes with an event: split, all at once where the model allows, else one by one
+        int K = 0;
+        for (int j = j0; j < j1; ++j) {
+          idx[K] = j;
+          K += need[j] != 0;
         }
-        switching(c, tb.E0[s], y, S0);
-        switching(c, tb.E1[s], y1, S1);
-        for (int i = 0; i < 4; ++i) sides[i] = side(S0[i]);
-        TermCache tc;
-        if (m.n_breaks == 0) {  // the step's own (unclipped) stage times are tabulated
-          tc.t[0] = t;
-          tc.q[0] = tb.stage[3 * s];
-          tc.t[1] = t + h;
-          tc.q[1] = tb.stage[3 * s + 2];
-          tc.n = 2;
+        if (K == 0) continue;
+        if (vector_split_ok(m, h)) {
+          split_block(m, c, tb, s, t, h, max_splits, idx, K, x, x1, w);
+          continue;
         }
-        bool flips[4];
-        first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which, flips);
-        split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, flips, sides, max_splits, out4);
-        for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+        for (int g = 0; g < K; ++g) {
+          const int j = idx[g];
+          double y[4], y1[4], kl[4], S0[4], S1[4], sides[4], th, out4[4];
+          int which;
+          for (int i = 0; i < 4; ++i) {
+            y[i] = x[i][j];
+            y1[i] = x1[i][j];
+          }
+          TermCache tc;
+          if (m.n_breaks == 0) {  // the step's own (unclipped) stage times are tabulated
+            tc.t[0] = t;
+            tc.q[0] = tb.stage[3 * s];
+            tc.t[1] = t + h;
+            tc.q[1] = tb.stage[3 * s + 2];
+            tc.n = 2;
+          }
+          field(c, tb.stage[3 * s], y, kl);  // the trial step's first stage
+          switching(c, tb.E0[s], y, S0);
+          switching(c, tb.E1[s], y1, S1);
+          for (int i = 0; i < 4; ++i) sides[i] = side(S0[i]);
+          bool flips[4];
+          first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which, flips);
+          split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, flips, sides, max_splits, out4);
+          for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+        }
       }
       std::swap(x, x1);
     }
@@ -638,6 +950,7 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
   const int64_t prank = pd.size();
   if (prank < 2 || pd[prank - 1] != NPARAM) return ffi::Error::InvalidArgument("parameter rows must have 24 entries");
   const int64_t rows = pd[prank - 2];
+  if (rows < 1) return ffi::Error::InvalidArgument("at least one parameter row is needed");
   const int64_t pbatch = P.element_count() / (rows * NPARAM);
   const int64_t rbatch = lane_row.element_count() / std::max<int64_t>(n, 1);
   const int64_t tbatch = t0_buf.element_count();
@@ -658,8 +971,7 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
     // only the rows of active lanes are tabulated (a pool of many rows holds few at a time)
     std::vector<unsigned char> used(rows, 0);
-    for (int64_t j = 0; j < n_act; ++j)
-      if (rowp[j] >= 0 && rowp[j] < rows) used[rowp[j]] = 1;
+    for (int64_t j = 0; j < n_act; ++j) used[row_index(rowp[j], rows)] = 1;
     for (int64_t r = 0; r < rows; ++r) {
       models[r] = make_model(pb + r * NPARAM, static_cast<int>(shape));
       coefs[r] = coef(models[r]);
@@ -676,12 +988,16 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     int64_t bl = (n_act + threads * kBlocksPerThread - 1) / (threads * kBlocksPerThread);
     bl = std::min<int64_t>(kBlock, std::max<int64_t>(kMinBlock, (bl + 7) / 8 * 8));
     const int nb = static_cast<int>((n_act + bl - 1) / bl);
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int blk = 0; blk < nb; ++blk) {
-      const int64_t a = static_cast<int64_t>(blk) * bl;
-      const int64_t b = std::min<int64_t>(a + bl, n_act);
-      run_block(yb, ob, n, a, b, rowp, models, coefs, tables, t0, static_cast<int>(periods),
-                static_cast<int>(steps), static_cast<int>(max_splits));
+#pragma omp parallel
+    {
+      std::unique_ptr<SplitScratch> scratch(new SplitScratch);
+#pragma omp for schedule(dynamic, 1)
+      for (int blk = 0; blk < nb; ++blk) {
+        const int64_t a = static_cast<int64_t>(blk) * bl;
+        const int64_t b = std::min<int64_t>(a + bl, n_act);
+        run_block(yb, ob, n, a, b, rowp, models, coefs, tables, t0, static_cast<int>(periods),
+                  static_cast<int>(steps), static_cast<int>(max_splits), *scratch);
+      }
     }
   }
   return ffi::Error::Success();
