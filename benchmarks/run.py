@@ -215,7 +215,7 @@ def bench_kernel(X, repeat, R):
 
     jax.clear_caches()
     for key, integrator, rep in (("default", jaxgear.KinkAwareRK4(STEPS), repeat),
-                                 ("kink_jax", jaxgear.KinkAwareRK4(STEPS, backend="jax"), 1),
+                                 ("kink_jax", jaxgear.KinkAwareRK4(STEPS, native=False), 1),
                                  ("rk4", jaxgear.RK4(STEPS), repeat)):
         m, Y = measure_result(strobe(integrator), rep)
         Ys[key] = np.asarray(Y)
@@ -748,7 +748,7 @@ def print_table(R) -> list[str]:
     L.append(f"  {'implementation':52s} {'compile s':>9s} {'run s':>8s} {'ns/step/cell':>12s}")
     rows = [
         ("default: KinkAwareRK4(200), compiled CPU kernel", "default"),
-        ("KinkAwareRK4(200, backend='jax'), pure JAX", "kink_jax"),
+        ("KinkAwareRK4(200, native=False), pure JAX", "kink_jax"),
         ("RK4(200), plain (XLA)", "rk4"),
         ("numba blocked+tabulated+vectorised, plain RK4", "numba_blocked"),
         ("  same, 1 thread", "numba_blocked_1thread"),
