@@ -170,3 +170,20 @@ def test_a_lanes_result_does_not_depend_on_the_pool_it_is_in():
         pick = rng.choice(2000, size=m, replace=False)
         small = np.asarray(integ.advance(jg.REDUCED, p, jnp.asarray(Y[:, pick]), 0.0, 2))
         np.testing.assert_array_equal(small, big[:, pick], err_msg=f"{m} lanes")
+
+
+def test_lane_rows_out_of_range_are_read_as_the_pure_jax_path_reads_them():
+    """A lane's row is read as ``params[row]`` reads it in JAX (negative from the end,
+    out of range clamped): the kernel never reads outside the parameter rows."""
+    from jaxgear.integrate import stack_params
+
+    rng = np.random.default_rng(15)
+    ps = [random_params(rng, "sine") for _ in range(3)]
+    stacked = stack_params(ps)
+    rows = np.array([0, 1, 2, -1, 3, 99, -3, -40] * 8, np.int32)
+    Y = jnp.asarray(random_states(rng, len(rows)))
+    out = np.asarray(KinkAwareRK4(60).advance_rows(jg.REDUCED, stacked, rows, Y, 0.0, 1))
+    same = np.array([0, 1, 2, 2, 2, 2, 0, 0] * 8)  # numpy's reading, clamped
+    for r, p in enumerate(ps):
+        ref = np.asarray(KinkAwareRK4(60, native=False).advance(jg.REDUCED, p, Y, 0.0, 1))
+        assert rel_diff(out[:, same == r], ref[:, same == r]) <= TOL, r
