@@ -488,7 +488,7 @@ Model make_model(const double* row, int shape) {
 // The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
 // lanes in one pass (the four stages of a lane in registers): x (4 x L) -> x1, and whether
 // the step holds an event (a switching function changes sign, or a known time break).
-inline void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
+__attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
                           const double (*x)[kBlock], double (*x1)[kBlock], double E0, double E1, bool brk,
                           unsigned char* need) {
   const double h2 = 0.5 * h, h6 = h / 6.0;
@@ -536,7 +536,7 @@ inline bool vector_split_ok(const Model& m, double h) { return m.n_breaks == 0 &
 
 // The time terms of split_block: those of terms_at for the sine shape, and at the step's
 // own ends the tabulated ones (as the TermCache of the lane-by-lane split holds them).
-inline Terms terms_sine(const double* p, const Clock& ck, double t, double te, const Terms& q0, const Terms& q2,
+__attribute__((always_inline)) inline Terms terms_sine(const double* p, const Clock& ck, double t, double te, const Terms& q0, const Terms& q2,
                         double tau) {
   const double W = p[OMEGA];
   const double x = W * (tau - ck.t);
@@ -572,66 +572,81 @@ inline double pick4(int w, double a0, double a1, double a2, double a3) {
 struct SplitScratch {
   alignas(64) double y[4][kBlock], k1[4][kBlock], ym[4][kBlock], y1[4][kBlock], sd[4][kBlock];
   alignas(64) double th[kBlock], tt[kBlock], hh[kBlock];
-  alignas(64) double s0[4 * kBlock], s1[4 * kBlock], d0[4 * kBlock], d1[4 * kBlock], root[4 * kBlock];
+  alignas(64) double s0[4 * kBlock + 8], s1[4 * kBlock + 8], d0[4 * kBlock + 8], d1[4 * kBlock + 8];
+  alignas(64) double root[4 * kBlock + 8];
+  alignas(64) double S0[4][kBlock], S1[4][kBlock], D0[4][kBlock], D1[4][kBlock];
   alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
   alignas(64) double wh[kBlock], fl[4][kBlock];
-  alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock], act[4 * kBlock];
+  alignas(64) double act[4 * kBlock];
+  alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock];
 };
 
-// Roots of the Hermite cubics of `np` crossings at once: hermite_root vectorised over
-// them, iterated until every one has converged (each keeps its own iterations).
+// Roots of the Hermite cubics of `np` crossings at once: hermite_root on eight at a time
+// (GCC vector extensions; the selects and the arithmetic of hermite_root, the loop left when
+// all eight have converged: each root keeps its own iterations). The inputs are padded to
+// a multiple of eight with a harmless cubic, so every root takes the same instructions
+// wherever it stands.
+typedef double v8d __attribute__((vector_size(64)));
+typedef long long v8l __attribute__((vector_size(64)));
+
+inline v8d load8(const double* p) {
+  v8d v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
 inline void hermite_roots(SplitScratch& w, int np) {
-  double* s0 = w.s0;
-  double* s1 = w.s1;
-  double* d0 = w.d0;
-  double* d1 = w.d1;
-  double* th = w.root;
-  double* lo = w.lo;
-  double* hi = w.hi;
-  double* sg0 = w.sg0;
-  int* act = w.act;
-#pragma omp simd
-  for (int k = 0; k < np; ++k) {
-    const double denom = s0[k] - s1[k];
-    double t0 = denom != 0 ? s0[k] / denom : 0.5;
-    th[k] = std::min(std::max(t0, 0.0), 1.0);
-    lo[k] = 0.0;
-    hi[k] = 1.0;
-    sg0[k] = sgn(s0[k]);
-    act[k] = 1;
+  const int np8 = (np + 7) / 8 * 8;
+  for (int k = np; k < np8; ++k) {
+    w.s0[k] = 1.0;
+    w.s1[k] = -1.0;
+    w.d0[k] = 0.0;
+    w.d1[k] = 0.0;
   }
-  for (int it = 0; it < kHermiteIters; ++it) {
-    int left = 0;
-#pragma omp simd reduction(+ : left)
-    for (int k = 0; k < np; ++k) {
-      const double a = th[k], t2 = a * a, t3 = t2 * a;
-      const double v = (2 * t3 - 3 * t2 + 1) * s0[k] + (t3 - 2 * t2 + a) * d0[k] + (-2 * t3 + 3 * t2) * s1[k] +
-                       (t3 - t2) * d1[k];
-      const double d = (6 * t2 - 6 * a) * s0[k] + (3 * t2 - 4 * a + 1) * d0[k] + (-6 * t2 + 6 * a) * s1[k] +
-                       (3 * t2 - 2 * a) * d1[k];
-      const bool on = act[k] != 0;
-      const bool same = sgn(v) == sg0[k];
-      const double nlo = same ? a : lo[k], nhi = same ? hi[k] : a;
-      const double nn = a - v / (d != 0 ? d : 1.0), mid = 0.5 * (nlo + nhi);
-      const bool done = (v == 0) | ((d != 0) & (std::fabs(nn - a) <= 4.0 * kEps));
-      const double nt = (nn > nlo) & (nn < nhi) & (d != 0) ? nn : mid;
-      lo[k] = on ? nlo : lo[k];
-      hi[k] = on ? nhi : hi[k];
-      th[k] = on & !done ? nt : a;
-      const int still = on & !done;
-      act[k] = still;
-      left += still;
+  const v8d zero = {}, one = zero + 1.0;
+  for (int k0 = 0; k0 < np8; k0 += 8) {
+    const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0), d0 = load8(w.d0 + k0), d1 = load8(w.d1 + k0);
+    auto p = [&](v8d th) {
+      const v8d t2 = th * th, t3 = t2 * th;
+      return (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + th) * d0 + (-2.0 * t3 + 3.0 * t2) * s1 +
+             (t3 - t2) * d1;
+    };
+    auto dp = [&](v8d th) {
+      const v8d t2 = th * th;
+      return (6.0 * t2 - 6.0 * th) * s0 + (3.0 * t2 - 4.0 * th + 1.0) * d0 + (-6.0 * t2 + 6.0 * th) * s1 +
+             (3.0 * t2 - 2.0 * th) * d1;
+    };
+    const v8d denom = s0 - s1;
+    const v8d q = s0 / (denom != 0.0 ? denom : one);
+    v8d th = denom != 0.0 ? q : zero + 0.5;
+    th = th < 0.0 ? zero : th;  // std::max(th, 0.0)
+    th = 1.0 < th ? one : th;   // std::min(th, 1.0)
+    v8d lo = zero, hi = one;
+    const v8d sg0 = s0 > 0.0 ? one : (s0 < 0.0 ? -one : zero);
+    v8l act = zero == zero;  // all true
+    for (int it = 0; it < kHermiteIters; ++it) {
+      const v8d v = p(th), d = dp(th);
+      const v8d sv = v > 0.0 ? one : (v < 0.0 ? -one : zero);
+      const v8l same = sv == sg0;
+      const v8d nlo = same ? th : lo, nhi = same ? hi : th;
+      const v8l dnz = d != 0.0;
+      const v8d nn = th - v / (dnz ? d : one), mid = 0.5 * (nlo + nhi);
+      const v8d step = nn - th;
+      const v8d ast = step < 0.0 ? -step : step;
+      const v8l done = (v == 0.0) | (dnz & (ast <= 4.0 * kEps));
+      const v8l inside = (nn > nlo) & (nn < nhi) & dnz;
+      const v8d nt = inside ? nn : mid;
+      lo = act ? nlo : lo;
+      hi = act ? nhi : hi;
+      act = act & ~done;
+      th = act ? nt : th;
+      long long any = 0;
+      for (int i = 0; i < 8; ++i) any |= act[i];
+      if (!any) break;
     }
-    if (left == 0) break;
-  }
-#pragma omp simd
-  for (int k = 0; k < np; ++k) {
-    const double a = th[k], t2 = a * a, t3 = t2 * a;
-    const double v = (2 * t3 - 3 * t2 + 1) * s0[k] + (t3 - 2 * t2 + a) * d0[k] + (-2 * t3 + 3 * t2) * s1[k] +
-                     (t3 - t2) * d1[k];
-    const double d = (6 * t2 - 6 * a) * s0[k] + (3 * t2 - 4 * a + 1) * d0[k] + (-6 * t2 + 6 * a) * s1[k] +
-                     (3 * t2 - 2 * a) * d1[k];
-    th[k] = a - v / (d != 0 ? d : 1.0);
+    const v8d d = dp(th);
+    const v8d r = th - p(th) / (d != 0.0 ? d : one);
+    __builtin_memcpy(w.root + k0, &r, sizeof r);
   }
 }
 
@@ -647,31 +662,74 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   const Clock& ck = tb.clock[s];
   const Terms q0 = tb.stage[3 * s], q2 = tb.stage[3 * s + 2];
   const double te = t + h, E0 = tb.E0[s], E1 = tb.E1[s];
-  // the crossing of the trial step (first_crossing): switching functions and rates at both ends
+  // the crossing of the trial step (first_crossing): switching functions and rates at both
+  // ends, vectorised over the lanes (padded to a multiple of eight with copies of the last
+  // one, whose results are dropped), then the crossed functions gathered for hermite_roots
+  const int Kp = (K + 7) / 8 * 8;
+  int ix[kBlock];
+  for (int g = 0; g < Kp; ++g) ix[g] = idx[g < K ? g : K - 1];
+  double (*S0a)[kBlock] = w.S0;
+  double (*S1a)[kBlock] = w.S1;
+  double (*D0a)[kBlock] = w.D0;
+  double (*D1a)[kBlock] = w.D1;
+  const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
+  const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
+#pragma omp simd simdlen(8)
+  for (int g = 0; g < Kp; ++g) {
+    // field(q0, y) (k1), switching at both ends, switching_rate at both ends (field(q2, y1)
+    // enters through its position components only), on scalars
+    const int j = ix[g];
+    const double y0 = x[0][j], y1 = x[1][j], y2 = x[2][j], y3 = x[3][j];
+    const double e0 = x1[0][j], e1 = x1[1][j], e2 = x1[2][j], e3 = x1[3][j];
+    const double X = y2 - y0 - q0.E, V = y3 - y1 - q0.dE;
+    const double zl = y0 - bsp, zh = y0 + bsp, Xl = X - brp, Xh = X + brp;
+    const double fsp = y0 >= bsp ? zl : (y0 <= -bsp ? zh : 0.0);
+    const double frp = X >= brp ? Xl : (X <= -brp ? Xh : 0.0);
+    const double gsp = q0.ksp * fsp + csp * y1, grp = q0.krp * frp + crp * V;
+    const double k1v = a2sp * gsp + a2rp * grp + q0.L1, k3v = a4sp * gsp + a4rp * grp + L2;
+    const double Xa = y2 - y0 - E0, Xb = e2 - e0 - E1;
+    const double S00 = y0 - bsp, S01 = y0 + bsp, S02 = Xa - brp, S03 = Xa + brp;
+    const double S10 = e0 - bsp, S11 = e0 + bsp, S12 = Xb - brp, S13 = Xb + brp;
+    const double r0 = y3 - y1 - q0.dE, r1 = e3 - e1 - q2.dE;
+    w.y[0][g] = y0;
+    w.y[1][g] = y1;
+    w.y[2][g] = y2;
+    w.y[3][g] = y3;
+    w.k1[0][g] = y1;
+    w.k1[1][g] = k1v;
+    w.k1[2][g] = y3;
+    w.k1[3][g] = k3v;
+    w.sd[0][g] = S00 >= 0.0 ? 1.0 : -1.0;
+    w.sd[1][g] = S01 >= 0.0 ? 1.0 : -1.0;
+    w.sd[2][g] = S02 >= 0.0 ? 1.0 : -1.0;
+    w.sd[3][g] = S03 >= 0.0 ? 1.0 : -1.0;
+    S0a[0][g] = S00;
+    S0a[1][g] = S01;
+    S0a[2][g] = S02;
+    S0a[3][g] = S03;
+    S1a[0][g] = S10;
+    S1a[1][g] = S11;
+    S1a[2][g] = S12;
+    S1a[3][g] = S13;
+    for (int i = 0; i < 4; ++i) w.thl[i][g] = 2.0;
+    D0a[0][g] = y1;
+    D0a[1][g] = y1;
+    D0a[2][g] = r0;
+    D0a[3][g] = r0;
+    D1a[0][g] = e1;
+    D1a[1][g] = e1;
+    D1a[2][g] = r1;
+    D1a[3][g] = r1;
+  }
   int np = 0;
   for (int g = 0; g < K; ++g) {
-    const int j = idx[g];
-    double y[4], y1[4], k1[4], F1[4], S0[4], S1[4], D0[4], D1[4];
     for (int i = 0; i < 4; ++i) {
-      y[i] = x[i][j];
-      y1[i] = x1[i][j];
-    }
-    field(c, q0, y, k1);
-    switching(c, E0, y, S0);
-    switching(c, E1, y1, S1);
-    field(c, q2, y1, F1);
-    switching_rate(q0.dE, k1, D0);
-    switching_rate(q2.dE, F1, D1);
-    for (int i = 0; i < 4; ++i) {
-      w.y[i][g] = y[i];
-      w.k1[i][g] = k1[i];
-      w.sd[i][g] = side(S0[i]);
-      w.thl[i][g] = 2.0;
-      if (side(S1[i]) != w.sd[i][g] && std::isfinite(S1[i]) && std::isfinite(S0[i])) {
-        w.s0[np] = S0[i];
-        w.s1[np] = S1[i];
-        w.d0[np] = D0[i] * h;
-        w.d1[np] = D1[i] * h;
+      const double S0 = S0a[i][g], S1 = S1a[i][g];
+      if (side(S1) != w.sd[i][g] && std::isfinite(S1) && std::isfinite(S0)) {
+        w.s0[np] = S0;
+        w.s1[np] = S1;
+        w.d0[np] = D0a[i][g] * h;
+        w.d1[np] = D1a[i][g] * h;
         w.pair_lane[np] = g;
         w.pair_fn[np++] = i;
       }
@@ -679,29 +737,40 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   }
   hermite_roots(w, np);
   for (int k = 0; k < np; ++k) w.thl[w.pair_fn[k]][w.pair_lane[k]] = std::min(std::max(w.root[k], 0.0), 1.0);
+  // the first crossing of each lane (as first_crossing), eight lanes at a time
   const double thb = tb.thb[s];
-#pragma omp simd
-  for (int g = 0; g < K; ++g) {
-    double th_s = 2.0;
-    int jf = 0;
-    for (int i = 0; i < 4; ++i) {
-      const bool lt = w.thl[i][g] < th_s;
-      th_s = lt ? w.thl[i][g] : th_s;
-      jf = lt ? i : jf;
-    }
-    const bool use_break = thb < th_s;
-    const int which = (use_break | (th_s > 1.0)) ? -1 : jf;
-    w.wh[g] = which;
-    w.th[g] = std::min(use_break ? thb : th_s, 1.0);
-    const double lim = th_s + kSimultaneous;
-    for (int i = 0; i < 4; ++i) w.fl[i][g] = (which >= 0) & (w.thl[i][g] <= lim) ? -1.0 : 1.0;  // factor of the side
+  for (int g0 = 0; g0 < Kp; g0 += 8) {
+    const v8d zero = {}, one = zero + 1.0;
+    const v8d t0 = load8(w.thl[0] + g0), t1 = load8(w.thl[1] + g0), t2 = load8(w.thl[2] + g0),
+              t3 = load8(w.thl[3] + g0);
+    v8d th_s = zero + 2.0, jf = zero;  // the first smallest
+    jf = t0 < th_s ? zero : jf;
+    th_s = t0 < th_s ? t0 : th_s;
+    jf = t1 < th_s ? one : jf;
+    th_s = t1 < th_s ? t1 : th_s;
+    jf = t2 < th_s ? zero + 2.0 : jf;
+    th_s = t2 < th_s ? t2 : th_s;
+    jf = t3 < th_s ? zero + 3.0 : jf;
+    th_s = t3 < th_s ? t3 : th_s;
+    const v8l use_break = thb < th_s;
+    const v8d which = use_break ? -one : (th_s > 1.0 ? -one : jf);
+    v8d th = use_break ? zero + thb : th_s;
+    th = 1.0 < th ? one : th;  // std::min(th, 1.0)
+    const v8d lim = th_s + kSimultaneous;
+    const v8l any = which >= 0.0;
+    const v8d f0 = any & (t0 <= lim) ? -one : one, f1 = any & (t1 <= lim) ? -one : one;
+    const v8d f2 = any & (t2 <= lim) ? -one : one, f3 = any & (t3 <= lim) ? -one : one;
+    __builtin_memcpy(w.wh + g0, &which, sizeof which);
+    __builtin_memcpy(w.th + g0, &th, sizeof th);
+    __builtin_memcpy(w.fl[0] + g0, &f0, sizeof f0);
+    __builtin_memcpy(w.fl[1] + g0, &f1, sizeof f1);
+    __builtin_memcpy(w.fl[2] + g0, &f2, sizeof f2);
+    __builtin_memcpy(w.fl[3] + g0, &f3, sizeof f3);
   }
   // the sub-step to the crossing on the piece being left (rk4_lane with k1 known), the
   // landing on the surface (land), the flip, and the rest of the step on the new piece
   // (field_piece, switching and switching_rate written out on scalars, the same arithmetic)
-  const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
-  const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
-  auto piece = [&](const Terms& q, double z0, double z1, double z2, double z3, double s0, double s1, double s2,
+  auto piece = [=](const Terms& q, double z0, double z1, double z2, double z3, double s0, double s1, double s2,
                    double s3, double& v1, double& v3) {
     const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
     const double zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
@@ -712,8 +781,8 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
   const int more_allowed = max_splits >= 2, always_more = max_splits > 2;
-#pragma omp simd
-  for (int g = 0; g < K; ++g) {
+#pragma omp simd simdlen(8)
+  for (int g = 0; g < Kp; ++g) {
     double sd0 = w.sd[0][g], sd1 = w.sd[1][g], sd2 = w.sd[2][g], sd3 = w.sd[3][g];
     const double y0 = w.y[0][g], y1 = w.y[1][g], y2 = w.y[2][g], y3 = w.y[3][g];
     const double a0 = w.k1[0][g], a1 = w.k1[1][g], a2 = w.k1[2][g], a3 = w.k1[3][g];
