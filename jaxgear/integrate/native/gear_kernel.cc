@@ -496,8 +496,9 @@ __attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
   auto f = [&](const Terms& q, double z0, double z1, double z2, double z3, double& v1, double& v3) {
     const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
-    const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
+    // the dead zone as max(x - b, 0) + min(x + b, 0): the same value (exact: one term is 0)
+    const double fsp = std::max(z0 - bsp, 0.0) + std::min(z0 + bsp, 0.0);
+    const double frp = std::max(X - brp, 0.0) + std::min(X + brp, 0.0);
     const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
@@ -521,52 +522,25 @@ __attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(
     x1[1][j] = e1;
     x1[2][j] = e2;
     x1[3][j] = e3;
+    // (lanes that are not finite are told apart in the split: lane_finite)
     const double X0 = y2 - y0 - E0, X1 = e2 - e0 - E1;
-    const bool fin = (e0 - e0 == 0.0) & (X1 - X1 == 0.0) & (y0 - y0 == 0.0) & (X0 - X0 == 0.0);
     const bool cr = ((y0 - bsp >= 0) != (e0 - bsp >= 0)) | ((y0 + bsp >= 0) != (e0 + bsp >= 0)) |
                     ((X0 - brp >= 0) != (X1 - brp >= 0)) | ((X0 + brp >= 0) != (X1 + brp >= 0));
-    need[j] = (cr & fin) | brk;
+    need[j] = cr | brk;
   }
+}
+
+// Whether a lane's sign test is meaningful (its step is split only then, unless a time break
+// lies inside the step): the crossing coordinates finite at both ends of the trial step.
+inline bool lane_finite(double E0, double E1, const double* y, const double* y1) {
+  const double X0 = y[2] - y[0] - E0, X1 = y1[2] - y1[0] - E1;
+  return (y1[0] - y1[0] == 0.0) & (X1 - X1 == 0.0) & (y[0] - y[0] == 0.0) & (X0 - X0 == 0.0);
 }
 
 // Whether the split of a row's lanes can run vectorised (split_block): no time breaks (the
 // sine mesh stiffness), and every time met inside a step close enough to its start for the
 // short series of small_sincos (|W (tau - t)| <= 1.25 W h plus round-off, below 0.2).
 inline bool vector_split_ok(const Model& m, double h) { return m.n_breaks == 0 && 1.3 * m.p[OMEGA] * h <= 0.2; }
-
-// The time terms of split_block: those of terms_at for the sine shape, and at the step's
-// own ends the tabulated ones (as the TermCache of the lane-by-lane split holds them).
-__attribute__((always_inline)) inline Terms terms_sine(const double* p, const Clock& ck, double t, double te, const Terms& q0, const Terms& q2,
-                        double tau) {
-  const double W = p[OMEGA];
-  const double x = W * (tau - ck.t);
-  const double x2 = x * x;
-  const double sx = x * (1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 + x2 * (-1.0 / 39916800))))));
-  const double cx = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320 + x2 * (-1.0 / 3628800 +
-                                                                                         x2 * (1.0 / 479001600))))));
-  const double S0 = ck.sn[0] * cx + ck.cs[0] * sx, S1 = ck.sn[1] * cx + ck.cs[1] * sx;
-  const double S2 = ck.sn[2] * cx + ck.cs[2] * sx, C2 = ck.cs[2] * cx - ck.sn[2] * sx;
-  const double S3 = ck.sn[3] * cx + ck.cs[3] * sx, C3 = ck.cs[3] * cx - ck.sn[3] * sx;
-  const double e_sp = p[ESA] * S2;
-  const double de_sp = p[ESA] * W * C2;
-  const double dde_sp = -p[ESA] * W * W * S2;
-  const bool a = tau == t, b = tau == te;
-  Terms q;
-  // (every value computed, then selected: no arithmetic under a branch, so loops vectorise)
-  const double ksp = p[KSM] + p[KSA] * S0, krp = p[KRM] + p[KRA] * S1, E = e_sp + p[ERA] * S3;
-  const double dE = de_sp + p[ERA] * W * C3, L1 = p[MU_S] * p[F_D] + p[MU_C] * p[F_L] - dde_sp;
-  q.ksp = b ? q2.ksp : (a ? q0.ksp : ksp);
-  q.krp = b ? q2.krp : (a ? q0.krp : krp);
-  q.E = b ? q2.E : (a ? q0.E : E);
-  q.dE = b ? q2.dE : (a ? q0.dE : dE);
-  q.L1 = b ? q2.L1 : (a ? q0.L1 : L1);
-  return q;
-}
-
-// Pick entry `w` (0..3) of four values without indexing (vectorisable).
-inline double pick4(int w, double a0, double a1, double a2, double a3) {
-  return w == 0 ? a0 : (w == 1 ? a1 : (w == 2 ? a2 : a3));
-}
 
 // Scratch of split_block: the lanes of a block that split in one step, struct of arrays.
 struct SplitScratch {
@@ -576,7 +550,7 @@ struct SplitScratch {
   alignas(64) double root[4 * kBlock + 8];
   alignas(64) double S0[4][kBlock], S1[4][kBlock], D0[4][kBlock], D1[4][kBlock];
   alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
-  alignas(64) double wh[kBlock], fl[4][kBlock];
+  alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
   alignas(64) double act[4 * kBlock];
   alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock];
 };
@@ -651,11 +625,12 @@ inline void hermite_roots(SplitScratch& w, int np) {
 }
 
 // The split of the lanes `idx[0..K)` of a block (all of one parameter row, vector_split_ok)
-// in step s from t: the same arithmetic as first_crossing and split_lane lane by lane (the
-// results are the same to the bit), with the crossing, the sub-step to it, the landing and
-// the rest of the step vectorised over the lanes; the few lanes with a further event in the
-// same step (or max_splits > 2) continue lane by lane. x: the states at t, x1: the trial
-// states at t + h, overwritten with the split ones.
+// in step s from t: the arithmetic of first_crossing and split_lane, with the crossing, the
+// sub-step to it, the landing and the rest of the step done eight lanes at a time (every
+// lane through the same instructions, so its result does not depend on its neighbours);
+// the few lanes with a further event in the same step (or max_splits > 2) continue lane by
+// lane. Lanes that are not finite keep their trial step (lane_finite). x: the states at t,
+// x1: the trial states at t + h, overwritten with the split ones.
 void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t, double h, int max_splits,
                  const int* idx, int K, const double (*x)[kBlock], double (*x1)[kBlock], SplitScratch& w) {
   const double* p = m.p;
@@ -688,6 +663,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     const double gsp = q0.ksp * fsp + csp * y1, grp = q0.krp * frp + crp * V;
     const double k1v = a2sp * gsp + a2rp * grp + q0.L1, k3v = a4sp * gsp + a4rp * grp + L2;
     const double Xa = y2 - y0 - E0, Xb = e2 - e0 - E1;
+    w.fin[g] = (e0 - e0 == 0.0) & (Xb - Xb == 0.0) & (y0 - y0 == 0.0) & (Xa - Xa == 0.0) ? 1.0 : 0.0;
     const double S00 = y0 - bsp, S01 = y0 + bsp, S02 = Xa - brp, S03 = Xa + brp;
     const double S10 = e0 - bsp, S11 = e0 + bsp, S12 = Xb - brp, S13 = Xb + brp;
     const double r0 = y3 - y1 - q0.dE, r1 = e3 - e1 - q2.dE;
@@ -723,6 +699,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   }
   int np = 0;
   for (int g = 0; g < K; ++g) {
+    if (w.fin[g] == 0.0) continue;  // not finite: the trial step stands (lane_finite)
     for (int i = 0; i < 4; ++i) {
       const double S0 = S0a[i][g], S1 = S1a[i][g];
       if (side(S1) != w.sd[i][g] && std::isfinite(S1) && std::isfinite(S0)) {
@@ -770,111 +747,146 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   // the sub-step to the crossing on the piece being left (rk4_lane with k1 known), the
   // landing on the surface (land), the flip, and the rest of the step on the new piece
   // (field_piece, switching and switching_rate written out on scalars, the same arithmetic)
-  auto piece = [=](const Terms& q, double z0, double z1, double z2, double z3, double s0, double s1, double s2,
-                   double s3, double& v1, double& v3) {
-    const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    const double zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
-    const double fsp = s0 > 0 ? zl : (s1 < 0 ? zh : 0.0);  // (sides are +-1: never NaN)
-    const double frp = s2 > 0 ? Xl : (s3 < 0 ? Xh : 0.0);
-    const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+  struct T8 {
+    v8d ksp, krp, E, dE, L1;
+  };
+  const v8d zero = {}, one = zero + 1.0;
+  // terms_at (sine shape) at eight times at once, and at the step's own ends the tabulated
+  // terms (as the TermCache of the lane-by-lane split holds them)
+  auto terms8 = [&](v8d tau) {
+    const double W = p[OMEGA];
+    const v8d xx = W * (tau - ck.t);
+    const v8d x2 = xx * xx;
+    const v8d sx = xx * (1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 + x2 * (-1.0 / 39916800))))));
+    const v8d cx = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320 + x2 * (-1.0 / 3628800 +
+                                                                                         x2 * (1.0 / 479001600))))));
+    const v8d S0 = ck.sn[0] * cx + ck.cs[0] * sx, S1 = ck.sn[1] * cx + ck.cs[1] * sx;
+    const v8d S2 = ck.sn[2] * cx + ck.cs[2] * sx, C2 = ck.cs[2] * cx - ck.sn[2] * sx;
+    const v8d S3 = ck.sn[3] * cx + ck.cs[3] * sx, C3 = ck.cs[3] * cx - ck.sn[3] * sx;
+    const v8d e_sp = p[ESA] * S2;
+    const v8d de_sp = p[ESA] * W * C2;
+    const v8d dde_sp = -p[ESA] * W * W * S2;
+    const v8l at0 = tau == t, at1 = tau == te;
+    const v8d ksp = p[KSM] + p[KSA] * S0, krp = p[KRM] + p[KRA] * S1, E = e_sp + p[ERA] * S3;
+    const v8d dE = de_sp + p[ERA] * W * C3, L1 = p[MU_S] * p[F_D] + p[MU_C] * p[F_L] - dde_sp;
+    T8 q;
+    q.ksp = at1 ? zero + q2.ksp : (at0 ? zero + q0.ksp : ksp);
+    q.krp = at1 ? zero + q2.krp : (at0 ? zero + q0.krp : krp);
+    q.E = at1 ? zero + q2.E : (at0 ? zero + q0.E : E);
+    q.dE = at1 ? zero + q2.dE : (at0 ? zero + q0.dE : dE);
+    q.L1 = at1 ? zero + q2.L1 : (at0 ? zero + q0.L1 : L1);
+    return q;
+  };
+  // field_piece's velocity components on eight lanes
+  auto piece = [&](const T8& q, v8d z0, v8d z1, v8d z2, v8d z3, v8d s0, v8d s1, v8d s2, v8d s3, v8d& v1,
+                   v8d& v3) {
+    const v8d X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
+    const v8d zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
+    const v8d fsp = s0 > 0.0 ? zl : (s1 < 0.0 ? zh : zero);  // (sides are +-1: never NaN)
+    const v8d frp = s2 > 0.0 ? Xl : (s3 < 0.0 ? Xh : zero);
+    const v8d gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
-  const int more_allowed = max_splits >= 2, always_more = max_splits > 2;
-#pragma omp simd simdlen(8)
-  for (int g = 0; g < Kp; ++g) {
-    double sd0 = w.sd[0][g], sd1 = w.sd[1][g], sd2 = w.sd[2][g], sd3 = w.sd[3][g];
-    const double y0 = w.y[0][g], y1 = w.y[1][g], y2 = w.y[2][g], y3 = w.y[3][g];
-    const double a0 = w.k1[0][g], a1 = w.k1[1][g], a2 = w.k1[2][g], a3 = w.k1[3][g];
-    double h1 = w.th[g] * h;
-    const double hm = 0.5 * h1;
-    double b1, b3, c1, c3, d1, d3;
-    const Terms qm = terms_sine(p, ck, t, te, q0, q2, t + hm);
-    const double u0 = y0 + hm * a0, u1 = y1 + hm * a1, u2 = y2 + hm * a2, u3 = y3 + hm * a3;
+  auto store = [](double* dst, v8d v) { __builtin_memcpy(dst, &v, sizeof v); };
+  const double habs = std::fabs(h);
+  for (int g = 0; g < Kp; g += 8) {
+    v8d sd0 = load8(w.sd[0] + g), sd1 = load8(w.sd[1] + g), sd2 = load8(w.sd[2] + g), sd3 = load8(w.sd[3] + g);
+    const v8d y0 = load8(w.y[0] + g), y1 = load8(w.y[1] + g), y2 = load8(w.y[2] + g), y3 = load8(w.y[3] + g);
+    const v8d a0 = load8(w.k1[0] + g), a1 = load8(w.k1[1] + g), a2 = load8(w.k1[2] + g), a3 = load8(w.k1[3] + g);
+    v8d h1 = load8(w.th + g) * h;
+    const v8d hm = 0.5 * h1;
+    v8d b1, b3, c1, c3, d1, d3;
+    const T8 qm = terms8(t + hm);
+    const v8d u0 = y0 + hm * a0, u1 = y1 + hm * a1, u2 = y2 + hm * a2, u3 = y3 + hm * a3;
     piece(qm, u0, u1, u2, u3, sd0, sd1, sd2, sd3, b1, b3);
-    const double v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
+    const v8d v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
     piece(qm, v0, v1, v2, v3, sd0, sd1, sd2, sd3, c1, c3);
-    const double z0 = y0 + h1 * v1, z1 = y1 + h1 * c1, z2 = y2 + h1 * v3, z3 = y3 + h1 * c3;
-    const Terms qe = terms_sine(p, ck, t, te, q0, q2, t + h1);
+    const v8d z0 = y0 + h1 * v1, z1 = y1 + h1 * c1, z2 = y2 + h1 * v3, z3 = y3 + h1 * c3;
+    const T8 qe = terms8(t + h1);
     piece(qe, z0, z1, z2, z3, sd0, sd1, sd2, sd3, d1, d3);
-    const double h16 = h1 / 6.0;
-    double m0 = y0 + h16 * (a0 + 2.0 * (u1 + v1) + z1);
-    double m1 = y1 + h16 * (a1 + 2.0 * (b1 + c1) + d1);
-    double m2 = y2 + h16 * (a2 + 2.0 * (u3 + v3) + z3);
-    double m3 = y3 + h16 * (a3 + 2.0 * (b3 + c3) + d3);
+    const v8d h16 = h1 / 6.0;
+    v8d m0 = y0 + h16 * (a0 + 2.0 * (u1 + v1) + z1);
+    v8d m1 = y1 + h16 * (a1 + 2.0 * (b1 + c1) + d1);
+    v8d m2 = y2 + h16 * (a2 + 2.0 * (u3 + v3) + z3);
+    v8d m3 = y3 + h16 * (a3 + 2.0 * (b3 + c3) + d3);
     // land: one Newton correction along the piece being left
     {
-      const double wh = w.wh[g];
-      double F1, F3;
+      const v8d wh = load8(w.wh + g);
+      v8d F1, F3;
       piece(qe, m0, m1, m2, m3, sd0, sd1, sd2, sd3, F1, F3);
-      const double F0 = m1, F2 = m3;
-      const double Xr = m2 - m0 - qe.E;
-      const double r2 = F2 - F0 - qe.dE;
-      const double rate = wh < 2.0 ? F0 : r2;
-      const double Sa = m0 - bsp, Sb = m0 + bsp, Sc = Xr - brp, Sd = Xr + brp;
-      const double Sw = wh == 0.0 ? Sa : (wh == 1.0 ? Sb : (wh == 2.0 ? Sc : Sd));
-      const double dt = -Sw / (rate != 0 ? rate : 1.0);
-      const bool ok = (wh >= 0.0) & (rate != 0) & (dt - dt == 0.0) & (std::fabs(dt) <= 0.25 * std::fabs(h));
-      const double n0 = m0 + F0 * dt, n1 = m1 + F1 * dt, n2 = m2 + F2 * dt, n3 = m3 + F3 * dt, nh = h1 + dt;
+      const v8d F0 = m1, F2 = m3;
+      const v8d Xr = m2 - m0 - qe.E;
+      const v8d r2 = F2 - F0 - qe.dE;
+      const v8d rate = wh < 2.0 ? F0 : r2;
+      const v8d Sa = m0 - bsp, Sb = m0 + bsp, Sc = Xr - brp, Sd = Xr + brp;
+      const v8d Sw = wh == 0.0 ? Sa : (wh == 1.0 ? Sb : (wh == 2.0 ? Sc : Sd));
+      const v8l rnz = rate != 0.0;
+      const v8d dt = -Sw / (rnz ? rate : one);
+      const v8d adt = dt < 0.0 ? -dt : dt;
+      const v8l ok = (wh >= 0.0) & rnz & (dt - dt == 0.0) & (adt <= 0.25 * habs);
+      const v8d n0 = m0 + F0 * dt, n1 = m1 + F1 * dt, n2 = m2 + F2 * dt, n3 = m3 + F3 * dt, nh = h1 + dt;
       m0 = ok ? n0 : m0;
       m1 = ok ? n1 : m1;
       m2 = ok ? n2 : m2;
       m3 = ok ? n3 : m3;
       h1 = ok ? nh : h1;
     }
-    sd0 = sd0 * w.fl[0][g];
-    sd1 = sd1 * w.fl[1][g];
-    sd2 = sd2 * w.fl[2][g];
-    sd3 = sd3 * w.fl[3][g];
+    sd0 = sd0 * load8(w.fl[0] + g);
+    sd1 = sd1 * load8(w.fl[1] + g);
+    sd2 = sd2 * load8(w.fl[2] + g);
+    sd3 = sd3 * load8(w.fl[3] + g);
     // the rest of the step (rk4_lane from the surface)
-    const double tt = t + h1, hh = h - h1, hh2 = 0.5 * hh;
-    double e1, e3;
-    const Terms qa = terms_sine(p, ck, t, te, q0, q2, tt);
+    const v8d tt = t + h1, hh = h - h1, hh2 = 0.5 * hh;
+    v8d e1, e3;
+    const T8 qa = terms8(tt);
     piece(qa, m0, m1, m2, m3, sd0, sd1, sd2, sd3, e1, e3);
-    const double K0 = m1, K1 = e1, K2 = m3, K3 = e3;
-    const Terms qb = terms_sine(p, ck, t, te, q0, q2, tt + hh2);
-    const double p0 = m0 + hh2 * K0, p1 = m1 + hh2 * K1, p2 = m2 + hh2 * K2, p3 = m3 + hh2 * K3;
+    const v8d K0 = m1, K1 = e1, K2 = m3, K3 = e3;
+    const T8 qb = terms8(tt + hh2);
+    const v8d p0 = m0 + hh2 * K0, p1 = m1 + hh2 * K1, p2 = m2 + hh2 * K2, p3 = m3 + hh2 * K3;
     piece(qb, p0, p1, p2, p3, sd0, sd1, sd2, sd3, b1, b3);
-    const double r0 = m0 + hh2 * p1, r1 = m1 + hh2 * b1, r2 = m2 + hh2 * p3, r3 = m3 + hh2 * b3;
+    const v8d r0 = m0 + hh2 * p1, r1 = m1 + hh2 * b1, r2 = m2 + hh2 * p3, r3 = m3 + hh2 * b3;
     piece(qb, r0, r1, r2, r3, sd0, sd1, sd2, sd3, c1, c3);
-    const double s0 = m0 + hh * r1, s1 = m1 + hh * c1, s2 = m2 + hh * r3, s3 = m3 + hh * c3;
-    const Terms qc = terms_sine(p, ck, t, te, q0, q2, tt + hh);
+    const v8d s0 = m0 + hh * r1, s1 = m1 + hh * c1, s2 = m2 + hh * r3, s3 = m3 + hh * c3;
+    const T8 qc = terms8(tt + hh);
     piece(qc, s0, s1, s2, s3, sd0, sd1, sd2, sd3, d1, d3);
-    const double hh6 = hh / 6.0;
-    const double Y0 = m0 + hh6 * (K0 + 2.0 * (p1 + r1) + s1);
-    const double Y1 = m1 + hh6 * (K1 + 2.0 * (b1 + c1) + d1);
-    const double Y2 = m2 + hh6 * (K2 + 2.0 * (p3 + r3) + s3);
-    const double Y3 = m3 + hh6 * (K3 + 2.0 * (b3 + c3) + d3);
+    const v8d hh6 = hh / 6.0;
+    const v8d Y0 = m0 + hh6 * (K0 + 2.0 * (p1 + r1) + s1);
+    const v8d Y1 = m1 + hh6 * (K1 + 2.0 * (b1 + c1) + d1);
+    const v8d Y2 = m2 + hh6 * (K2 + 2.0 * (p3 + r3) + s3);
+    const v8d Y3 = m3 + hh6 * (K3 + 2.0 * (b3 + c3) + d3);
     // a further event in the rest of the step? (the sign test of first_crossing)
-    const double X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
-    const double T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
-    const double T0[4] = {m0 - bsp, m0 + bsp, X0 - brp, X0 + brp};
-    const double SD[4] = {sd0, sd1, sd2, sd3};
-    int more = 0;
+    const v8d X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
+    const v8d T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
+    const v8d T0[4] = {m0 - bsp, m0 + bsp, X0 - brp, X0 + brp};
+    const v8d SD[4] = {sd0, sd1, sd2, sd3};
+    v8l more = zero != zero;
     for (int i = 0; i < 4; ++i)
-      more |= ((T1[i] >= 0.0 ? 1.0 : -1.0) != SD[i]) & (T1[i] - T1[i] == 0.0) & (T0[i] - T0[i] == 0.0);
-    w.ym[0][g] = m0;
-    w.ym[1][g] = m1;
-    w.ym[2][g] = m2;
-    w.ym[3][g] = m3;
-    w.y1[0][g] = Y0;
-    w.y1[1][g] = Y1;
-    w.y1[2][g] = Y2;
-    w.y1[3][g] = Y3;
-    w.k1[0][g] = K0;
-    w.k1[1][g] = K1;
-    w.k1[2][g] = K2;
-    w.k1[3][g] = K3;
-    w.sd[0][g] = sd0;
-    w.sd[1][g] = sd1;
-    w.sd[2][g] = sd2;
-    w.sd[3][g] = sd3;
-    w.tt[g] = tt;
-    w.hh[g] = hh;
-    w.cont[g] = more_allowed & (more | always_more);  // continues lane by lane
+      more |= ((T1[i] >= 0.0 ? one : -one) != SD[i]) & (T1[i] - T1[i] == 0.0) & (T0[i] - T0[i] == 0.0);
+    store(w.ym[0] + g, m0);
+    store(w.ym[1] + g, m1);
+    store(w.ym[2] + g, m2);
+    store(w.ym[3] + g, m3);
+    store(w.y1[0] + g, Y0);
+    store(w.y1[1] + g, Y1);
+    store(w.y1[2] + g, Y2);
+    store(w.y1[3] + g, Y3);
+    store(w.k1[0] + g, K0);
+    store(w.k1[1] + g, K1);
+    store(w.k1[2] + g, K2);
+    store(w.k1[3] + g, K3);
+    store(w.sd[0] + g, sd0);
+    store(w.sd[1] + g, sd1);
+    store(w.sd[2] + g, sd2);
+    store(w.sd[3] + g, sd3);
+    store(w.tt + g, tt);
+    store(w.hh + g, hh);
+    for (int i = 0; i < 8; ++i)  // continues lane by lane
+      w.cont[g + i] = max_splits >= 2 && (more[i] != 0 || max_splits > 2);
   }
   for (int g = 0; g < K; ++g) {
     const int j = idx[g];
+    if (w.fin[g] == 0.0) continue;
     if (!w.cont[g]) {
       for (int i = 0; i < 4; ++i) x1[i][j] = w.y1[i][g];
       continue;
@@ -959,9 +971,18 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
                       tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
         // lanes with an event: split, all at once where the model allows, else one by one
         int K = 0;
-        for (int j = j0; j < j1; ++j) {
+        for (int j = j0; j < j1;) {  // eight flags at a time: most are 0
+          if (j + 8 <= j1) {
+            uint64_t word;
+            __builtin_memcpy(&word, need + j, 8);
+            if (word == 0) {
+              j += 8;
+              continue;
+            }
+          }
           idx[K] = j;
           K += need[j] != 0;
+          ++j;
         }
         if (K == 0) continue;
         if (vector_split_ok(m, h)) {
@@ -976,6 +997,7 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
             y[i] = x[i][j];
             y1[i] = x1[i][j];
           }
+          if (tb.thb[s] >= 1.0 && !lane_finite(tb.E0[s], tb.E1[s], y, y1)) continue;  // the trial step stands
           TermCache tc;
           if (m.n_breaks == 0) {  // the step's own (unclipped) stage times are tabulated
             tc.t[0] = t;
