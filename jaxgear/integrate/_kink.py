@@ -16,7 +16,7 @@ model document §8).
 The lanes that need a split (a few per cent per step) are gathered into a compact
 buffer in large batches and selected from a whole-batch computation in small ones,
 without leaving ``jit`` and without restarting the integrator; the compiled CPU kernel
-for the gear models (:mod:`jaxgear.integrate._native`) does the same lane by lane.
+for the gear models (:mod:`jaxgear.integrate._native`) gathers them per block of lanes.
 """
 
 from __future__ import annotations

@@ -614,9 +614,9 @@ inline void hermite_roots(SplitScratch& w, int np) {
       hi = act ? nhi : hi;
       act = act & ~done;
       th = act ? nt : th;
-      long long any = 0;
-      for (int i = 0; i < 8; ++i) any |= act[i];
-      if (!any) break;
+      const v8l a4 = act | __builtin_shufflevector(act, act, 4, 5, 6, 7, 0, 1, 2, 3);
+      const v8l a2 = a4 | __builtin_shufflevector(a4, a4, 2, 3, 0, 1, 6, 7, 4, 5);
+      if (!(a2[0] | a2[1])) break;
     }
     const v8d d = dp(th);
     const v8d r = th - p(th) / (d != 0.0 ? d : one);
@@ -699,17 +699,17 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   }
   int np = 0;
   for (int g = 0; g < K; ++g) {
-    if (w.fin[g] == 0.0) continue;  // not finite: the trial step stands (lane_finite)
+    // (written whatever the test, kept when it holds: no branch to mispredict)
+    const bool fin = w.fin[g] != 0.0;  // not finite: the trial step stands (lane_finite)
     for (int i = 0; i < 4; ++i) {
       const double S0 = S0a[i][g], S1 = S1a[i][g];
-      if (side(S1) != w.sd[i][g] && std::isfinite(S1) && std::isfinite(S0)) {
-        w.s0[np] = S0;
-        w.s1[np] = S1;
-        w.d0[np] = D0a[i][g] * h;
-        w.d1[np] = D1a[i][g] * h;
-        w.pair_lane[np] = g;
-        w.pair_fn[np++] = i;
-      }
+      w.s0[np] = S0;
+      w.s1[np] = S1;
+      w.d0[np] = D0a[i][g] * h;
+      w.d1[np] = D1a[i][g] * h;
+      w.pair_lane[np] = g;
+      w.pair_fn[np] = i;
+      np += fin & (side(S1) != w.sd[i][g]) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0);
     }
   }
   hermite_roots(w, np);
