@@ -551,7 +551,7 @@ struct SplitScratch {
   alignas(64) double S0[4][kBlock], S1[4][kBlock], D0[4][kBlock], D1[4][kBlock];
   alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
   alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
-  alignas(64) double act[4 * kBlock];
+  alignas(64) long long actl[4 * kBlock];
   alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock];
 };
 
@@ -578,28 +578,41 @@ inline void hermite_roots(SplitScratch& w, int np) {
     w.d1[k] = 0.0;
   }
   const v8d zero = {}, one = zero + 1.0;
+  // the iterations of all groups of eight interleaved (independent chains: they overlap)
+  auto p = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+    const v8d t2 = th * th, t3 = t2 * th;
+    return (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + th) * d0 + (-2.0 * t3 + 3.0 * t2) * s1 +
+           (t3 - t2) * d1;
+  };
+  auto dp = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+    const v8d t2 = th * th;
+    return (6.0 * t2 - 6.0 * th) * s0 + (3.0 * t2 - 4.0 * th + 1.0) * d0 + (-6.0 * t2 + 6.0 * th) * s1 +
+           (3.0 * t2 - 2.0 * th) * d1;
+  };
+  auto store = [](double* dst, v8d v) { __builtin_memcpy(dst, &v, sizeof v); };
   for (int k0 = 0; k0 < np8; k0 += 8) {
-    const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0), d0 = load8(w.d0 + k0), d1 = load8(w.d1 + k0);
-    auto p = [&](v8d th) {
-      const v8d t2 = th * th, t3 = t2 * th;
-      return (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + th) * d0 + (-2.0 * t3 + 3.0 * t2) * s1 +
-             (t3 - t2) * d1;
-    };
-    auto dp = [&](v8d th) {
-      const v8d t2 = th * th;
-      return (6.0 * t2 - 6.0 * th) * s0 + (3.0 * t2 - 4.0 * th + 1.0) * d0 + (-6.0 * t2 + 6.0 * th) * s1 +
-             (3.0 * t2 - 2.0 * th) * d1;
-    };
+    const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0);
     const v8d denom = s0 - s1;
     const v8d q = s0 / (denom != 0.0 ? denom : one);
     v8d th = denom != 0.0 ? q : zero + 0.5;
     th = th < 0.0 ? zero : th;  // std::max(th, 0.0)
     th = 1.0 < th ? one : th;   // std::min(th, 1.0)
-    v8d lo = zero, hi = one;
-    const v8d sg0 = s0 > 0.0 ? one : (s0 < 0.0 ? -one : zero);
-    v8l act = zero == zero;  // all true
-    for (int it = 0; it < kHermiteIters; ++it) {
-      const v8d v = p(th), d = dp(th);
+    store(w.root + k0, th);
+    store(w.lo + k0, zero);
+    store(w.hi + k0, one);
+    store(w.sg0 + k0, s0 > 0.0 ? one : (s0 < 0.0 ? -one : zero));
+    const v8l all = zero == zero;
+    __builtin_memcpy(w.actl + k0, &all, sizeof all);
+  }
+  for (int it = 0; it < kHermiteIters; ++it) {
+    v8l left = zero != zero;
+    for (int k0 = 0; k0 < np8; k0 += 8) {
+      const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0), d0 = load8(w.d0 + k0), d1 = load8(w.d1 + k0);
+      v8d th = load8(w.root + k0), lo = load8(w.lo + k0), hi = load8(w.hi + k0);
+      const v8d sg0 = load8(w.sg0 + k0);
+      v8l act;
+      __builtin_memcpy(&act, w.actl + k0, sizeof act);
+      const v8d v = p(th, s0, s1, d0, d1), d = dp(th, s0, s1, d0, d1);
       const v8d sv = v > 0.0 ? one : (v < 0.0 ? -one : zero);
       const v8l same = sv == sg0;
       const v8d nlo = same ? th : lo, nhi = same ? hi : th;
@@ -614,13 +627,21 @@ inline void hermite_roots(SplitScratch& w, int np) {
       hi = act ? nhi : hi;
       act = act & ~done;
       th = act ? nt : th;
-      const v8l a4 = act | __builtin_shufflevector(act, act, 4, 5, 6, 7, 0, 1, 2, 3);
-      const v8l a2 = a4 | __builtin_shufflevector(a4, a4, 2, 3, 0, 1, 6, 7, 4, 5);
-      if (!(a2[0] | a2[1])) break;
+      store(w.root + k0, th);
+      store(w.lo + k0, lo);
+      store(w.hi + k0, hi);
+      __builtin_memcpy(w.actl + k0, &act, sizeof act);
+      left |= act;
     }
-    const v8d d = dp(th);
-    const v8d r = th - p(th) / (d != 0.0 ? d : one);
-    __builtin_memcpy(w.root + k0, &r, sizeof r);
+    const v8l a4 = left | __builtin_shufflevector(left, left, 4, 5, 6, 7, 0, 1, 2, 3);
+    const v8l a2 = a4 | __builtin_shufflevector(a4, a4, 2, 3, 0, 1, 6, 7, 4, 5);
+    if (!(a2[0] | a2[1])) break;
+  }
+  for (int k0 = 0; k0 < np8; k0 += 8) {
+    const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0), d0 = load8(w.d0 + k0), d1 = load8(w.d1 + k0);
+    const v8d th = load8(w.root + k0);
+    const v8d d = dp(th, s0, s1, d0, d1);
+    store(w.root + k0, th - p(th, s0, s1, d0, d1) / (d != 0.0 ? d : one));
   }
 }
 
@@ -971,18 +992,22 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
                       tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
         // lanes with an event: split, all at once where the model allows, else one by one
         int K = 0;
-        for (int j = j0; j < j1;) {  // eight flags at a time: most are 0
-          if (j + 8 <= j1) {
+        int j = j0;
+        for (; j + 64 <= j1; j += 64) {  // 64 flags (0 or 1) to the bits of a mask, then its set bits
+          uint64_t mask = 0;
+          for (int b8 = 0; b8 < 8; ++b8) {
             uint64_t word;
-            __builtin_memcpy(&word, need + j, 8);
-            if (word == 0) {
-              j += 8;
-              continue;
-            }
+            __builtin_memcpy(&word, need + j + 8 * b8, 8);
+            mask |= (((word & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56) << (8 * b8);
           }
+          while (mask) {
+            idx[K++] = j + __builtin_ctzll(mask);
+            mask &= mask - 1;
+          }
+        }
+        for (; j < j1; ++j) {
           idx[K] = j;
           K += need[j] != 0;
-          ++j;
         }
         if (K == 0) continue;
         if (vector_split_ok(m, h)) {
