@@ -524,8 +524,9 @@ __attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(
     x1[3][j] = e3;
     // (lanes that are not finite are told apart in the split: lane_finite)
     const double X0 = y2 - y0 - E0, X1 = e2 - e0 - E1;
-    const bool cr = ((y0 - bsp >= 0) != (e0 - bsp >= 0)) | ((y0 + bsp >= 0) != (e0 + bsp >= 0)) |
-                    ((X0 - brp >= 0) != (X1 - brp >= 0)) | ((X0 + brp >= 0) != (X1 + brp >= 0));
+    // (x - b >= 0 is x >= b, x + b >= 0 is x >= -b: the sign of a rounded difference is exact)
+    const bool cr = ((y0 >= bsp) != (e0 >= bsp)) | ((y0 >= -bsp) != (e0 >= -bsp)) | ((X0 >= brp) != (X1 >= brp)) |
+                    ((X0 >= -brp) != (X1 >= -brp));
     need[j] = cr | brk;
   }
 }
