@@ -59,8 +59,8 @@ def backlash_sweep(counts, folder: Path, say=print):
     wall time and the per-value results (saved by the sweep in ``folder/parts``)."""
     grid = jg.CellGrid.paper(tuple(counts))
     t = time.perf_counter()
-    sweep = jg.basin_sweep(REDUCED, jg.paper_params(), "b", SWEEP_VALUES, grid, progress=False, out=folder,
-                           save=False, uncertainty=0)
+    sweep = jg.basin_sweep(REDUCED, jg.paper_params(), "b", SWEEP_VALUES, grid, options=jg.BasinOptions(uncertainty=0),
+                           progress=False, out=folder, save=False)
     wall = time.perf_counter() - t
     parts = [jg.load(p) for p in sorted((folder / "parts").glob("value_*.nc"))]
     for v, r in zip(SWEEP_VALUES, parts):

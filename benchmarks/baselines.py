@@ -15,7 +15,8 @@ whole forcing periods ``T = 2 pi / Omega`` from ``t0``, in float64.
   the few lanes whose step crosses a backlash kink the split of the compiled CPU kernel
   (``jaxgear/integrate/native/gear_kernel.cc``) step for step: Hermite crossing,
   sub-step to it, rest of the step, up to ``max_splits`` events per step. It is the
-  baseline of that kernel: the same algorithm and the same tricks.
+  baseline of that kernel's algorithm, with the crossing lanes split one by one (the
+  kernel gathers them per block and splits them eight at a time).
 - :func:`numba_naive` — a straightforward ``prange`` loop, one cell at a time, with
   ``sin``/``cos`` recomputed at every stage (a weak baseline).
 - :func:`scipy_loop` — ``scipy.integrate.solve_ivp`` (RK45) in a Python loop.
@@ -270,8 +271,7 @@ def numba_naive(params, X, *, periods=1, t0=0.0, steps_per_period=200):
 #      is the next one's start; the step's own start and end are in the table) are reused,
 #      which is what the kernel's per-lane ``TermCache`` does.
 # The first stage k1 of a split lane's trial step is recomputed there (one field evaluation
-# for a few per cent of the lanes) rather than stored for every lane at every step as the
-# kernel does; the values are the same. The split code takes scalars and tuples only: an
+# for a few per cent of the lanes), as the kernel does; the values are the same. The split code takes scalars and tuples only: an
 # array argument costs numba two atomic reference-count updates per call, which would
 # dominate the few hundred flops of a split.
 # fastmath: every flag but ``nnan``/``ninf`` (they would drop the finiteness test of the

@@ -75,14 +75,14 @@ CORRECTORS = {"hand-written loop": hand_written_newton, "optimistix Newton": _ar
 
 def paper_p4():
     x0 = np.array([5.3608, -0.1903, 8.2803, -0.8374])
-    return jg.continue_orbit(jg.REDUCED, jg.paper_params(), x0, param="Omega", stop=0.9, period=4, ds=0.01,
-                             progress=False)
+    return jg.continue_orbit(jg.REDUCED, jg.paper_params(), x0, param="Omega", stop=0.9, period=4,
+                             options=jg.ContinuationOptions(ds=0.01), progress=False)
 
 
 def duffing_folds():
     p = jg.DuffingParams(omega=0.9, delta=0.01, alpha=1.0, beta=1.0, gamma=0.003)
-    return jg.continue_orbit(jg.DUFFING, p, np.zeros(2), param="omega", stop=1.15, ds=0.01, ds_max=0.05,
-                             progress=False)
+    return jg.continue_orbit(jg.DUFFING, p, np.zeros(2), param="omega", stop=1.15,
+                             options=jg.ContinuationOptions(ds=0.01, ds_max=0.05), progress=False)
 
 
 BRANCHES = {"paper P-4 in Omega (0.87 to 0.9, PD)": paper_p4, "Duffing in omega (0.9 to 1.15, two folds)": duffing_folds}

@@ -69,7 +69,8 @@ def measure(n_values: int = 8, counts=(20, 12, 24), repeat: int = 2) -> dict:
     values = np.linspace(4.0, 6.0, n_values)
 
     def batched():
-        return jg.basin_sweep(jg.REDUCED, params, "b", values, grid, progress=False, batched=True)
+        return jg.basin_sweep(jg.REDUCED, params, "b", values, grid, options=jg.BasinOptions(batched=True),
+                              progress=False)
 
     def separate():
         return [jg.analyze_global(jg.REDUCED, jg.with_param(params, "b", v), grid, progress=False) for v in values]

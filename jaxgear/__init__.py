@@ -72,6 +72,7 @@ from ._cells import CellGrid as CellGrid, PAPER_REGION as PAPER_REGION
 from ._lyapunov import (
     AttractorType as AttractorType,
     LyapunovSpectrum as LyapunovSpectrum,
+    LyapunovOptions as LyapunovOptions,
     lyapunov_spectrum as lyapunov_spectrum,
     classify_attractor as classify_attractor,
     kaplan_yorke as kaplan_yorke,
@@ -113,13 +114,16 @@ from .shooting import (
     ShootResult as ShootResult,
     ShootOptions as ShootOptions,
     SearchOptions as SearchOptions,
+    VerifyOptions as VerifyOptions,
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
+    SearchSettings as SearchSettings,
     OrbitCheck as OrbitCheck,
 )
 from .continuation import (
     continue_orbit as continue_orbit,
     switch_branch as switch_branch,
+    ContinuationOptions as ContinuationOptions,
     Branch as Branch,
     BifurcationPoint as BifurcationPoint,
 )
@@ -128,6 +132,8 @@ from .sweep import (
     basin_sweep as basin_sweep,
     basin_map as basin_map,
     parameter_map as parameter_map,
+    SequenceOptions as SequenceOptions,
+    BasinOptions as BasinOptions,
     BifurcationDiagram as BifurcationDiagram,
     BasinSweep as BasinSweep,
     BasinMap as BasinMap,
@@ -137,6 +143,7 @@ from .design import (
     design as design,
     DesignResult as DesignResult,
     DesignOptions as DesignOptions,
+    DesignSettings as DesignSettings,
     OrbitSamples as OrbitSamples,
     sample_orbit as sample_orbit,
     MeshForces as MeshForces,

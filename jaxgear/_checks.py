@@ -6,6 +6,7 @@ is allowed, before any integration starts.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import os
@@ -16,7 +17,7 @@ import jax
 import numpy as np
 
 __all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article",
-           "physical_memory", "check_memory"]
+           "physical_memory", "check_memory", "with_changes", "split_changes"]
 
 
 def article(word: str) -> str:
@@ -167,3 +168,39 @@ def is_traced(x) -> bool:
     except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
         return True
     return False
+
+
+# ------------------------------------------------------------------ options objects
+def with_changes(options, cls, changes: dict):
+    """``options`` (an instance of ``cls``, or ``None`` for its defaults) with the fields in
+    ``changes`` replaced (checked again); an unknown name raises ``ValueError``."""
+    if options is None:
+        options = cls()
+    elif not isinstance(options, cls):
+        raise ValueError(f"options={options!r} must be a {cls.__name__} (or None for the defaults).")
+    if not changes:
+        return options
+    names = [f.name for f in dataclasses.fields(options)]
+    unknown = [n for n in changes if n not in names]
+    if unknown:
+        raise ValueError(f"unknown option {unknown[0]!r}; the fields of {type(options).__name__} are "
+                         f"{', '.join(names)}.")
+    return dataclasses.replace(options, **changes)
+
+
+def split_changes(changes: dict, *classes) -> list[dict]:
+    """``changes`` (keyword arguments naming fields of several options types) split into one
+    dict per class of ``classes``, each name going to the first class that has it; an
+    unknown name raises ``ValueError`` listing every field."""
+    names = [[f.name for f in dataclasses.fields(c)] for c in classes]
+    out: list[dict] = [{} for _ in classes]
+    for key, value in changes.items():
+        for i, fields in enumerate(names):
+            if key in fields:
+                out[i][key] = value
+                break
+        else:
+            allowed = ", ".join(n for fields in names for n in fields)
+            raise ValueError(f"unknown option {key!r}; the options are {allowed} "
+                             f"(fields of {', '.join(c.__name__ for c in classes)}).")
+    return out

@@ -44,10 +44,11 @@ from ._checks import article
 __all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
            "RESULT_TYPES", "plain"]
 
-FORMAT = 3
-"""Layout version written into every file: 3 since results hold their method object and
-typed settings (2: the same with settings as dictionaries; files of jaxgear 0.1 have
-none and are not read)."""
+FORMAT = 4
+"""Layout version written into every file: 4 since every result's settings are typed
+records holding the options objects (3: the same with the settings of orbit searches and
+designs as dictionaries; 2: every result's settings as dictionaries; files of jaxgear
+0.1 have none and are not read)."""
 
 RESULT_TYPES: dict[str, type] = {}
 """Registered result types by class name."""
@@ -257,15 +258,17 @@ def _encode_items(w: _Writer, items: tuple, cls, dim: str, path: str) -> None:
             shapes = shapes.reshape(len(items), ndim)
             size = tuple(int(max(1, shapes[:, j].max(initial=1))) for j in range(ndim))
             dtype = np.result_type(*[a.dtype for a in arrays if a is not None]) if any(
-                a is not None for a in arrays) else np.float64
+                a is not None for a in arrays) else np.dtype(np.float64)
             fill = np.nan if dtype.kind in "fc" else (False if dtype.kind == "b" else ("" if dtype.kind in "OUS"
                                                                                      else -1))
             stacked = np.full((len(items),) + size, fill, dtype=dtype if dtype.kind not in "US" else object)
             for i, a in enumerate(arrays):
                 if a is not None:
                     stacked[(i,) + tuple(slice(0, s) for s in a.shape)] = a
-            dims = _dims_for(meta, None, p, stacked.ndim, prefix=(dim,)) if meta.get("dims") is not None and \
-                not callable(meta.get("dims")) else (dim,) + tuple(f"{p}_{j}" for j in range(ndim))
+            named = meta.get("dims") is not None and not callable(meta.get("dims")) and any(
+                a is not None for a in arrays)  # all None: one placeholder axis of its own
+            dims = _dims_for(meta, None, p, stacked.ndim, prefix=(dim,)) if named else \
+                (dim,) + tuple(f"{p}_{j}" for j in range(ndim))
             w.array(p, dims, stacked)
             w.data[f"{p}__shape"] = ((dim, f"{p}__ndim"), shapes, {})
         elif _strip_optional(hint) in (int, float, bool) and all(x is not None for x in vals):

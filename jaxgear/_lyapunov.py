@@ -28,12 +28,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ._checks import check_bool, check_int, check_number
+from ._checks import check_bool, check_int, check_number, with_changes
 from ._status import Status
 from ._system import ForcedSystem, check_state_shape, check_system
 from .integrate import AbstractIntegrator, resolve_integrator
 
-__all__ = ["AttractorType", "LyapunovSpectrum", "lyapunov_spectrum", "classify_attractor", "kaplan_yorke",
+__all__ = ["AttractorType", "LyapunovSpectrum", "LyapunovOptions", "lyapunov_spectrum", "classify_attractor", "kaplan_yorke",
            "birkhoff_weights", "DEFAULT_ZERO_TOL"]
 
 DEFAULT_ZERO_TOL = 1e-6
@@ -104,6 +104,38 @@ class LyapunovSpectrum(eqx.Module):
     periods: int = eqx.field(static=True)
     transient: int = eqx.field(static=True)
     weighted: bool = eqx.field(static=True)
+
+
+class LyapunovOptions(eqx.Module):
+    """Options of :func:`lyapunov_spectrum` (immutable; checked at construction).
+
+    Attributes:
+        n_exponents: ``k``, the number of exponents (``1 <= k <= dim`` of the system).
+        periods: iterates of ``P`` averaged over, a multiple of ``stretches``.
+        transient: iterates run first (state only) to reach the attractor.
+        stretches: number of stretches (>= 2) for the error estimate.
+        weighted: weighted Birkhoff averages within each stretch (:func:`birkhoff_weights`).
+        chunk_size: initial states integrated together in one compiled call (memory is
+            bounded by it; the result does not depend on it).
+    """
+
+    n_exponents: int = eqx.field(static=True, default=2)
+    periods: int = eqx.field(static=True, default=2000)
+    transient: int = eqx.field(static=True, default=200)
+    stretches: int = eqx.field(static=True, default=10)
+    weighted: bool = eqx.field(static=True, default=True)
+    chunk_size: int = eqx.field(static=True, default=1024)
+
+    def __check_init__(self):
+        check_int(self.n_exponents, "n_exponents", 1)
+        stretches = check_int(self.stretches, "stretches", 2)
+        periods = check_int(self.periods, "periods", stretches)
+        if periods % stretches:
+            raise ValueError(f"periods={periods} must be a multiple of stretches={stretches} "
+                             "(each stretch averages the same number of iterates).")
+        check_int(self.transient, "transient", 0)
+        check_bool(self.weighted, "weighted")
+        check_int(self.chunk_size, "chunk_size", 1)
 
 
 def birkhoff_weights(n: int) -> np.ndarray:
@@ -188,10 +220,9 @@ def _lyapunov_kernel(system, params, Y, t0, k, transient, stretches, weights, in
     return est, Y
 
 
-def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch dim"], *, n_exponents: int = 2,
-                      periods: int = 2000, transient: int = 200, stretches: int = 10, t0: float = 0.0,
-                      weighted: bool = True, integrator: AbstractIntegrator | None = None,
-                      chunk_size: int = 1024) -> LyapunovSpectrum:
+def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch dim"], *, t0: float = 0.0,
+                      integrator: AbstractIntegrator | None = None, options: LyapunovOptions | None = None,
+                      **changes) -> LyapunovSpectrum:
     """The ``n_exponents`` largest Lyapunov exponents of the stroboscopic map from ``x0``.
 
     ``P: x(t0) -> x(t0 + T)`` is the one-period map of the forced system (paper eq. 6;
@@ -224,29 +255,19 @@ def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
         system: any :class:`~jaxgear.ForcedSystem`.
         params: its parameter pytree (one set, not batched).
         x0: initial states ``(..., dim)`` at time ``t0``.
-        n_exponents: ``k``, the number of exponents (``1 <= k <= dim``).
-        periods: iterates of ``P`` averaged over, a multiple of ``stretches``.
-        transient: iterates run first (state only) to reach the attractor.
-        stretches: number of stretches (>= 2) for the error estimate.
         t0: phase of the stroboscopic section (system time unit).
-        weighted: weighted Birkhoff averages within each stretch (see above).
         integrator: default :func:`~jaxgear.integrate.default_integrator`.
-        chunk_size: initial states integrated together in one compiled call (memory
-            is bounded by it; the result does not depend on it).
+        options: :class:`LyapunovOptions` (``n_exponents`` ``k``, ``periods``,
+            ``transient``, ``stretches``, ``weighted``, ``chunk_size``); ``None``: the defaults.
+        **changes: fields of ``options`` to change, e.g. ``n_exponents=4, periods=500``.
     Returns:
         a :class:`LyapunovSpectrum` with the batch shape of ``x0``.
     """
+    opts = with_changes(options, LyapunovOptions, changes)
     check_state_shape(system, x0)
-    k = check_int(n_exponents, "n_exponents", 1, system.dim)
-    stretches = check_int(stretches, "stretches", 2)
-    periods = check_int(periods, "periods", stretches)
-    if periods % stretches:
-        raise ValueError(f"periods={periods} must be a multiple of stretches={stretches} "
-                         "(each stretch averages the same number of iterates).")
-    transient = check_int(transient, "transient", 0)
+    k = check_int(opts.n_exponents, "n_exponents", 1, system.dim)
+    periods, stretches, transient, chunk_size = opts.periods, opts.stretches, opts.transient, opts.chunk_size
     t0 = check_number(t0, "t0")
-    weighted = check_bool(weighted, "weighted")
-    chunk_size = check_int(chunk_size, "chunk_size", 1)
     integrator = resolve_integrator(integrator)
     x0 = jnp.asarray(x0, jnp.float64)
     lead = x0.shape[:-1]
@@ -254,7 +275,7 @@ def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
     X = x0.reshape(-1, system.dim)
     n = X.shape[0]
     length = periods // stretches
-    w = birkhoff_weights(length) if weighted else np.full(length, 1.0 / length)
+    w = birkhoff_weights(length) if opts.weighted else np.full(length, 1.0 / length)
     weights = jnp.asarray(w, jnp.float64)
     T = jnp.asarray(system.period(params), jnp.float64)
     ests, finals = [], []
@@ -276,7 +297,7 @@ def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
         errors_per_time=(err / T).reshape(*lead, k),
         stretch_exponents=est.reshape(*lead, stretches, k), kaplan_yorke=kaplan_yorke(lam).reshape(lead),
         final_state=final.reshape(*lead, system.dim), status=status.reshape(lead), periods=periods,
-        transient=transient, weighted=weighted)
+        transient=transient, weighted=opts.weighted)
 
 
 def classify_attractor(spectrum: LyapunovSpectrum, period: int | ArrayLike | None = None, *,

@@ -18,7 +18,7 @@ import functools
 import jax.numpy as jnp
 
 from ._params import GearParams
-from ._system import ForcedSystem
+from ._system import ForcedSystem, NativeKernel
 
 __all__ = [
     "backlash",
@@ -201,7 +201,7 @@ REDUCED = ForcedSystem(
     switching=reduced_switching,
     piece_field=reduced_vector_field,
     time_breaks=gear_time_breaks,
-    native="reduced",
+    native=NativeKernel.REDUCED,
 )
 """The reduced 2-DOF model of paper §4.1; Σ = {x4 = 0} is its default section."""
 

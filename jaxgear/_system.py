@@ -7,6 +7,7 @@ models of :mod:`jaxgear._model` are two such systems.
 
 from __future__ import annotations
 
+import enum
 import functools
 from collections.abc import Callable
 from typing import Any
@@ -18,7 +19,16 @@ import numpy as np
 
 from ._checks import is_traced
 
-__all__ = ["ForcedSystem", "check_system", "check_state_shape", "state_index"]
+__all__ = ["ForcedSystem", "NativeKernel", "check_system", "check_state_shape", "state_index"]
+
+
+class NativeKernel(enum.Enum):
+    """The compiled CPU kernel that integrates a built-in model (``ForcedSystem.native``).
+
+    ``REDUCED``: the reduced 2-DOF gear model of paper §4.1 (``jaxgear/integrate/native/gear_kernel.cc``).
+    """
+
+    REDUCED = "reduced"
 
 
 class ForcedSystem(eqx.Module):
@@ -51,6 +61,9 @@ class ForcedSystem(eqx.Module):
             jumps across a switching surface (requires ``piece_field``); the integrator
             then applies the saltation matrix to first derivatives (monodromy matrices);
             second derivatives (gradients of multipliers) through a jump are not exact.
+        native: the :class:`NativeKernel` that integrates this system on CPUs (the
+            built-in reduced gear model has one), or ``None`` (the pure-JAX steps). The
+            kernel computes this system's own equations: leave it ``None`` for any other.
 
     Times and states are in the user's units (the gear models are dimensionless:
     time ``tau = omega_n t``, lengths in ``b_c``, model document §3). Systems without
@@ -66,9 +79,12 @@ class ForcedSystem(eqx.Module):
     time_breaks: Callable[[Any], Any] | None = eqx.field(static=True, default=None)
     piece_field: Callable[[Any, Any, Any, Any], Any] | None = eqx.field(static=True, default=None)
     field_jumps: bool = eqx.field(static=True, default=False)
-    native: Any = eqx.field(static=True, default=None)
+    native: NativeKernel | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
+        if self.native is not None and not isinstance(self.native, NativeKernel):
+            raise ValueError(f"ForcedSystem.native={self.native!r} must be a NativeKernel member (the compiled "
+                             f"kernel of a built-in model: {', '.join(k.name for k in NativeKernel)}) or None.")
         if not callable(self.vector_field):
             raise TypeError("ForcedSystem.vector_field must be callable f(t, x, params).")
         if not callable(self.period):

@@ -164,6 +164,6 @@ for k in sorted(by_period):
 
 # %%
 for k in sorted(by_period):
-    check = jg.verify_orbit(jg.REDUCED, p, by_period[k], periods=300)
+    check = jg.verify_orbit(jg.REDUCED, p, by_period[k], options=jg.VerifyOptions(periods=300))
     print(f"P-{k}: {'kept' if check.kept else 'left after ' + str(int(check.left_at.max())) + ' periods'}")
     assert check.kept == by_period[k].stable

@@ -164,7 +164,7 @@ def nearest_attractor(x):
 
 
 for o in orbits:
-    check = jg.verify_orbit(jg.REDUCED, p, o, periods=400 if FULL else 300)
+    check = jg.verify_orbit(jg.REDUCED, p, o, options=jg.VerifyOptions(periods=400 if FULL else 300))
     ends = sorted({nearest_attractor(x) for x in check.final_points[:, -1]})
     verdict = "kept" if check.kept else f"left after {int(check.left_at.max())} periods, ends on {', '.join(ends)}"
     print(f"P-{o.period}: {verdict}")

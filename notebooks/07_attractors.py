@@ -53,8 +53,8 @@ backlash = np.linspace(1.0, 3.5, 12) if FULL else np.array([2.0, 3.0])
 
 # %%
 ueda = jg.DuffingParams(delta=0.05, alpha=0.0, beta=1.0, gamma=7.5, omega=1.0)
-spec = lyapunov_spectrum(jg.DUFFING, ueda, jnp.array([2.5, 0.0]), periods=2000 if FULL else 400,
-                            transient=200 if FULL else 50)
+spec = lyapunov_spectrum(jg.DUFFING, ueda, jnp.array([2.5, 0.0]),
+                         options=jg.LyapunovOptions(periods=2000 if FULL else 400, transient=200 if FULL else 50))
 lam = np.asarray(spec.exponents)
 print("exponents per period:", lam, "+-", np.asarray(spec.errors))
 print("type:", classify_attractor(spec).name, " Kaplan-Yorke dimension:", float(spec.kaplan_yorke))

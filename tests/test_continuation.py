@@ -24,6 +24,7 @@ from scipy.optimize import brentq
 import jaxgear as jg
 from jaxgear import continue_orbit, switch_branch
 from jaxgear import load as load_branch
+from jaxgear.continuation import CORRECTOR
 
 ZETA, EPS, BETA = 0.005, 0.1, 1.0
 
@@ -37,8 +38,8 @@ def _f64(x):
 def mathieu():
     """Trivial P-1 orbit x = 0 of the parametric Duffing oscillator continued in Omega."""
     p = jg.ParamDuffingParams(zeta=ZETA, epsilon=EPS, beta=BETA, Omega=1.85)
-    br = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15, ds=0.02, ds_max=0.05,
-                        progress=False)
+    br = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15,
+                        options=jg.ContinuationOptions(ds=0.02, ds_max=0.05), progress=False)
     return p, br
 
 
@@ -46,7 +47,7 @@ def mathieu():
 def doubled(mathieu):
     p, br = mathieu
     pd = [b for b in br.bifurcations if b.kind == "PD"]
-    return switch_branch(jg.PARAM_DUFFING, p, br, pd[0], stop=2.15, ds=0.02, ds_max=0.05, progress=False)
+    return switch_branch(jg.PARAM_DUFFING, p, br, pd[0], stop=2.15, progress=False)  # the options of br
 
 
 DUFF = dict(delta=0.01, alpha=1.0, beta=1.0, gamma=0.003)
@@ -289,6 +290,33 @@ def test_bad_input_is_rejected(duffing_folds, mathieu):
         continue_orbit(jg.DUFFING, p, np.zeros(2), param="omega", stop=1.0, period=0, progress=False)
     with pytest.raises(ValueError, match="period doubling"):
         switch_branch(jg.DUFFING, p, br, 0, stop=1.0, progress=False)
+    with pytest.raises(ValueError, match="unknown option 'step'.*ds.*max_iter"):
+        continue_orbit(jg.DUFFING, p, np.zeros(2), param="omega", stop=1.0, step=0.1, progress=False)
+    for bad, match in ((dict(ds=0.1, ds_max=0.05), "ds_min <= ds <= ds_max"), (dict(bounds=(2.0, 1.0)), "bounds="),
+                       (dict(max_steps=0), "max_steps=0"), (dict(max_angle=4.0), "max_angle"),
+                       (dict(locate_tol=0.0), "locate_tol")):
+        with pytest.raises(ValueError, match=match):
+            jg.ContinuationOptions(**bad)
+
+
+def test_typed_options_are_the_branch_settings(mathieu, doubled):
+    """The options object and the same fields given as keywords follow the same branch; the
+    branch records both options objects, and the doubled branch inherits those of its parent."""
+    p, br = mathieu
+    assert br.settings.options == jg.ContinuationOptions(ds=0.02, ds_max=0.05)
+    assert br.settings.shoot == CORRECTOR and br.settings.shoot.max_iter == 10
+    assert (br.settings.stop, br.settings.origin, br.settings.amplitude) == (2.15, "start", None)
+    assert doubled.settings.options == br.settings.options and doubled.settings.amplitude == 0.02
+    assert doubled.settings.origin.startswith("PD of the P-1 branch")
+    opts = jg.ContinuationOptions(ds=0.05, max_steps=2)
+    shoot = jg.ShootOptions(tol=1e-9, max_iter=8)
+    a = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15, options=opts, shoot=shoot,
+                       progress=False)
+    b = continue_orbit(jg.PARAM_DUFFING, p, np.zeros(2), param="Omega", stop=2.15, ds=0.05, max_steps=2, tol=1e-9,
+                       max_iter=8, progress=False)
+    assert a.settings == b.settings and (a.settings.options, a.settings.shoot) == (opts, shoot)
+    np.testing.assert_array_equal(a.values, b.values)
+    assert len(a) == 3 and a.status == "max_steps"
 
 
 def test_with_param_and_get_param():

@@ -151,6 +151,10 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
     np.testing.assert_array_equal(back.orbit.multipliers, r2.orbit.multipliers)
     assert (back.free, back.status, back.settings, back.initial_params) == (r2.free, r2.status, r2.settings,
                                                                              r2.initial_params)
+    # the settings are the options object and typed fields; the start is the parameter pytree
+    assert back.settings.options == jg.DesignOptions(steps=300) and back.settings.period == 1
+    assert back.settings.optimizer == "adam, lr 0.05 cosine decay" and back.settings.integrator == r2.settings.integrator
+    assert isinstance(back.initial_params, TwoSource) and back.initial_params == p
     import xarray as xr
 
     with xr.open_dataset(path, engine="h5netcdf") as ds:

@@ -15,7 +15,7 @@ import xarray as xr
 
 import jaxgear as jg
 from jaxgear import CellGrid
-from jaxgear._codec import RESULT_TYPES, array_field, custom_field, from_dataset, to_dataset
+from jaxgear._codec import FORMAT, RESULT_TYPES, array_field, custom_field, from_dataset, to_dataset
 from jaxgear.integrate import integrator_from_dict
 
 DOUBLE_WELL = jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
@@ -126,7 +126,7 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         np.testing.assert_array_equal(ds["x3"].values, r.grid.axis_centres(2))
         assert list(ds["state"].values) == ["x1", "x2", "x3", "x4"]
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
-        assert ds.attrs["jaxgear_format"] == 3
+        assert ds.attrs["jaxgear_format"] == FORMAT == 4
         for name, v in jg.paper_params().to_dict().items():  # the canonical set, one attribute each
             assert ds.attrs[f"param_{name}"] == v
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
@@ -325,7 +325,7 @@ def test_load_errors_name_the_problem(duffing_results, tmp_path):
     xr.Dataset({"a": ("i", np.arange(3))}).to_netcdf(tmp_path / "foreign.nc", engine="h5netcdf")
     with pytest.raises(ValueError, match="another program"):
         jg.load(tmp_path / "foreign.nc")
-    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": 3}).to_netcdf(tmp_path / "bad.nc",
+    xr.Dataset(attrs={"jaxgear_type": "Nonsense", "jaxgear_format": FORMAT}).to_netcdf(tmp_path / "bad.nc",
                                                                                   engine="h5netcdf")
     with pytest.raises(ValueError, match="unknown jaxgear_type 'Nonsense'"):
         jg.load(tmp_path / "bad.nc")

@@ -141,7 +141,7 @@ def test_dead_zone_states_fourth_order_multipliers_at_least_third():
 
     state_err, mu_err = [], []
     for n in (40, 80, 160, 320):
-        integ = KinkAwareRK4(n, backend="jax")
+        integ = KinkAwareRK4(n, native=False)
         flow = jax.jit(lambda x, integ=integ: integ.flow(DEAD_ZONE, DZ_PARAMS, x, 0.0, 2))
         y = np.asarray(flow(jnp.asarray(x0)))
         M = np.asarray(jax.jacfwd(flow)(jnp.asarray(x0)))
@@ -203,7 +203,7 @@ def _contact_field(t, x, sides, mid):
 
 def test_jumping_field_monodromy_includes_the_saltation():
     x0 = np.array([1.7, -0.4])
-    integ = KinkAwareRK4(800, backend="jax")
+    integ = KinkAwareRK4(800, native=False)
     flow = jax.jit(lambda x: integ.flow(CONTACT_DAMPED, DZ_PARAMS, x, 0.0, 1))
     ref = lambda x: reference_flow(_contact_field, _dz_switching, x, 0.0, T_DZ)  # noqa: E731
     np.testing.assert_allclose(np.asarray(flow(jnp.asarray(x0))), ref(x0), atol=1e-9)
@@ -253,11 +253,11 @@ def test_known_time_jumps_land_on_step_boundaries():
     ref = lambda x: reference_flow(_sq_field, _dz_switching, x, 0.0, T_DZ, breaks=breaks)  # noqa: E731
     errs = []
     for n in (100, 200, 400):
-        integ = KinkAwareRK4(n, backend="jax")
+        integ = KinkAwareRK4(n, native=False)
         errs.append(np.abs(np.asarray(integ.flow(SQUARE_STIFFNESS, DZ_PARAMS, jnp.asarray(x0), 0.0, 1)) - ref(x0)).max())
     r = np.asarray(errs[:-1]) / np.asarray(errs[1:])
     assert np.all(r > 12), (errs, r)  # fourth order although the field jumps mid-step
-    integ = KinkAwareRK4(800, backend="jax")
+    integ = KinkAwareRK4(800, native=False)
     flow = jax.jit(lambda x: integ.flow(SQUARE_STIFFNESS, DZ_PARAMS, x, 0.0, 1))
     np.testing.assert_allclose(np.asarray(jax.jacfwd(flow)(jnp.asarray(x0))), central_difference_jacobian(ref, x0),
                                atol=1e-6)
@@ -374,3 +374,29 @@ def test_paper_preset_monodromy_determinant_is_the_liouville_value(steps):
     dev = np.asarray(dev)  # (n, state)
     assert np.all((dev[0] / dev[1] > 12) & (dev[0] / dev[1] < 22)), dev
     assert len(steps) == 2 or np.all(dev[-1] <= 1e-10), dev
+
+
+# ----------------------------------------------------------------------------- typed options
+def test_native_option_is_a_bool_and_saved_settings_of_either_form_are_read():
+    from jaxgear.integrate import integrator_from_dict
+
+    assert KinkAwareRK4(50).native is True
+    for d, native in (({"type": "KinkAwareRK4", "steps_per_period": 50, "backend": "jax"}, False),
+                      ({"type": "KinkAwareRK4", "steps_per_period": 50, "backend": "auto"}, True),
+                      ({"type": "KinkAwareRK4", "steps_per_period": 50}, True),
+                      (KinkAwareRK4(50, max_splits=3, native=False).to_dict(), False)):
+        integ = integrator_from_dict(d)
+        assert integ.native is native and integ.steps_per_period == 50, d
+    assert integrator_from_dict(KinkAwareRK4(50, max_splits=3, native=False).to_dict()).max_splits == 3
+    with pytest.raises(ValueError, match="native"):
+        KinkAwareRK4(50, native="jax")
+    with pytest.raises(ValueError, match="backend"):
+        integrator_from_dict({"type": "KinkAwareRK4", "backend": "gpu"})
+
+
+def test_a_system_names_its_compiled_kernel_with_the_typed_marker():
+    from jaxgear._system import ForcedSystem, NativeKernel
+
+    assert jg.REDUCED.native is NativeKernel.REDUCED
+    with pytest.raises(ValueError, match="native"):
+        ForcedSystem(vector_field=lambda t, x, p: x, period=lambda p: 1.0, state_names=("x",), native="reduced")

@@ -1,6 +1,6 @@
 """The compiled CPU kernel of the reduced model equals the pure-JAX kink-aware steps.
 
-The pure-JAX path (``KinkAwareRK4(backend="jax")``) is the reference: it is what runs on
+The pure-JAX path (``KinkAwareRK4(native=False)``) is the reference: it is what runs on
 GPUs and what supplies the derivatives. The kernel must give the same states to
 round-off for random states and random parameters, both mesh-stiffness shapes,
 ``b = 0``, vmapped parameter batches and a partly active pool. (The N-planet model has
@@ -70,7 +70,7 @@ def test_kernel_equals_pure_jax_on_random_states_and_parameters(shape):
         Y = jnp.asarray(random_states(rng, 700))  # not a multiple of the kernel's block
         t0 = float(rng.uniform(0, 10))
         native = jax.jit(lambda Y, p, t0=t0: KinkAwareRK4(100).advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
-        ref = jax.jit(lambda Y, p, t0=t0: KinkAwareRK4(100, backend="jax").advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
+        ref = jax.jit(lambda Y, p, t0=t0: KinkAwareRK4(100, native=False).advance(jg.REDUCED, p, Y, t0, 2))(Y, p)
         assert np.all(np.isfinite(np.asarray(ref)))
         assert rel_diff(native, ref) <= TOL, (shape, rel_diff(native, ref))
         assert rel_diff(native, Y) > 1e-3  # the states moved
@@ -82,7 +82,7 @@ def test_kernel_equals_pure_jax_for_every_split_count():
     Y = jnp.asarray(random_states(rng, 300))
     for max_splits in (1, 2, 3):
         a = KinkAwareRK4(60, max_splits=max_splits).advance(jg.REDUCED, p, Y, 0.0, 1)
-        b = KinkAwareRK4(60, max_splits=max_splits, backend="jax").advance(jg.REDUCED, p, Y, 0.0, 1)
+        b = KinkAwareRK4(60, max_splits=max_splits, native=False).advance(jg.REDUCED, p, Y, 0.0, 1)
         assert rel_diff(a, b) <= TOL, max_splits
 
 
@@ -94,7 +94,7 @@ def test_kernel_under_vmap_over_parameters_and_with_a_partly_active_pool():
     integ = KinkAwareRK4(80)
     out = jax.vmap(lambda p: integ.advance(jg.REDUCED, p, Y, 0.0, 1))(batch)
     for i, p in enumerate(ps):
-        ref = KinkAwareRK4(80, backend="jax").advance(jg.REDUCED, p, Y, 0.0, 1)
+        ref = KinkAwareRK4(80, native=False).advance(jg.REDUCED, p, Y, 0.0, 1)
         assert rel_diff(out[i], ref) <= TOL, i
     # lanes at or above n_active are returned unchanged, the others advanced as usual
     part = integ.advance(jg.REDUCED, ps[0], Y, 0.0, 1, n_active=100)
@@ -105,8 +105,8 @@ def test_kernel_under_vmap_over_parameters_and_with_a_partly_active_pool():
 def test_kernel_derivatives_are_those_of_the_pure_jax_steps():
     p = jg.paper_params()
     x = jnp.asarray([5.36, -0.19, 8.28, -0.84])
-    f = lambda backend: (lambda x: KinkAwareRK4(100, backend=backend).advance(jg.REDUCED, p, x[:, None], 0.0, 1)[:, 0])  # noqa: E731
-    np.testing.assert_allclose(np.asarray(jax.jacfwd(f("auto"))(x)), np.asarray(jax.jacfwd(f("jax"))(x)), rtol=1e-12)
+    f = lambda native: (lambda x: KinkAwareRK4(100, native=native).advance(jg.REDUCED, p, x[:, None], 0.0, 1)[:, 0])  # noqa: E731
+    np.testing.assert_allclose(np.asarray(jax.jacfwd(f(True))(x)), np.asarray(jax.jacfwd(f(False))(x)), rtol=1e-12)
 
 
 def test_kernel_keeps_non_finite_lanes_to_themselves():
@@ -117,7 +117,7 @@ def test_kernel_keeps_non_finite_lanes_to_themselves():
     out = np.asarray(KinkAwareRK4(50).advance(jg.REDUCED, p, jnp.asarray(Y), 0.0, 1))
     assert not np.isfinite(out[:, 5]).any() and not np.isfinite(out[:, 9]).all()
     good = np.setdiff1d(np.arange(64), [5, 9])
-    ref = np.asarray(KinkAwareRK4(50, backend="jax").advance(jg.REDUCED, p, jnp.asarray(Y[:, good]), 0.0, 1))
+    ref = np.asarray(KinkAwareRK4(50, native=False).advance(jg.REDUCED, p, jnp.asarray(Y[:, good]), 0.0, 1))
     assert rel_diff(out[:, good], ref) <= TOL
 
 
@@ -131,7 +131,7 @@ def test_kernel_under_nested_vmap_with_mixed_batching():
     assert out.shape == (2, 3, 4, 40)
     for i, p in enumerate(ps):
         for j in range(3):
-            ref = KinkAwareRK4(50, backend="jax").advance(jg.REDUCED, p, Ys[j], 0.0, 1)
+            ref = KinkAwareRK4(50, native=False).advance(jg.REDUCED, p, Ys[j], 0.0, 1)
             assert rel_diff(out[i, j], ref) <= TOL, (i, j)
 
 
@@ -150,7 +150,7 @@ def test_kernel_with_one_parameter_row_per_lane():
     for r, p in enumerate(ps):
         same = KinkAwareRK4(80).advance(jg.REDUCED, p, Y, 0.0, 2)
         np.testing.assert_array_equal(np.asarray(out)[:, rows == r], np.asarray(same)[:, rows == r])
-    ref = KinkAwareRK4(80, backend="jax").advance_rows(jg.REDUCED, stacked, jnp.asarray(rows), Y, 0.0, 2)
+    ref = KinkAwareRK4(80, native=False).advance_rows(jg.REDUCED, stacked, jnp.asarray(rows), Y, 0.0, 2)
     assert rel_diff(out, ref) <= TOL
     part = KinkAwareRK4(80).advance_rows(jg.REDUCED, stacked, rows, Y, 0.0, 2, n_active=100)
     np.testing.assert_array_equal(np.asarray(part[:, 100:]), np.asarray(Y[:, 100:]))
@@ -170,3 +170,20 @@ def test_a_lanes_result_does_not_depend_on_the_pool_it_is_in():
         pick = rng.choice(2000, size=m, replace=False)
         small = np.asarray(integ.advance(jg.REDUCED, p, jnp.asarray(Y[:, pick]), 0.0, 2))
         np.testing.assert_array_equal(small, big[:, pick], err_msg=f"{m} lanes")
+
+
+def test_lane_rows_out_of_range_are_read_as_the_pure_jax_path_reads_them():
+    """A lane's row is read as ``params[row]`` reads it in JAX (negative from the end,
+    out of range clamped): the kernel never reads outside the parameter rows."""
+    from jaxgear.integrate import stack_params
+
+    rng = np.random.default_rng(15)
+    ps = [random_params(rng, "sine") for _ in range(3)]
+    stacked = stack_params(ps)
+    rows = np.array([0, 1, 2, -1, 3, 99, -3, -40] * 8, np.int32)
+    Y = jnp.asarray(random_states(rng, len(rows)))
+    out = np.asarray(KinkAwareRK4(60).advance_rows(jg.REDUCED, stacked, rows, Y, 0.0, 1))
+    same = np.array([0, 1, 2, 2, 2, 2, 0, 0] * 8)  # numpy's reading, clamped
+    for r, p in enumerate(ps):
+        ref = np.asarray(KinkAwareRK4(60, native=False).advance(jg.REDUCED, p, Y, 0.0, 1))
+        assert rel_diff(out[:, same == r], ref[:, same == r]) <= TOL, r

@@ -347,7 +347,8 @@ def test_find_periodic_orbits_stores_settings_and_trajectories():
     s = jg.find_periodic_orbits(jg.DUFFING, p, np.array([[1.0, 1.1]]), progress=False, trajectory_samples=40)
     o = s.orbits[0]
     assert s.params == {"delta": 0.1, "alpha": 1.0, "beta": 1.0, "gamma": 0.3, "omega": 1.4}
-    assert s.system == "duffing" and s.state_names == ("x", "v") and s.settings["tol"] == 1e-10
+    assert s.system == "duffing" and s.state_names == ("x", "v")
+    assert s.settings.options == jg.SearchOptions(trajectory_samples=40) and s.settings.periods == (1,)
     assert o.trajectory.shape == (41, 2) and o.samples_per_period == 40
     # the stored trajectory is the flow: it starts at the orbit point and closes after one period
     # (40 samples of 5 RK4 steps: the 200 steps of the map the orbit is a fixed point of)
@@ -355,6 +356,23 @@ def test_find_periodic_orbits_stores_settings_and_trajectories():
     assert np.linalg.norm(o.trajectory[-1] - o.points[0]) < 1e-10
     ts, xs = jg.sample_trajectory(jg.DUFFING, p, o.points[0], periods=1, samples_per_period=40)
     np.testing.assert_allclose(o.trajectory, np.asarray(xs), rtol=0, atol=1e-13)
+
+
+def test_search_settings_are_typed_and_load_as_saved(tmp_path):
+    """The settings of a search are its options object (a solver and a search integrator
+    of the user's included), the periods, t0 and the integrator; the file gives them back
+    equal, field by field."""
+    import optimistix as optx
+
+    opts = jg.SearchOptions(solver=optx.Dogleg(rtol=1e-9, atol=1e-11), search_integrator=jg.RK4(100),
+                            max_iter=25, trajectory_samples=0)
+    s = jg.find_periodic_orbits(jg.DUFFING, duffing(), np.array([[1.0, 1.1]]), period=[1, 2], t0=0.25,
+                                integrator=jg.RK4(200), options=opts, progress=False)
+    assert s.settings == jg.SearchSettings(options=opts, periods=(1, 2), t0=0.25, integrator=jg.RK4(200))
+    back = jg.load(s.save(tmp_path / "s.nc"))
+    assert back.settings == s.settings and back.settings.search_integrator == jg.RK4(100)
+    assert back.summary()["settings"] == s.summary()["settings"]
+    assert s.summary()["settings"]["solver"]["type"] == "Dogleg" and s.summary()["settings"]["periods"] == [1, 2]
 
 
 @pytest.mark.slow

@@ -498,8 +498,8 @@ def small_results(tmp_path_factory):
     d = tmp_path_factory.mktemp("sweeps")
     p = jg.DuffingParams(**DUFF, omega=1.3)
     bif = bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.2, 1.6, 5), [[0.0, 0.0], [2.0, 0.0]],
-                              transient=100, record=17, direction="both", integrator=jg.RK4(32), max_period=8,
-                              progress=False)
+                              direction="both", integrator=jg.RK4(32),
+                              options=jg.SequenceOptions(transient=100, record=17, max_period=8), progress=False)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (6, 6), names=("x", "v"))
     bas = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, method=jg.Direct(integrator=jg.RK4(32), max_period=4),
                       progress=False)
@@ -540,6 +540,27 @@ def test_save_load_round_trip(small_results):
     assert bif.points.flags.writeable is False  # immutable results
     assert "omega" in bif.table() and json.dumps(bif.summary())
     assert json.dumps(small_results["bas"].summary()) and small_results["pm"].table()
+
+
+def test_options_are_typed_and_are_the_settings(small_results):
+    """A sweep's settings are its options object (``record`` as used: ``2 max_period + 2``
+    for a parameter map given none) and its integrator; the keywords are the same fields;
+    a bad or unknown option is refused naming it."""
+    bif, pm, bas = small_results["bif"], small_results["pm"], small_results["bas"]
+    assert bif.settings == jg.sweep.SequenceSettings(
+        options=jg.SequenceOptions(transient=100, record=17, max_period=8), integrator=jg.RK4(32))
+    assert pm.settings.options == jg.SequenceOptions(transient=100, record=10, max_period=4)
+    assert bas.match_tol == pytest.approx(0.05 * np.hypot(6.0, 6.0)) and bas.uncertainty_samples == 1024
+    assert jg.SequenceOptions(max_period=4).with_record(64).record == 64
+    for bad, match in ((dict(record=8, max_period=4), "record"), (dict(tol=0.0), "tol"),
+                       (dict(escape_bound=-1.0), "escape_bound"), (dict(chunk_size=0), "chunk_size")):
+        with pytest.raises(ValueError, match=match):
+            jg.SequenceOptions(**bad)
+    with pytest.raises(ValueError, match="match_tol"):
+        jg.BasinOptions(match_tol=0.0)
+    with pytest.raises(ValueError, match="unknown option 'transients'.*transient"):
+        bifurcation_diagram(jg.DUFFING, jg.DuffingParams(**DUFF, omega=1.3), "omega", [1.2, 1.3], [0.0, 0.0],
+                            transients=10)
 
 
 def test_plots_draw_from_loaded_results(small_results):

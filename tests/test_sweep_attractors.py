@@ -139,8 +139,9 @@ def test_sweep_records_types_and_exponents_and_counts_every_type():
                         grid),
            _fake_result([(_ring((0.1, 0.0), 1.2), 0, C, 0.4, 0.03, 10), (_ring((0.0, 30.0), 0.5), 0, Q, 0.0, 1e-4, 10)],
                         grid)]
-    s = _basins._assemble_basins(res, "gamma", ("gamma",), np.array([1.0, 2.0, 3.0]), grid, jg.Direct(), 2.0, 0,
-                                 jg.DUFFING, {}, "test")
+    p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=1.0, gamma=1.0, omega=1.2)
+    s = _basins._assemble_basins(res, "gamma", np.array([1.0, 2.0, 3.0]), grid, jg.Direct(),
+                                 jg.BasinOptions(match_tol=2.0, uncertainty=0), jg.DUFFING, p)
     assert s.n_attractors == 3
     assert s.period.tolist() == [[4, 0, -1], [4, 0, -1], [-1, 0, 0]]
     assert s.attractor_type.tolist() == [[P, C, -1], [P, C, -1], [-1, C, Q]]

@@ -16,7 +16,7 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_bool, check_int
-from .._lyapunov import AttractorType, classify_attractor, kaplan_yorke, lyapunov_spectrum
+from .._lyapunov import AttractorType, LyapunovOptions, classify_attractor, kaplan_yorke, lyapunov_spectrum
 from .._matching import group_attractors, minimal_cycle
 from .._params import params_to_dict
 from .._system import ForcedSystem, check_system
@@ -210,8 +210,8 @@ def attractor_exponents(system, params, attractors, integrator, multipliers, n_e
     free = [i for i, (_, k) in enumerate(attractors) if k <= 0]
     if free:
         x0 = np.stack([np.asarray(attractors[i][0], np.float64)[0] for i in free])
-        sp = lyapunov_spectrum(system, params, x0, n_exponents=n, periods=LYAPUNOV_PERIODS, transient=0,
-                               stretches=LYAPUNOV_STRETCHES, integrator=integrator)
+        opts = LyapunovOptions(n_exponents=n, periods=LYAPUNOV_PERIODS, transient=0, stretches=LYAPUNOV_STRETCHES)
+        sp = lyapunov_spectrum(system, params, x0, integrator=integrator, options=opts)
         kinds[free] = classify_attractor(sp, period=np.zeros(len(free), np.int64))
         exps, errs, ky = (np.asarray(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
         for j, i in enumerate(free):

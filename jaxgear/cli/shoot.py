@@ -290,7 +290,7 @@ def _summary(search, system, params, args) -> dict:
     """The ``--json`` object (also ``orbits.json``)."""
     from .._params import params_to_dict
 
-    st = search.settings
+    st = search.settings.to_dict()
     return {
         "command": "shoot", "system": system.name, "state_names": list(system.state_names),
         "params": params_to_dict(params),
@@ -304,7 +304,7 @@ def _summary(search, system, params, args) -> dict:
 
 def _print_search(search, system, params, args, source) -> None:
     """The text report: the search's settings, its convergence per period, every orbit."""
-    st = search.settings
+    st = search.settings.to_dict()
     n = search.n_seeds
     omega = f"Omega={float(params.Omega):.4g}, " if hasattr(params, "Omega") else ""
     print(f"jaxgear shoot: {system.name} model, {source or 'preset ' + args.preset}, "

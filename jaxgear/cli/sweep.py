@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
@@ -148,36 +149,86 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+class _Plan(NamedTuple):
+    """A checked ``jaxgear sweep`` command: the system (``user`` for ``--system``, else None),
+    its parameters, the range of ``--values`` and the values (``values2`` of ``--values2``),
+    the integrator, and for ``--kind basins`` the grid and the method."""
+
+    user: Any
+    system: Any
+    params: Any
+    start: float
+    stop: float
+    count: int
+    values: Any
+    values2: Any
+    integ: Any
+    grid: Any = None
+    method: Any = None
+
+
 def run(args) -> int:
-    import numpy as np
-
-    from .._cells import CellGrid
-    from .._checks import check_int
-    from .._model import REDUCED
-    from .._params import param_targets
-    from .._presets import resolve_params
-    from ..analysis import method_from_name
-    from ..integrate import default_integrator
-    from ..sweep import check_values
-
     if args.distributed:  # before any JAX computation
         from .._devices import initialize
 
         if args.kind not in ("basins", "bifurcation"):
             raise ValueError("--distributed runs --kind basins and bifurcation (continuation runs in one process).")
         initialize()
-    # every option is checked before any integration and before --out is touched
+    plan = _plan(args)  # every option is checked before any integration and before --out is touched
+    if args.kind != "continuation" and not args.restart:  # a sweep of other settings in --out: refused now
+        check_resume(args.out, _resume_settings(args, plan))
+    head = _head(args, plan)
+    if args.distributed:
+        from .._devices import process_index
+
+        if process_index() != 0:  # its share of the values (exchanged, or parts in --out); process 0 writes
+            _share(args, plan)
+            return 0
+    with OutputFolder(args.out, OWNED, create=True) as work:
+        t0 = time.perf_counter()
+        if args.kind == "continuation":
+            files = _continuation(args, plan, work, head)
+        else:
+            files = _sweep(args, plan, work, head, t0)
+    print(f"\nwrote {', '.join(files)} to {args.out}/")
+    return 0
+
+
+def _plan(args) -> _Plan:
+    """Every option checked (before any integration and before ``--out`` is touched) and
+    the sweep it asks for."""
+    import numpy as np
+
+    from .._model import REDUCED
+    from .._params import param_targets
+    from ..integrate import default_integrator
+
     start, stop, count = _range(args.values)
     check_options(args, OPTIONS)
     user = resolve_cli_system(args)
     system = REDUCED if user is None else user.system
+    count2 = _check_flags(args, user, system, start, stop)
+    grid = _user_grid(args, user) if user is not None and args.kind == "basins" else None
+    _check_work(args, user, system, grid, count, count2)
+    values = np.linspace(start, stop, count)
+    values2 = None if args.values2 is None else np.linspace(*_range(args.values2, "--values2"))
+    check_output_folder(args.out)
+    params = _cli_params(args, user)
+    param_targets(params, args.param)  # unknown name -> the list of valid ones
+    plan = _Plan(user, system, params, start, stop, count, values, values2, default_integrator(args.steps_per_period),
+                 grid)
+    return _check_values(args, plan)
+
+
+def _check_flags(args, user, system, start: float, stop: float) -> int | None:
+    """The options that must go together or not at all; the count of ``--values2`` (None without it)."""
     if args.kind != "continuation" and start > stop:
         raise ValueError(f"--values={args.values}: START must be < STOP for --kind {args.kind} (the values are "
                          "swept up and down by --direction); only --kind continuation runs from START to STOP.")
-    values2 = None
     if (args.param2 is None) != (args.values2 is None):
         raise ValueError("--param2 NAME and --values2 START:STOP:COUNT go together (a basin map over two "
                          "parameters).")
+    count2 = None
     if args.param2 is not None:
         if args.kind != "basins":
             raise ValueError(f"--param2 makes a basin map: it needs --kind basins (got --kind {args.kind}).")
@@ -189,8 +240,13 @@ def run(args) -> int:
                          f"basins (got --kind {args.kind}).")
     for pt in args.points or ():
         check_point(pt, "--from", system.dim)
-    if user is not None:
-        grid = _user_grid(args, user) if args.kind == "basins" else None
+    return count2
+
+
+def _check_work(args, user, system, grid, count: int, count2: int | None) -> None:
+    """The starts' box of a bifurcation sweep, and the memory the sweep keeps."""
+    from .._model import REDUCED
+
     if args.kind == "bifurcation" and args.region is not None:
         if user is None:
             check_region(args.region, "--region (the box of the starts)", 3, REDUCED.state_names[:3], ESCAPE_BOUND)
@@ -204,84 +260,112 @@ def run(args) -> int:
     else:  # the grid as given or the method's default (checked against the method below)
         counts = (grid.counts if user is not None else args.grid
                   or (STROBOSCOPIC_COUNTS if args.method == "stroboscopic" else SECTION_COUNTS))
-        _check_basins_work(args, counts, count * (1 if args.values2 is None else count2), system.dim)
-    values = np.linspace(start, stop, count)
-    if args.values2 is not None:
-        values2 = np.linspace(start2, stop2, count2)
-    check_output_folder(args.out)
+        _check_basins_work(args, counts, count * (1 if count2 is None else count2), system.dim)
+
+
+def _cli_params(args, user):
+    """The parameters: the ``--system`` object's, or the preset with ``--set`` (identical planets)."""
+    from .._presets import resolve_params
+
     if user is not None:
-        params = user.params
-    else:
-        _, params = resolve_params(args.preset, args.overrides)
-        if not params.is_uniform:
-            raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
-                             "the given parameters differ per planet.")
-        params = params.uniform()
-    param_targets(params, args.param)  # unknown name -> the list of valid ones
-    integ = default_integrator(args.steps_per_period)
+        return user.params
+    _, params = resolve_params(args.preset, args.overrides)
+    if not params.is_uniform:
+        raise ValueError("sweep uses the reduced 2-DOF model, which needs identical planets; "
+                         "the given parameters differ per planet.")
+    return params.uniform()
+
+
+def _check_values(args, plan: _Plan) -> _Plan:
+    """The values of the parameter(s) checked for the kind of sweep; for ``--kind basins``
+    the plan with its grid and method."""
+    import numpy as np
+
+    from .._checks import check_int
+    from .._params import param_targets
+    from ..sweep import check_values
+
+    system, params, values = plan.system, plan.params, plan.values
     if args.kind == "continuation":
         if not args.points or len(args.points) != 1:
             raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
                              "at the start value (e.g. from jaxgear shoot).")
-        check_values(system, params, (args.param,), np.array([[start], [stop]]))
-    elif args.kind == "bifurcation":
+        check_values(system, params, (args.param,), np.array([[plan.start], [plan.stop]]))
+        return plan
+    if args.kind == "bifurcation":
         check_int(args.record, "--record", 2 * args.max_period + 1)
         check_values(system, params, (args.param,), values[:, None])
+        return plan
+    grid, method = _basins_grid(args, plan)
+    method.check(system, grid)
+    if plan.values2 is None:
+        check_values(system, params, (args.param,), values[:, None])
     else:
-        method = method_from_name(args.method, integrator=integ, max_period=args.max_period)
-        if user is not None:
-            names = grid.axis_names
-            check_region(tuple(zip(grid.lower, grid.upper)), "--region", len(names), names, escape_bound(method))
-        else:
-            default = method.default_grid(REDUCED)
-            names = default.axis_names
-            where = f"(--method {args.method} grids {', '.join(names)})"
-            region = args.region or tuple(zip(default.lower, default.upper))
-            counts = args.grid or (STROBOSCOPIC_COUNTS if len(names) == 4 else SECTION_COUNTS)
-            check_region(region, f"--region {where}", len(names), names, escape_bound(method),
-                         [b for i, b in enumerate(default.base) if i not in default.axes])
-            check_counts(counts, f"--grid {where}", len(names), names)
-            grid = CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names)
-        method.check(system, grid)
-        if values2 is None:
-            check_values(system, params, (args.param,), values[:, None])
-        else:
-            if set(param_targets(params, args.param)) & set(param_targets(params, args.param2)):
-                raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
-            check_values(system, params, (args.param, args.param2),
-                         np.stack(np.meshgrid(values, values2), axis=-1).reshape(-1, 2))
-    if args.kind != "continuation" and not args.restart:  # a sweep of other settings in --out: refused now
-        check_resume(args.out, _resume_settings(args, user, params, values, values2, integ,
-                                                *((grid, method) if args.kind == "basins" else (None, None))))
-    head = f"jaxgear sweep: {args.kind} in {args.param} = {start:g} .. {stop:g} ({count} values)"
-    if values2 is not None:
-        head += f" x {args.param2} = {values2[0]:g} .. {values2[-1]:g} ({len(values2)} values)"
-    head += (f", preset {args.preset}, {REDUCED.name} model" if user is None
-             else f", system {user.spec} ({system.name})")
-    if args.distributed:
-        from .._devices import process_index
+        if set(param_targets(params, args.param)) & set(param_targets(params, args.param2)):
+            raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
+        check_values(system, params, (args.param, args.param2),
+                     np.stack(np.meshgrid(values, plan.values2), axis=-1).reshape(-1, 2))
+    return plan._replace(grid=grid, method=method)
 
-        if process_index() != 0:  # its share of the values (exchanged, or parts in --out); process 0 writes
-            from ..sweep import bifurcation_diagram
 
-            if args.kind == "basins":
-                _basins(args, system, params, values, values2, grid, method, progress=False)
-            else:
-                bifurcation_diagram(system, params, args.param, values, _starts(args, user), transient=args.transient,
-                                    record=args.record, direction=args.direction, integrator=integ,
-                                    max_period=args.max_period, progress=False, out=Path(args.out),
-                                    restart=args.restart, save=False)
-            return 0
+def _basins_grid(args, plan: _Plan):
+    """``--kind basins``: the grid (the ``--system`` one, or ``--region``/``--grid`` over the
+    method's default) and the method with ``--max-period`` and the integrator."""
+    from .._cells import CellGrid
+    from .._model import REDUCED
+    from ..analysis import method_from_name
 
-    with OutputFolder(args.out, OWNED, create=True) as work:
-        t0 = time.perf_counter()
-        if args.kind == "continuation":
-            files = _continuation(args, system, params, start, stop, count, integ, work, head)
-        else:
-            files = _sweep(args, user, params, values, integ, work, head, t0, grid if args.kind == "basins" else None,
-                           method if args.kind == "basins" else None, values2)
-    print(f"\nwrote {', '.join(files)} to {args.out}/")
-    return 0
+    method = method_from_name(args.method, integrator=plan.integ, max_period=args.max_period)
+    if plan.user is not None:
+        grid = plan.grid
+        names = grid.axis_names
+        check_region(tuple(zip(grid.lower, grid.upper)), "--region", len(names), names, escape_bound(method))
+        return grid, method
+    default = method.default_grid(REDUCED)
+    names = default.axis_names
+    where = f"(--method {args.method} grids {', '.join(names)})"
+    region = args.region or tuple(zip(default.lower, default.upper))
+    counts = args.grid or (STROBOSCOPIC_COUNTS if len(names) == 4 else SECTION_COUNTS)
+    check_region(region, f"--region {where}", len(names), names, escape_bound(method),
+                 [b for i, b in enumerate(default.base) if i not in default.axes])
+    check_counts(counts, f"--grid {where}", len(names), names)
+    return CellGrid.box(region, counts, axes=default.axes, base=default.base, names=REDUCED.state_names), method
+
+
+def _head(args, plan: _Plan) -> str:
+    """The first line the command prints."""
+    from .._model import REDUCED
+
+    head = f"jaxgear sweep: {args.kind} in {args.param} = {plan.start:g} .. {plan.stop:g} ({plan.count} values)"
+    if plan.values2 is not None:
+        v2 = plan.values2
+        head += f" x {args.param2} = {v2[0]:g} .. {v2[-1]:g} ({len(v2)} values)"
+    return head + (f", preset {args.preset}, {REDUCED.name} model" if plan.user is None
+                   else f", system {plan.user.spec} ({plan.system.name})")
+
+
+def _sequence_options(args):
+    """The :class:`~jaxgear.SequenceOptions` of ``--transient``, ``--record`` and ``--max-period``."""
+    from ..sweep import SequenceOptions
+
+    return SequenceOptions(transient=args.transient, record=args.record, max_period=args.max_period)
+
+
+def _diagram(args, plan: _Plan, progress: bool):
+    """The bifurcation diagram, resumable in ``--out`` (the result file is written by the caller)."""
+    from ..sweep import bifurcation_diagram
+
+    return bifurcation_diagram(plan.system, plan.params, args.param, plan.values, _starts(args, plan.user),
+                               direction=args.direction, integrator=plan.integ, options=_sequence_options(args),
+                               progress=progress, out=Path(args.out), restart=args.restart, save=False)
+
+
+def _share(args, plan: _Plan) -> None:
+    """A process other than 0 of a ``--distributed`` sweep: its share of the values."""
+    if args.kind == "basins":
+        _basins(args, plan, progress=False)
+    else:
+        _diagram(args, plan, progress=False)
 
 
 def _user_grid(args, user):
@@ -341,22 +425,22 @@ def _check_basins_work(args, counts, n_values: int, dim: int = 4) -> None:
                + (" in one pool" if args.one_pool else "") + (" (both parameters)" if args.values2 else ""))
 
 
-def _resume_settings(args, user, params, values, values2, integ, grid, method) -> dict:
+def _resume_settings(args, plan: _Plan) -> dict:
     """The settings of the sweep this command would resume that the command line decides
     alone (as the sweep functions record them in the manifest of --out), for
     :func:`~jaxgear.cli.common.check_resume`; the sweep functions compare every setting
     again when they open the folder."""
-    from .._model import REDUCED
     from .._params import params_to_dict
     from ..sweep._basins import uncertainty_setting
 
-    s = {"system": (REDUCED if user is None else user.system).name, "params": params_to_dict(params)}
+    s = {"system": plan.system.name, "params": params_to_dict(plan.params)}
+    values, values2 = plan.values, plan.values2
     if args.kind == "bifurcation":
-        s.update(kind="bifurcation", param=args.param, values=values.tolist(), starts=_starts(args, user).tolist(),
-                 transient=int(args.transient), record=int(args.record), direction=args.direction,
-                 max_period=int(args.max_period), integrator=integ.to_dict())
+        s.update(kind="bifurcation", param=args.param, values=values.tolist(),
+                 starts=_starts(args, plan.user).tolist(), transient=int(args.transient), record=int(args.record),
+                 direction=args.direction, max_period=int(args.max_period), integrator=plan.integ.to_dict())
         return s
-    s.update(grid=grid.to_dict(), method=method.to_dict())
+    s.update(grid=plan.grid.to_dict(), method=plan.method.to_dict())
     if args.uncertainty_samples is not None:
         s.update(uncertainty_setting(args.uncertainty_samples))
     if values2 is None:
@@ -391,100 +475,97 @@ def _starts(args, user=None):
     return X0
 
 
-def _basins(args, system, params, values, values2, grid, method, progress: bool):
-    """The basin sweep over ``--param`` (``values2`` None) or the basin map over ``--param``
+def _basins(args, plan: _Plan, progress: bool):
+    """The basin sweep over ``--param`` (no ``--values2``) or the basin map over ``--param``
     x ``--param2``, resumable in ``--out`` (the result file is written by the caller)."""
-    from ..sweep import basin_map, basin_sweep
+    from ..sweep import BasinOptions, basin_map, basin_sweep
 
-    kw = dict(method=method, progress=progress, out=Path(args.out), restart=args.restart, save=False,
-              batched=args.one_pool)
-    if args.uncertainty_samples is not None:
-        kw["uncertainty"] = args.uncertainty_samples
-    if values2 is None:
-        return basin_sweep(system, params, args.param, values, grid, **kw)
-    return basin_map(system, params, args.param, values, args.param2, values2, grid, **kw)
+    samples = {} if args.uncertainty_samples is None else {"uncertainty": args.uncertainty_samples}
+    opts = BasinOptions(batched=args.one_pool, **samples)
+    kw = dict(method=plan.method, options=opts, progress=progress, out=Path(args.out), restart=args.restart,
+              save=False)
+    if plan.values2 is None:
+        return basin_sweep(plan.system, plan.params, args.param, plan.values, plan.grid, **kw)
+    return basin_map(plan.system, plan.params, args.param, plan.values, args.param2, plan.values2, plan.grid, **kw)
 
 
-def _sweep(args, user, params, values, integ, work: Path, head: str, t0: float, grid, method,
-           values2=None) -> list[str]:
-    """A bifurcation or basin sweep (or map) of the gear model (``user`` None) or of the
-    ``--system``: resume parts in ``--out``, its files into ``work``."""
-
-    from .._model import REDUCED
-    from ..sweep import bifurcation_diagram
-
-    system = REDUCED if user is None else user.system
-    out = Path(args.out)
+def _sweep(args, plan: _Plan, work: Path, head: str, t0: float) -> list[str]:
+    """A bifurcation or basin sweep (or map) of the gear model or of the ``--system``:
+    resume parts in ``--out``, its files into ``work``."""
     if args.kind == "bifurcation":
-        X0 = _starts(args, user)
-        print(head + f", {len(X0)} starts, direction {args.direction}")
-        result = bifurcation_diagram(system, params, args.param, values, X0, transient=args.transient,
-                                     record=args.record, direction=args.direction, integrator=integ,
-                                     max_period=args.max_period, progress=not args.quiet, out=out,
-                                     restart=args.restart, save=False)
+        print(head + f", {len(_starts(args, plan.user))} starts, direction {args.direction}")
+        result = _diagram(args, plan, progress=not args.quiet)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
-        print(result.table())
-        if "up" in result.directions and "down" in result.directions:
-            diff = result.values[result.differs("up", "down")]
-            print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
-                  + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
-        result.save(work / "bifurcation.nc")
-        files = ["bifurcation.nc", "summary.json"]
-        figs = {}
-        if not args.no_figures:
-            from ..plotting import plot_bifurcation
-
-            if user is None:
-                figs = {"bifurcation.png": plot_bifurcation(result, "x1"),
-                        "bifurcation_x3.png": plot_bifurcation(result, "x3")}
-            else:  # the first coordinate of the user's system
-                figs = {"bifurcation.png": plot_bifurcation(result, system.state_names[0])}
-    else:  # basins
-        print(head + f", {args.method} on {grid.n_cells} cells per value")
-        result = _basins(args, system, params, values, values2, grid, method, progress=not args.quiet)
+        name, figs = "bifurcation.nc", _report_diagram(args, plan, result)
+    else:
+        print(head + f", {args.method} on {plan.grid.n_cells} cells per value")
+        result = _basins(args, plan, progress=not args.quiet)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
-        figs = {}
-        if values2 is None:
-            print(result.shares_table())
-            print()
-            print(with_uncertainty_line(result.table(), result))
-            if shares_uncertainty_line(result):
-                print(shares_uncertainty_line(result))
-            name = "basins.nc"
-            if not args.no_figures:
-                from ..plotting import plot_basin_shares
-
-                figs = {"shares.png": plot_basin_shares(result)}
-        else:
-            print(with_uncertainty_line(result.table(), result, "points"))
-            name = "basin_map.nc"
-            if not args.no_figures:
-                from ..plotting import plot_basin_map
-
-                figs = {"basin_map.png": plot_basin_map(result), "basin_map_shares.png": plot_basin_map(result, "all")}
-        result.save(work / name)
-        files = [name, "summary.json"]
+        name, figs = _report_basins(args, plan, result)
+    result.save(work / name)
     summary = result.summary()
     summary["runtime_s"] = time.perf_counter() - t0  # in summary.json only, never in the result file
     write_json(summary, work / "summary.json", indent=1)
-    for name, fig in figs.items():
-        save_figure(fig, work / name, dpi=120)
-    return files + list(figs)
+    for fname, fig in figs.items():
+        save_figure(fig, work / fname, dpi=120)
+    return [name, "summary.json"] + list(figs)
 
 
-def _continuation(args, system, params, start, stop, count, integ, out, head) -> list[str]:
+def _report_diagram(args, plan: _Plan, result) -> dict:
+    """Print the diagram's table and hysteresis; its figures ``{file name: figure}``."""
+    print(result.table())
+    if "up" in result.directions and "down" in result.directions:
+        diff = result.values[result.differs("up", "down")]
+        print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
+              + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
+    if args.no_figures:
+        return {}
+    from ..plotting import plot_bifurcation
+
+    if plan.user is None:
+        return {"bifurcation.png": plot_bifurcation(result, "x1"), "bifurcation_x3.png": plot_bifurcation(result, "x3")}
+    return {"bifurcation.png": plot_bifurcation(result, plan.system.state_names[0])}  # the system's first coordinate
+
+
+def _report_basins(args, plan: _Plan, result) -> tuple[str, dict]:
+    """Print the basin sweep's (or map's) tables; its file name and figures."""
+    if plan.values2 is not None:
+        print(with_uncertainty_line(result.table(), result, "points"))
+        if args.no_figures:
+            return "basin_map.nc", {}
+        from ..plotting import plot_basin_map
+
+        return "basin_map.nc", {"basin_map.png": plot_basin_map(result),
+                                "basin_map_shares.png": plot_basin_map(result, "all")}
+    print(result.shares_table())
+    print()
+    print(with_uncertainty_line(result.table(), result))
+    if shares_uncertainty_line(result):
+        print(shares_uncertainty_line(result))
+    if args.no_figures:
+        return "basins.nc", {}
+    from ..plotting import plot_basin_shares
+
+    return "basins.nc", {"shares.png": plot_basin_shares(result)}
+
+
+def _continuation(args, plan: _Plan, out: Path, head: str) -> list[str]:
+    """The branch of the ``--from`` orbit from START to STOP (the step: the spacing of
+    ``--values``), its table, file, summary and figure."""
     import numpy as np
 
     from .._params import params_to_dict, with_param
-    from ..continuation import continue_orbit
+    from ..continuation import ContinuationOptions, continue_orbit
 
     x0 = np.asarray(args.points[0], dtype=float)
+    start, stop, params = plan.start, plan.stop, plan.params
     p0 = with_param(params, args.param, start)
-    ds = abs(stop - start) / (count - 1)
+    ds = abs(stop - start) / (plan.count - 1)
     print(head + f", P-{args.period} orbit from {x0.tolist()}, step {ds:g}")
     t0 = time.perf_counter()
-    branch = continue_orbit(system, p0, x0, param=args.param, stop=stop, period=args.period, ds=ds,
-                            max_steps=args.max_steps, integrator=integ, progress=not args.quiet)
+    branch = continue_orbit(plan.system, p0, x0, param=args.param, stop=stop, period=args.period,
+                            integrator=plan.integ, options=ContinuationOptions(ds=ds, max_steps=args.max_steps),
+                            progress=not args.quiet)
     print(f"done in {time.perf_counter() - t0:.1f} s\n")
     table = branch.table()
     print(table)

@@ -49,6 +49,7 @@ steps is Python (inherent: each step depends on the last) with a progress bar.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from typing import Any, NamedTuple
@@ -59,6 +60,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
+from .._checks import split_changes, with_changes
 from .._params import get_param, params_to_dict, with_param
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
@@ -67,8 +69,13 @@ from ..integrate import AbstractIntegrator, resolve_integrator
 from ..shooting import ShootOptions, periodic_orbit, sorted_eigvals
 from ..shooting._floquet import check_period
 from ._branch import BifurcationPoint, Branch, BranchSettings
+from ._options import CORRECTOR, ContinuationOptions
 
-__all__ = ["continue_orbit", "switch_branch"]
+__all__ = ["continue_orbit", "switch_branch", "START_ITERATIONS"]
+
+START_ITERATIONS = 40
+"""Newton iterations at least of the solve that converges the starting orbit from ``x0``
+(a point near the orbit, not on it: more than a corrector step from a predicted point needs)."""
 
 # Corrector outcomes (a Status).
 _OK = int(Status.CONVERGED)
@@ -169,15 +176,37 @@ def _bordered_newton(evaluate, z_guess, anchor, w, tol, max_iter, max_norm):
     return z, st, sol.stats["num_steps"] - 1, rF, J, pts
 
 
+class _Ctx(NamedTuple):
+    """Everything fixed along one branch: the problem (system, parameters, the continued
+    parameter's name, ``k``), the integrator, the phase ``t0`` and the corrector's options."""
+
+    system: ForcedSystem
+    params: Any
+    name: str
+    k: int
+    integrator: AbstractIntegrator
+    t0: Any
+    shoot: ShootOptions
+
+    def correct(self, z_guess, anchor, w, tref) -> _Step:
+        f64 = lambda a: jnp.asarray(a, jnp.float64)
+        # the Newton solver is a static argument: benchmarks/continuation.py swaps in a
+        # hand-written reference loop to time against it in the same process
+        out = _correct(_bordered_newton, self._replace(t0=f64(self.t0)), f64(z_guess), f64(anchor), f64(w),
+                       f64(tref))
+        return _Step(*[np.asarray(a) for a in jax.device_get(out)])
+
+
 @eqx.filter_jit
-def _correct(newton, system, params, name, k, integrator, t0, z_guess, anchor, w, tref, tol, max_iter, max_norm):
+def _correct(newton, ctx: _Ctx, z_guess, anchor, w, tref):
     """Bordered Newton ``F(z) = 0, w . (z - anchor) = 0`` from ``z_guess`` by ``newton``
-    (:func:`_bordered_newton`), then the tangent, multipliers and test functions at the
-    result (one compiled kernel)."""
+    (:func:`_bordered_newton`, with the tolerances of ``ctx.shoot``), then the tangent,
+    multipliers and test functions at the result (one compiled kernel)."""
     n = z_guess.shape[0] - 1
     eye = jnp.eye(n)
-    evaluate = lambda z: _map_and_jac(system, params, name, k, t0, integrator, z)
-    z, st, it, rF, J, pts = newton(evaluate, z_guess, anchor, w, tol, max_iter, max_norm)
+    evaluate = lambda z: _map_and_jac(ctx.system, ctx.params, ctx.name, ctx.k, ctx.t0, ctx.integrator, z)
+    opts = ctx.shoot
+    z, st, it, rF, J, pts = newton(evaluate, z_guess, anchor, w, opts.tol, opts.max_iter, opts.max_norm)
     ok = st == _OK
     Js = jnp.where(ok, J, 0.0)
     _, _, Vh = jnp.linalg.svd(Js, full_matrices=True)
@@ -190,28 +219,6 @@ def _correct(newton, system, params, name, k, integrator, t0, z_guess, anchor, w
     nan = jnp.nan
     return _Step(z=z, status=st, iterations=it, residual=rF, jac=J, tangent=jnp.where(ok, t, nan),
                  multipliers=jnp.where(ok, lam, nan), pts=pts, tests=jnp.where(ok, tests, nan))
-
-
-class _Ctx(NamedTuple):
-    """Everything fixed along one branch (the kernel's static configuration and tolerances)."""
-
-    system: ForcedSystem
-    params: Any
-    name: str
-    k: int
-    integrator: AbstractIntegrator
-    t0: float
-    tol: float
-    max_iter: int
-    max_norm: float
-
-    def correct(self, z_guess, anchor, w, tref) -> _Step:
-        f64 = lambda a: jnp.asarray(a, jnp.float64)
-        # the Newton solver is a static argument: benchmarks/continuation.py swaps in a
-        # hand-written reference loop to time against it in the same process
-        out = _correct(_bordered_newton, self.system, self.params, self.name, self.k, self.integrator,
-                       f64(self.t0), f64(z_guess), f64(anchor), f64(w), f64(tref), self.tol, self.max_iter, self.max_norm)
-        return _Step(*[np.asarray(a) for a in jax.device_get(out)])
 
 
 def _e_p(n):
@@ -317,77 +324,65 @@ def _detect(ctx: _Ctx, a: _Step, b: _Step, index: int, locate_tol: float) -> lis
 
 
 # --------------------------------------------------------------------------- driver
-def _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max, tol, bounds):
-    k = check_period(period)
-    p0 = get_param(params, param)  # ValueError for an unknown name
-    if stop is not None and not math.isfinite(float(stop)):
-        raise ValueError(f"stop={stop} must be a finite value of {param}.")
-    if not (ds > 0 and math.isfinite(ds)):
-        raise ValueError(f"ds={ds} must be a positive step (arclength in (x, {param})).")
-    if isinstance(max_steps, bool) or int(max_steps) < 1:
-        raise ValueError(f"max_steps={max_steps} must be an integer >= 1.")
-    ds_min = ds * 1e-4 if ds_min is None else float(ds_min)
-    ds_max = ds * 10.0 if ds_max is None else float(ds_max)
-    if not (0 < ds_min <= ds <= ds_max):
-        raise ValueError(f"need 0 < ds_min <= ds <= ds_max, got ds_min={ds_min}, ds={ds}, ds_max={ds_max}.")
-    if not (tol > 0):
-        raise ValueError(f"tol={tol} must be > 0.")
-    if bounds is not None:
-        lo, hi = (float(v) for v in bounds)
-        if not lo < hi:
-            raise ValueError(f"bounds={bounds} must be (low, high) with low < high.")
-        bounds = (lo, hi)
-    return k, p0, ds_min, ds_max, bounds
+def _options(options, shoot, changes: dict) -> tuple[ContinuationOptions, ShootOptions]:
+    """The continuation and corrector options with ``changes`` (fields of either) applied."""
+    to_options, to_shoot = split_changes(changes, ContinuationOptions, ShootOptions)
+    return (with_changes(options, ContinuationOptions, to_options),
+            with_changes(CORRECTOR if shoot is None else shoot, ShootOptions, to_shoot))
 
 
-def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds, max_angle, detect,
-         locate_tol, progress, desc, param, settings, params_start):
+def _check_stop(stop, param: str) -> float | None:
+    if stop is not None and (isinstance(stop, bool) or not math.isfinite(float(stop))):
+        raise ValueError(f"stop={stop} must be a finite value of {param} (or None for no target).")
+    return None if stop is None else float(stop)
+
+
+def _end_point(ctx: _Ctx, cur: _Step, out: _Step, settings: BranchSettings):
+    """The accepted step ``cur -> out`` ended past ``stop`` or outside ``bounds``: the point
+    re-converged on the target value and why the branch ends there (``(out, None)`` when
+    it goes on)."""
+    z, stop, bounds = cur.z, settings.stop, settings.options.bounds
+    p_old, p_new = float(z[-1]), float(out.z[-1])
+    if stop is not None and (p_old - stop) * (p_new - stop) <= 0 and p_new != p_old and p_old != stop:
+        target, reason = stop, "stop"
+    elif bounds is not None and not (bounds[0] <= p_new <= bounds[1]):
+        target, reason = (bounds[0] if p_new < bounds[0] else bounds[1]), "bounds"
+    else:
+        return out, None
+    zg = z + (target - p_old) / (p_new - p_old) * (out.z - z)
+    zg[-1] = target
+    fin = ctx.correct(zg, zg, _e_p(len(z) - 1), cur.tangent)
+    return (fin if fin.status == _OK else out), reason
+
+
+def _run(ctx: _Ctx, first: _Step, settings: BranchSettings, progress: bool, params_start: dict) -> Branch:
     """The continuation loop from the converged point ``first`` (tangent oriented already)."""
-    n = first.z.shape[0] - 1
-    steps = [first]
-    bifs: list[BifurcationPoint] = []
-    status = "max_steps"
-    cur = first
-    cos_max = math.cos(max_angle)
-    bar = progress_bar(int(max_steps), desc, progress, unit="step")
+    opts = settings.options
+    ds, (ds_min, ds_max) = float(opts.ds), opts.step_range
+    steps, bifs, status, cur = [first], [], "max_steps", first
+    cos_max = math.cos(opts.max_angle)
+    bar = progress_bar(int(opts.max_steps), f"P-{ctx.k} continuation in {ctx.name}", progress, unit="step")
     try:
-        while len(steps) <= max_steps:
-            z, t = cur.z, cur.tangent
-            zp = z + ds * t
-            out = ctx.correct(zp, zp, t, t)
-            ok = out.status == _OK
-            if ok:
-                turn = float(out.tangent @ t)
-                far = float(np.linalg.norm(out.z - zp))
-                ok = turn >= cos_max and far <= ds
+        while len(steps) <= opts.max_steps:
+            zp = cur.z + ds * cur.tangent
+            out = ctx.correct(zp, zp, cur.tangent, cur.tangent)
+            ok = out.status == _OK and float(out.tangent @ cur.tangent) >= cos_max and \
+                float(np.linalg.norm(out.z - zp)) <= ds
             if not ok:
                 if ds <= ds_min * (1 + 1e-12):
                     status = "diverged" if out.status == _DIVERGED else "corrector_failed"
                     break
                 ds = max(0.5 * ds, ds_min)
                 continue
-            final = False
-            p_old, p_new = float(z[-1]), float(out.z[-1])
-            target = None
-            if stop is not None and (p_old - stop) * (p_new - stop) <= 0 and p_new != p_old and p_old != stop:
-                target, reason = float(stop), "stop"
-            elif bounds is not None and not (bounds[0] <= p_new <= bounds[1]):
-                target, reason = (bounds[0] if p_new < bounds[0] else bounds[1]), "bounds"
-            if target is not None:
-                frac = (target - p_old) / (p_new - p_old)
-                zg = z + frac * (out.z - z)
-                zg[-1] = target
-                fin = ctx.correct(zg, zg, _e_p(n), t)
-                if fin.status == _OK:
-                    out = fin
-                status, final = reason, True
-            if detect:
-                bifs.extend(_detect(ctx, cur, out, len(steps) - 1, locate_tol))
+            out, reason = _end_point(ctx, cur, out, settings)
+            if opts.detect:
+                bifs.extend(_detect(ctx, cur, out, len(steps) - 1, opts.locate_tol))
             steps.append(out)
             cur = out
             bar.update(1)
-            bar.set_postfix_str(f"{param}={float(out.z[-1]):.6g} ds={ds:.2g}", refresh=False)
-            if final:
+            bar.set_postfix_str(f"{ctx.name}={float(out.z[-1]):.6g} ds={ds:.2g}", refresh=False)
+            if reason is not None:
+                status = reason
                 break
             if out.iterations <= 2:
                 ds = min(1.5 * ds, ds_max)
@@ -395,46 +390,60 @@ def _run(ctx: _Ctx, first: _Step, *, stop, ds, ds_min, ds_max, max_steps, bounds
                 ds = max(0.7 * ds, ds_min)
     finally:
         bar.close()
+    return _branch(ctx, steps, tuple(bifs), status, settings, params_start)
+
+
+def _branch(ctx: _Ctx, steps: list[_Step], bifs: tuple, status: str, settings: BranchSettings,
+            params_start: dict) -> Branch:
+    """The :class:`Branch` of the corrected points ``steps``."""
     Z = np.array([s.z for s in steps])
-    m = len(steps)
-    pts = np.array([s.pts for s in steps])
+    m, n = Z.shape[0], Z.shape[1] - 1
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(Z, axis=0), axis=1))])
     lam = np.array([s.multipliers for s in steps])
     return Branch(
-        param=param, values=Z[:, -1].copy(), points=pts.reshape(m, ctx.k, n), multipliers=lam,
-        stable=np.all(np.abs(lam) < 1.0, axis=1), residuals=np.array([float(s.residual) for s in steps]),
-        tangents=np.array([s.tangent for s in steps]), arclength=arc, status=status, bifurcations=tuple(bifs),
-        period=ctx.k, system=ctx.system.name, state_names=tuple(ctx.system.state_names),
-        params=params_start, settings=settings, version=__version__,
+        param=ctx.name, values=Z[:, -1].copy(), points=np.array([s.pts for s in steps]).reshape(m, ctx.k, n),
+        multipliers=lam, stable=np.all(np.abs(lam) < 1.0, axis=1),
+        residuals=np.array([float(s.residual) for s in steps]), tangents=np.array([s.tangent for s in steps]),
+        arclength=arc, status=status, bifurcations=bifs, period=ctx.k, system=ctx.system.name,
+        state_names=tuple(ctx.system.state_names), params=params_start, settings=settings, version=__version__,
     )
 
 
-def _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, origin: str = "start",
-              amplitude: float | None = None) -> BranchSettings:
-    return BranchSettings(ds=float(ds), ds_min=float(ds_min), ds_max=float(ds_max), max_steps=int(max_steps),
-                          stop=None if stop is None else float(stop),
-                          bounds=None if bounds is None else (float(bounds[0]), float(bounds[1])),
-                          max_angle=float(max_angle), tol=float(ctx.tol), max_iter=int(ctx.max_iter),
-                          max_norm=float(ctx.max_norm), locate_tol=float(locate_tol), t0=float(ctx.t0),
-                          integrator=ctx.integrator, origin=origin, amplitude=None if amplitude is None else float(amplitude))
+def _start_orbit(system, params, x0, param: str, k: int, t0, integrator, shoot: ShootOptions):
+    """The P-k orbit converged from ``x0`` at the parameter's value in ``params`` (checked):
+    its point and that value."""
+    p0 = get_param(params, param)  # ValueError for an unknown name
+    x0 = np.asarray(x0, dtype=float)
+    check_state_shape(system, x0)
+    if x0.shape != (system.dim,):
+        raise ValueError(f"x0 must be one state of shape ({system.dim},), got {x0.shape}.")
+    check_system(system, params, x0)
+    res = periodic_orbit(system, params, x0, period=k, t0=t0, integrator=integrator,
+                         options=dataclasses.replace(shoot, max_iter=max(shoot.max_iter, START_ITERATIONS)))
+    if int(res.status) != Status.CONVERGED:
+        raise ValueError(f"Newton from x0={x0.tolist()} did not converge to a P-{k} orbit at {param}={p0:.6g} "
+                         f"({Status(int(res.status)).label}, residual {float(res.residual):.2e}); "
+                         "give a point nearer the orbit.")
+    if int(res.min_period) < k:
+        warnings.warn(f"the orbit found from x0 has minimal period {int(res.min_period)} < {k}: continuing it as a "
+                      f"fixed point of P^{k} (its period doublings show up as branch points).", stacklevel=3)
+    return np.asarray(res.point, dtype=float), p0
 
 
-def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float, period: int = 1,
-                   ds: float = 0.01, max_steps: int = 500, integrator: AbstractIntegrator | None = None, progress: bool = True,
-                   t0: float = 0.0, ds_min: float | None = None, ds_max: float | None = None,
-                   tol: float = 1e-10, max_iter: int = 10, max_norm: float = 1e6,
-                   bounds: tuple[float, float] | None = None, max_angle: float = 0.5, detect: bool = True,
-                   locate_tol: float = 1e-10) -> Branch:
+def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float, period: int = 1, t0: float = 0.0,
+                   integrator: AbstractIntegrator | None = None, options: ContinuationOptions | None = None,
+                   shoot: ShootOptions | None = None, progress: bool = True, **changes) -> Branch:
     """Follow a P-k orbit in the parameter ``param`` by pseudo-arclength continuation.
 
     Starts by converging the orbit at the parameter's current value in ``params`` with
-    :func:`~jaxgear.periodic_orbit` (the library's solver from ``x0``), then follows the curve
-    of fixed points of ``P^k`` in ``(x, p)`` until the parameter reaches ``stop`` (the
-    last point is placed at ``stop`` exactly), leaves ``bounds``, ``max_steps`` steps are
-    taken, or the corrector fails at the smallest step (see :data:`BRANCH_STATUS`).
-    Folds are passed (the parameter may turn around on the way to ``stop``). Floquet
-    multipliers are computed at every point and period doublings, saddle-nodes, branch
-    points and Neimark-Sacker points are detected and located (see the module docs).
+    :func:`~jaxgear.periodic_orbit` (``shoot``, with at least :data:`START_ITERATIONS`
+    iterations, from ``x0``), then follows the curve of fixed points of ``P^k`` in
+    ``(x, p)`` until the parameter reaches ``stop`` (the last point is placed at ``stop``
+    exactly), leaves ``options.bounds``, ``options.max_steps`` steps are taken, or the
+    corrector fails at the smallest step (see :data:`BRANCH_STATUS`). Folds are passed
+    (the parameter may turn around on the way to ``stop``). Floquet multipliers are
+    computed at every point and period doublings, saddle-nodes, branch points and
+    Neimark-Sacker points are detected and located (see the module docs).
 
     Args:
         system: any :class:`~jaxgear.ForcedSystem`.
@@ -446,69 +455,61 @@ def continue_orbit(system: ForcedSystem, params, x0, *, param: str, stop: float,
             Per-planet fields are set for all planets.
         stop: the parameter value at which to end; the initial direction is towards it.
         period: ``k``, the orbit is a fixed point of ``P^k`` (forcing periods).
-        ds: initial arclength step in ``(x, p)`` (state units and parameter units mixed:
-            choose it for the faster-changing of the two).
-        max_steps: the most continuation steps (the branch has at most ``max_steps + 1`` points).
-        integrator: :class:`~jaxgear.RK4` (default) or :class:`~jaxgear.Adaptive`.
-        progress: show a progress bar.
         t0: phase of the stroboscopic section.
-        ds_min, ds_max: step bounds (default ``ds / 1e4`` and ``10 ds``).
-        tol: corrector tolerance on ``||P^k(x) - x||`` (Newton also stops only when its
-            next step is below ``tol + 1e-8 |(x, p)|``).
-        max_iter: corrector Newton iterations per step (a step needing more is retried
-            with half the step).
-        max_norm: a point with ``||x|| > max_norm`` counts as diverged.
-        bounds: optional ``(low, high)`` for the parameter; the branch ends on leaving it.
-        max_angle: largest turn of the tangent per step (rad); a step turning more is
-            retried with half the step (keeps the branch from jumping).
-        detect: detect and locate bifurcations.
-        locate_tol: arclength tolerance of the bifurcation location.
+        integrator: any integrator object; default :func:`~jaxgear.default_integrator`.
+        options: :class:`ContinuationOptions` (step ``ds`` and its bounds, ``max_steps``,
+            ``max_angle``, parameter ``bounds``, ``detect``, ``locate_tol``); ``None``: the defaults.
+        shoot: the corrector's :class:`~jaxgear.ShootOptions`: ``tol`` on
+            ``||P^k(x) - x||`` (Newton also stops only when its next step is below
+            ``tol + 1e-8 |(x, p)|``), ``max_iter`` per step (a step needing more is
+            retried with half the step), ``max_norm`` (a point with ``||x|| > max_norm``
+            counts as diverged); ``None``: :data:`CORRECTOR`.
+        progress: show a progress bar.
+        **changes: fields of ``options`` or ``shoot`` to change, e.g. ``ds=0.005, tol=1e-9``.
     Returns:
-        :class:`Branch`.
+        :class:`Branch` (its ``settings`` hold both options objects).
     Raises:
-        ValueError: bad arguments (unknown parameter, ``stop`` equal to the start,
-            wrong state shape, ...) or Newton did not converge from ``x0``.
+        ValueError: bad arguments (unknown parameter or option, ``stop`` equal to the
+            start, wrong state shape, ...) or Newton did not converge from ``x0``.
     """
+    options, shoot = _options(options, shoot, changes)
     integrator = resolve_integrator(integrator)
-    k, p0, ds_min, ds_max, bounds = _validate(system, params, param, stop, period, ds, max_steps, ds_min, ds_max,
-                                              tol, bounds)
-    if float(stop) == p0:
+    k = check_period(period)
+    stop = _check_stop(stop, param)
+    if stop is None:
+        raise ValueError(f"stop=None: continue_orbit needs the value of {param} to continue towards.")
+    point, p0 = _start_orbit(system, params, x0, param, k, t0, integrator, shoot)
+    if stop == p0:
         raise ValueError(f"stop={stop} equals the starting value of {param}: nothing to continue.")
-    x0 = np.asarray(x0, dtype=float)
-    check_state_shape(system, x0)
-    if x0.shape != (system.dim,):
-        raise ValueError(f"x0 must be one state of shape ({system.dim},), got {x0.shape}.")
-    check_system(system, params, x0)
-    res = periodic_orbit(system, params, x0, period=k, t0=t0, integrator=integrator,
-                         options=ShootOptions(tol=tol, max_norm=max_norm))
-    if int(res.status) != Status.CONVERGED:
-        raise ValueError(f"Newton from x0={x0.tolist()} did not converge to a P-{k} orbit at {param}={p0:.6g} "
-                         f"({Status(int(res.status)).label}, residual {float(res.residual):.2e}); "
-                         "give a point nearer the orbit.")
-    if int(res.min_period) < k:
-        warnings.warn(f"the orbit found from x0 has minimal period {int(res.min_period)} < {k}: continuing it as a "
-                      f"fixed point of P^{k} (its period doublings show up as branch points).", stacklevel=2)
-    ctx = _Ctx(system, params, param, k, integrator, float(t0), float(tol), int(max_iter), float(max_norm))
+    ctx = _Ctx(system, params, param, k, integrator, float(t0), shoot)
     n = system.dim
-    z0 = np.concatenate([np.asarray(res.point, dtype=float), [p0]])
-    direction = np.sign(float(stop) - p0) * _e_p(n)
-    first = ctx.correct(z0, z0, _e_p(n), direction)
+    z0 = np.concatenate([point, [p0]])
+    first = ctx.correct(z0, z0, _e_p(n), np.sign(stop - p0) * _e_p(n))
     if first.status != _OK:
         raise ValueError(f"the orbit found from x0 at {param}={p0:.6g} could not be refined by the corrector "
                          f"(status {int(first.status)}); try a smaller tol or another integrator.")
-    settings = _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol, origin="start")
-    return _run(ctx, first, stop=float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=int(max_steps),
-                bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol, progress=progress,
-                desc=f"P-{k} continuation in {param}", param=param, settings=settings,
-                params_start=params_to_dict(with_param(params, param, p0)))
+    settings = BranchSettings(options=options, shoot=shoot, stop=stop, t0=float(t0), integrator=integrator)
+    return _run(ctx, first, settings, progress, params_to_dict(with_param(params, param, p0)))
+
+
+def _pd_eigenvector(ctx: _Ctx, bifurcation: BifurcationPoint) -> tuple[_Step, np.ndarray]:
+    """The P-k orbit re-converged at the PD point and the unit eigenvector of its multiplier -1."""
+    n = ctx.system.dim
+    z_pd = np.concatenate([np.asarray(bifurcation.point, dtype=float), [float(bifurcation.param_value)]])
+    at = ctx.correct(z_pd, z_pd, _e_p(n), _e_p(n))
+    if at.status != _OK:
+        raise ValueError(f"the P-{ctx.k} orbit could not be re-converged at the PD point "
+                         f"{ctx.name}={float(bifurcation.param_value):.8g}.")
+    lam, V = np.linalg.eig(at.jac[:, :n] + np.eye(n))
+    v = np.real(V[:, int(np.argmin(np.abs(lam + 1.0)))])
+    v /= np.linalg.norm(v)
+    return at, (-v if v[np.argmax(np.abs(v))] < 0 else v)
 
 
 def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: BifurcationPoint | int, *,
-                  stop: float | None = None, amplitude: float | None = None, ds: float | None = None,
-                  max_steps: int = 500, integrator: AbstractIntegrator | None = None, progress: bool = True,
-                  ds_min: float | None = None, ds_max: float | None = None, tol: float = 1e-10,
-                  max_iter: int = 10, max_norm: float = 1e6, bounds: tuple[float, float] | None = None,
-                  max_angle: float = 0.5, detect: bool = True, locate_tol: float = 1e-10) -> Branch:
+                  stop: float | None = None, amplitude: float | None = None,
+                  integrator: AbstractIntegrator | None = None, options: ContinuationOptions | None = None,
+                  shoot: ShootOptions | None = None, progress: bool = True, **changes) -> Branch:
     """Follow the period-doubled branch born at a period-doubling point of ``branch``.
 
     At a PD point of a P-k branch the P-2k orbits bifurcate in the direction of the
@@ -526,11 +527,15 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
         branch: the P-k :class:`Branch`.
         bifurcation: one of ``branch.bifurcations`` (kind ``"PD"``) or its index there.
         stop: end of the new branch in the parameter (optional: without it the branch
-            runs until ``bounds`` or ``max_steps``; the doubled branch may go either way).
-        amplitude: size of the initial displacement along ``v`` (default ``ds``).
-        ds: arclength step (default ``branch.settings.ds``).
-        integrator: use the one of ``branch``.
-        Other arguments as in :func:`continue_orbit`.
+            runs until ``options.bounds`` or ``options.max_steps``; the doubled branch may
+            go either way).
+        amplitude: size of the initial displacement along ``v`` (default ``options.ds``).
+        integrator: any integrator object (default :func:`~jaxgear.default_integrator`;
+            pass ``branch.settings.integrator`` to keep the branch's).
+        options, shoot: as in :func:`continue_orbit`; ``None``: those of ``branch``
+            (``branch.settings.options`` and ``branch.settings.shoot``).
+        progress: show a progress bar.
+        **changes: fields of ``options`` or ``shoot`` to change.
     Returns:
         the P-2k :class:`Branch`.
     """
@@ -541,32 +546,20 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
     if bifurcation.kind != "PD":
         raise ValueError(f"switch_branch starts the doubled branch at a period doubling (kind 'PD'), "
                          f"got kind {bifurcation.kind!r}.")
-    ds = branch.settings.ds if ds is None else float(ds)
+    options, shoot = _options(branch.settings.options if options is None else options,
+                              branch.settings.shoot if shoot is None else shoot, changes)
     param = branch.param
     integrator = resolve_integrator(integrator)
-    k2, p_pd, ds_min, ds_max, bounds = _validate(system, params, param, stop, 2 * branch.period, ds, max_steps,
-                                                 ds_min, ds_max, tol, bounds)
-    h = ds if amplitude is None else float(amplitude)
+    get_param(params, param)  # ValueError for an unknown name
+    stop = _check_stop(stop, param)
+    h = options.ds if amplitude is None else float(amplitude)
     if not (h > 0):
         raise ValueError(f"amplitude={amplitude} must be > 0.")
     t0 = branch.settings.t0
-    p_pd = float(bifurcation.param_value)
-    n = system.dim
-    x_pd = np.asarray(bifurcation.point, dtype=float)
-    # eigenvector of the multiplier -1 of P^k at the PD point (re-converged there)
-    ctx_k = _Ctx(system, params, param, branch.period, integrator, t0, float(tol), int(max_iter), float(max_norm))
-    z_pd = np.concatenate([x_pd, [p_pd]])
-    at = ctx_k.correct(z_pd, z_pd, _e_p(n), _e_p(n))
-    if at.status != _OK:
-        raise ValueError(f"the P-{branch.period} orbit could not be re-converged at the PD point {param}={p_pd:.8g}.")
-    M = at.jac[:, :n] + np.eye(n)
-    lam, V = np.linalg.eig(M)
-    i = int(np.argmin(np.abs(lam + 1.0)))
-    v = np.real(V[:, i])
-    v /= np.linalg.norm(v)
-    if v[np.argmax(np.abs(v))] < 0:
-        v = -v
-    ctx = _Ctx(system, params, param, k2, integrator, t0, float(tol), int(max_iter), float(max_norm))
+    ctx_k = _Ctx(system, params, param, branch.period, integrator, t0, shoot)
+    at, v = _pd_eigenvector(ctx_k, bifurcation)
+    k2 = 2 * branch.period
+    ctx = ctx_k._replace(k=k2)
     w = np.concatenate([v, [0.0]])
     z_guess = at.z + h * w
     first = ctx.correct(z_guess, z_guess, w, w)
@@ -575,9 +568,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
                          f"(corrector status {int(first.status)}); try a smaller amplitude.")
     if np.linalg.norm(first.pts[branch.period] - first.pts[0]) <= 1e-3 * h:
         raise ValueError("the corrector went back to the P-k orbit; try another amplitude.")
-    settings = _settings(ctx, ds, ds_min, ds_max, max_steps, stop, bounds, max_angle, locate_tol,
-                         origin=f"PD of the P-{branch.period} branch at {param}={p_pd!r}", amplitude=h)
-    return _run(ctx, first, stop=None if stop is None else float(stop), ds=ds, ds_min=ds_min, ds_max=ds_max,
-                max_steps=int(max_steps), bounds=bounds, max_angle=max_angle, detect=detect, locate_tol=locate_tol,
-                progress=progress, desc=f"P-{k2} continuation in {param}", param=param, settings=settings,
-                params_start=params_to_dict(with_param(params, param, float(first.z[-1]))))
+    p_pd = float(bifurcation.param_value)
+    settings = BranchSettings(options=options, shoot=shoot, stop=stop, t0=float(t0), integrator=integrator,
+                              origin=f"PD of the P-{branch.period} branch at {param}={p_pd!r}", amplitude=h)
+    return _run(ctx, first, settings, progress, params_to_dict(with_param(params, param, float(first.z[-1]))))

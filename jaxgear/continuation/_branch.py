@@ -12,6 +12,8 @@ from .._format import format_table
 from .._io import save_result
 from .._system import state_index
 from ..integrate import AbstractIntegrator, integrator_from_dict
+from ..shooting import ShootOptions
+from ._options import ContinuationOptions
 
 __all__ = ["Branch", "BranchSettings", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS"]
 
@@ -76,35 +78,22 @@ def _fmt_complex(z) -> str:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class BranchSettings:
-    """The options a branch was followed with (:func:`continue_orbit`,
-    :func:`switch_branch`).
+    """What a branch was followed with (:func:`continue_orbit`, :func:`switch_branch`).
 
     Attributes:
-        ds, ds_min, ds_max: arclength step, its smallest and largest value (in ``(x, p)``).
-        max_steps: most continuation steps.
+        options: the :class:`ContinuationOptions` (steps, bounds, bifurcation search).
+        shoot: the corrector's :class:`~jaxgear.ShootOptions` (``tol``, ``max_iter``,
+            ``max_norm``; the starting orbit was converged with them too).
         stop: the parameter value where the branch was to end (None: no target).
-        bounds: ``(low, high)`` parameter range the branch was kept in (None: none).
-        max_angle: largest angle (radians) between successive tangents.
-        tol, max_iter, max_norm: the corrector's Newton tolerance, iterations and the
-            largest state norm it accepts.
-        locate_tol: tolerance of the bisection locating a bifurcation.
         t0: forcing phase (time) of the stroboscopic points.
         integrator: the integrator.
         origin: ``"start"`` or the period-doubling point the branch was switched from.
         amplitude: distance from that point to the branch's first orbit (None for ``"start"``).
     """
 
-    ds: float
-    ds_min: float
-    ds_max: float
-    max_steps: int
+    options: ContinuationOptions
+    shoot: ShootOptions
     stop: float | None = None
-    bounds: tuple[float, float] | None = None
-    max_angle: float
-    tol: float
-    max_iter: int
-    max_norm: float
-    locate_tol: float
     t0: float
     integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
     origin: str = "start"
@@ -131,8 +120,8 @@ class Branch:
         period: ``k`` (forcing periods per return of the continued map).
         system: the system's name; state_names: its coordinate names.
         params: the parameter set at the start of the branch (dict of the pytree).
-        settings: a :class:`BranchSettings` (step sizes, tolerances, integrator, ``t0``,
-            origin).
+        settings: a :class:`BranchSettings` (the continuation and corrector options,
+            integrator, ``t0``, origin).
     """
 
     param: str

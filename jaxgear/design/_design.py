@@ -57,13 +57,21 @@ from .._params import get_field, params_from_dict, params_to_dict, params_type_n
 from .._status import Status
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
+from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ..shooting import Instability, PeriodicOrbit, ShootOptions, classify_multipliers, periodic_orbit
 from ..shooting._floquet import check_period
 from ..shooting._options import with_changes
 from ._objectives import OrbitSamples, sample_orbit
 
-__all__ = ["design", "DesignResult", "DesignOptions"]
+__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings"]
+
+
+def _params_to_json(p) -> dict[str, Any]:
+    return {"type": params_type_name(p), "values": params_to_dict(p)}
+
+
+def _params_from_json(d: dict[str, Any]):
+    return params_from_dict(d["type"], d["values"])
 
 
 @result_type
@@ -87,24 +95,24 @@ class DesignResult:
             ``"newton failed"`` or ``"lost stability"`` (a step could not be taken even
             after shrinking it; the last good iterate is returned).
         message: a sentence explaining ``status``.
-        initial_params: parameters at the start (a dict of every parameter).
+        initial_params: the parameters at the start (same pytree type as the input).
         system: the system's name; state_names: its coordinates.
-        settings: period, t0, steps, tol, integrator, ... (JSON-able).
+        settings: a :class:`DesignSettings`: the :class:`DesignOptions`, the period,
+            ``t0``, the integrator and the samples per period.
         version: jaxgear version.
     """
 
-    params: Any = custom_field(lambda p: {"type": params_type_name(p), "values": params_to_dict(p)},
-                               lambda d: params_from_dict(d["type"], d["values"]))
+    params: Any = custom_field(_params_to_json, _params_from_json)
     orbit: PeriodicOrbit = None  # type: ignore[assignment]
     initial_orbit: PeriodicOrbit = None  # type: ignore[assignment]
     history: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     free: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
     status: str = ""
     message: str = ""
-    initial_params: dict = dataclasses.field(default_factory=dict)
+    initial_params: Any = custom_field(_params_to_json, _params_from_json)
     system: str = ""
     state_names: tuple[str, ...] = ()
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: DesignSettings
     version: str = ""
 
     @property
@@ -178,9 +186,13 @@ class DesignOptions(eqx.Module):
             the integrator's steps per period).
         shoot: the options of the shooting solve that re-converges the orbit at every
             step (:class:`~jaxgear.ShootOptions`).
+
+    In a saved :class:`DesignResult` a user's optimiser (functions, which a file cannot
+    hold) is recorded by :attr:`DesignSettings.optimizer` and loads as ``None``.
     """
 
-    optimizer: Any = eqx.field(static=True, default=None)
+    optimizer: Any = eqx.field(static=True, default=None,
+                               metadata=dict(encode=lambda o: None if o is None else "user", decode=lambda _: None))
     steps: int = eqx.field(static=True, default=100)
     tol: float = 1e-6
     require_stable: bool = eqx.field(static=True, default=False)
@@ -199,6 +211,27 @@ class DesignOptions(eqx.Module):
             check_int(self.samples_per_period, "samples_per_period", 2)
         if not isinstance(self.shoot, ShootOptions):
             raise ValueError(f"shoot={self.shoot!r} must be a jaxgear.ShootOptions.")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DesignSettings:
+    """What a :func:`design` run used (saved field by field with its result).
+
+    Attributes:
+        options: the :class:`DesignOptions` (its ``optimizer`` loads from a file as ``None``).
+        optimizer: ``"adam, lr 0.05 cosine decay"`` (the library's) or ``"user"``.
+        period: ``k`` of the tracked P-k orbit.
+        t0: phase of the stroboscopic section (system time unit).
+        integrator: the integrator.
+        samples_per_period: samples of the orbit per period the objective saw.
+    """
+
+    options: DesignOptions
+    optimizer: str
+    period: int
+    t0: float
+    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+    samples_per_period: int
 
 
 class _Eval(NamedTuple):
@@ -491,14 +524,12 @@ def design(system: ForcedSystem, params, x0: Float[ArrayLike, " dim"], objective
     orbit0 = _check_start(ev, k, options.require_stable)
     hist = _History(prob)
     u, ev, status, message = _optimise(evaluate, u, ev, hist, options, optimizer, progress)
-    settings = dict(period=k, t0=float(t0), steps=options.steps, tol=float(options.tol),
-                    require_stable=bool(options.require_stable), max_shrink=options.max_shrink,
-                    max_jump=options.max_jump, integrator=integrator.to_dict(), samples_per_period=samples,
-                    shoot_tol=float(options.shoot.tol),
-                    optimizer="adam, lr 0.05 cosine decay" if options.optimizer is None else "user")
+    settings = DesignSettings(options=options, period=k, t0=float(t0), integrator=integrator,
+                              samples_per_period=int(samples),
+                              optimizer="adam, lr 0.05 cosine decay" if options.optimizer is None else "user")
     return DesignResult(
         params=prob.at(u), orbit=_orbit_of(ev, k), initial_orbit=orbit0, history=hist.arrays(),
         free={n: (lo, hi) for n, lo, hi in zip(names, lows, highs)}, status=status, message=message,
-        initial_params=params_to_dict(params), system=system.name, state_names=tuple(system.state_names),
+        initial_params=params, system=system.name, state_names=tuple(system.state_names),
         settings=settings, version=__version__,
     )

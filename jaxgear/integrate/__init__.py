@@ -48,8 +48,15 @@ def integrator_from_dict(d: Mapping[str, Any]) -> AbstractIntegrator:
     if kind == "RK4":
         return RK4(int(d.get("steps_per_period") or DEFAULT_STEPS_PER_PERIOD))
     if kind == "KinkAwareRK4":
+        if "native" in d:
+            native = d["native"]
+        else:  # files written before the typed option: backend "auto" (the kernel) or "jax"
+            backend = d.get("backend", "auto")
+            if backend not in ("auto", "jax"):
+                raise ValueError(f"integrator backend={backend!r} in the saved settings; known: 'auto', 'jax'.")
+            native = backend == "auto"
         return KinkAwareRK4(int(d.get("steps_per_period") or DEFAULT_STEPS_PER_PERIOD),
-                            max_splits=int(d.get("max_splits", 2)), backend=str(d.get("backend", "auto")))
+                            max_splits=int(d.get("max_splits", 2)), native=native)
     if kind == "Adaptive":
         import diffrax
 

@@ -16,7 +16,7 @@ model document §8).
 The lanes that need a split (a few per cent per step) are gathered into a compact
 buffer in large batches and selected from a whole-batch computation in small ones,
 without leaving ``jit`` and without restarting the integrator; the compiled CPU kernel
-for the gear models (:mod:`jaxgear.integrate._native`) does the same lane by lane.
+for the gear models (:mod:`jaxgear.integrate._native`) gathers them per block of lanes.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import jax.numpy as jnp
 # through implicit differentiation); import it with the steps, not by accident elsewhere
 import lineax  # noqa: F401
 
-from .._checks import check_choice, check_int
+from .._checks import check_bool, check_int
 from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, batch_field, check_steps_per_period
 from ._rk4 import rk4_step
 
@@ -364,21 +364,22 @@ class KinkAwareRK4(AbstractFixedStep):
         steps_per_period: fixed steps per forcing period (>= 1).
         max_splits: events handled inside one step (1-3; a further event in the same
             step is stepped over as plain RK4 would).
-        backend: ``"auto"`` — the compiled CPU kernel for the built-in gear models when
-            one is available (:mod:`jaxgear.integrate._native`), the pure-JAX steps
-            otherwise and always for derivatives and GPUs; ``"jax"`` — always the
-            pure-JAX steps (the reference).
+        native: ``True`` — use the compiled CPU kernel when the system has one
+            (``ForcedSystem.native``, the built-in reduced gear model) and the platform
+            is a CPU (:mod:`jaxgear.integrate._native`; the pure-JAX steps otherwise, and
+            always for derivatives and GPUs); ``False`` — always the pure-JAX steps (the
+            reference). Both give the same states to round-off.
     """
 
     name: ClassVar[str] = "KinkAwareRK4"
     steps_per_period: int = eqx.field(static=True, default=DEFAULT_STEPS_PER_PERIOD)
     max_splits: int = eqx.field(static=True, default=2)
-    backend: str = eqx.field(static=True, default="auto")
+    native: bool = eqx.field(static=True, default=True)
 
     def __check_init__(self):
         check_steps_per_period(self.steps_per_period)
         check_int(self.max_splits, "max_splits", 1, 3)
-        check_choice(self.backend, "backend", ("auto", "jax"))
+        check_bool(self.native, "KinkAwareRK4.native")
 
     def step(self, system, params, t, Y, h):
         if not system.is_piecewise:
@@ -386,14 +387,14 @@ class KinkAwareRK4(AbstractFixedStep):
         return kink_step(system, params, t, Y, h, int(self.max_splits))
 
     def advance(self, system, params, Y, t0, periods: int, n_active=None):
-        if self.backend == "auto" and system.native is not None:
+        if self.native and system.native is not None:
             from ._native import native_advance
 
             return native_advance(self, system, params, Y, t0, int(periods), n_active)
         return super().advance(system, params, Y, t0, periods)
 
     def advance_rows(self, system, params_rows, rows, Y, t0, periods: int, n_active=None):
-        if self.backend == "auto" and system.native is not None:
+        if self.native and system.native is not None:
             from ._native import native_advance
 
             return native_advance(self, system, params_rows, Y, t0, int(periods), n_active, rows=rows)
@@ -405,4 +406,4 @@ class KinkAwareRK4(AbstractFixedStep):
 
     def to_dict(self):
         return {"type": self.name, "steps_per_period": int(self.steps_per_period),
-                "max_splits": int(self.max_splits), "backend": self.backend}
+                "max_splits": int(self.max_splits), "native": bool(self.native)}

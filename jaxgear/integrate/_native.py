@@ -3,7 +3,7 @@
 ``native/gear_kernel.cc`` is the kink-aware step of :mod:`._kink` for the reduced 2-DOF
 model of paper §4.1, written for the CPU (blocks of lanes kept in cache, time-only
 terms tabulated once per stage time, the trial step vectorised, the few lanes with a
-backlash crossing split one by one, blocks on every core). It is compiled with the
+backlash crossing gathered and split together, eight at a time, blocks on every core). It is compiled with the
 machine's C++ compiler on first use, registered as an XLA FFI target, and called inside
 ``jit`` like any other operation. The pure-JAX path stays the reference: it runs on
 GPUs (:func:`jax.lax.platform_dependent`), it supplies the derivatives (a
@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._cache import native_dir
+from .._system import NativeKernel
 
 __all__ = ["native_available", "native_advance", "PARAM_ORDER", "pack_params", "library_path"]
 
@@ -289,7 +290,7 @@ def native_advance(integrator, system, params, Y, t0, periods: int, n_active=Non
             return AbstractFixedStep.advance(integrator, system, params, Y, t0, periods)
         return AbstractIntegrator.advance_rows(integrator, system, params, rows, Y, t0, periods)
 
-    if not _load() or Y.ndim != 2 or Y.shape[0] != 4 or system.native != "reduced":
+    if not _load() or Y.ndim != 2 or Y.shape[0] != 4 or system.native is not NativeKernel.REDUCED:
         return jax_path(Y, t0, params, None, rows)
     active = jnp.asarray(Y.shape[1] if n_active is None else n_active, jnp.int32)
     steps, max_splits, shape = int(integrator.steps_per_period), int(integrator.max_splits), _shape_code(params)

@@ -10,12 +10,12 @@
 """
 
 from ._floquet import Instability, classify_multipliers, floquet_multipliers, monodromy, sorted_eigvals
-from ._options import SearchOptions, ShootOptions, default_solver
+from ._options import SearchOptions, ShootOptions, VerifyOptions, default_solver
 from ._orbit import ShootResult, periodic_orbit
-from ._search import NEWTON_STATUSES, OrbitSearch, PeriodicOrbit, find_periodic_orbits
+from ._search import NEWTON_STATUSES, OrbitSearch, PeriodicOrbit, SearchSettings, find_periodic_orbits
 from ._seeds import seeds_from_result, seeds_in_box
 from ._verify import OrbitCheck, verify_orbit
 
-__all__ = ["SearchOptions", "ShootOptions", "default_solver", "Instability", "classify_multipliers", "floquet_multipliers", "monodromy", "sorted_eigvals",
-           "ShootResult", "periodic_orbit", "OrbitSearch", "PeriodicOrbit", "find_periodic_orbits",
+__all__ = ["SearchOptions", "ShootOptions", "VerifyOptions", "default_solver", "Instability", "classify_multipliers", "floquet_multipliers", "monodromy", "sorted_eigvals",
+           "ShootResult", "periodic_orbit", "OrbitSearch", "SearchSettings", "PeriodicOrbit", "find_periodic_orbits",
            "NEWTON_STATUSES", "seeds_from_result", "seeds_in_box", "OrbitCheck", "verify_orbit"]

@@ -13,10 +13,11 @@ from typing import Any
 
 import equinox as eqx
 
-from .._checks import check_int, check_number
-from ..integrate import AbstractIntegrator
+from .._checks import check_int, check_number, split_changes, with_changes
+from ..integrate import AbstractIntegrator, integrator_from_dict
 
-__all__ = ["ShootOptions", "SearchOptions", "default_solver", "check_solver", "with_changes"]
+__all__ = ["ShootOptions", "SearchOptions", "VerifyOptions", "default_solver", "check_solver", "with_changes", "split_changes",
+           "solver_to_dict", "solver_from_dict"]
 
 STEP_RTOL, STEP_ATOL = 1e-10, 1e-12
 """Step tolerances of the library's solver: steps below ``1e-12 + 1e-10 |x|`` end the iteration
@@ -63,6 +64,33 @@ def check_solver(solver) -> None:
         raise ValueError(f"solver={solver!r} {hint}.")
 
 
+def solver_to_dict(solver) -> dict[str, Any] | None:
+    """A solver as saved in a result file: ``None`` (the library's choice) or its class name
+    and tolerances (:func:`solver_from_dict` rebuilds it)."""
+    if solver is None:
+        return None
+    return {"type": type(solver).__name__, "rtol": float(solver.rtol), "atol": float(solver.atol)}
+
+
+def solver_from_dict(d: dict[str, Any] | None):
+    """The solver :func:`solver_to_dict` saved: the optimistix class of that name with those
+    tolerances (``None`` for the library's choice)."""
+    if d is None:
+        return None
+    cls = getattr(_optx(), str(d["type"]), None)
+    if not isinstance(cls, type):
+        raise ValueError(f"solver type {d['type']!r} is not an optimistix solver.")
+    return cls(rtol=float(d["rtol"]), atol=float(d["atol"]))
+
+
+def _integrator_to_dict(integrator) -> dict[str, Any] | None:
+    return None if integrator is None else integrator.to_dict()
+
+
+def _integrator_from_dict(d) -> AbstractIntegrator | None:
+    return None if d is None else integrator_from_dict(d)
+
+
 class ShootOptions(eqx.Module):
     """Options of one Newton-type solve of ``P^k(x) - x = 0`` (paper §4.1).
 
@@ -80,7 +108,7 @@ class ShootOptions(eqx.Module):
             ``prod (1 / ||x - r_i||^p + shift)`` (Farrell, Birkisson & Funke 2015).
     """
 
-    solver: Any = None
+    solver: Any = eqx.field(default=None, metadata=dict(encode=solver_to_dict, decode=solver_from_dict))
     tol: float = 1e-10
     max_iter: int = eqx.field(static=True, default=40)
     max_norm: float = 1e6
@@ -155,7 +183,8 @@ class SearchOptions(ShootOptions):
 
     transient: int = eqx.field(static=True, default=0)
     deflation_rounds: int = eqx.field(static=True, default=0)
-    search_integrator: AbstractIntegrator | None = eqx.field(static=True, default=None)
+    search_integrator: AbstractIntegrator | None = eqx.field(
+        static=True, default=None, metadata=dict(encode=_integrator_to_dict, decode=_integrator_from_dict))
     dedup_tol: float = 1e-6
     chunk_size: int = eqx.field(static=True, default=256)
     trajectory_samples: int = eqx.field(static=True, default=200)
@@ -173,18 +202,31 @@ class SearchOptions(ShootOptions):
         check_int(self.verify, "verify", 0)
 
 
-def with_changes(options, cls, changes: dict):
-    """``options`` (an instance of ``cls``, or ``None`` for its defaults) with the fields in
-    ``changes`` replaced (checked again); an unknown name raises ``ValueError``."""
-    if options is None:
-        options = cls()
-    elif not isinstance(options, cls):
-        raise ValueError(f"options={options!r} must be a {cls.__name__} (or None for the defaults).")
-    if not changes:
-        return options
-    names = [f.name for f in dataclasses.fields(options)]
-    unknown = [n for n in changes if n not in names]
-    if unknown:
-        raise ValueError(f"unknown option {unknown[0]!r}; the fields of {type(options).__name__} are "
-                         f"{', '.join(names)}.")
-    return dataclasses.replace(options, **changes)
+class VerifyOptions(eqx.Module):
+    """Options of :func:`~jaxgear.verify_orbit`, the paper's check of an orbit by direct
+    integration from perturbed starts (§4.1).
+
+    Attributes:
+        periods: forcing periods integrated per trial.
+        perturbation: relative size of the initial perturbation (dimensionless): the
+            starts are ``x* + perturbation (1 + ||x*||) u`` for random unit vectors ``u``.
+        n_trials: number of perturbed starts.
+        leave_tol: distance (state units) above which the motion has left the orbit.
+        n_final: number of final stroboscopic points returned per trial (at most ``periods``).
+        seed: seed of the random directions ``u``.
+    """
+
+    periods: int = eqx.field(static=True, default=300)
+    perturbation: float = 1e-6
+    n_trials: int = eqx.field(static=True, default=4)
+    leave_tol: float = 1e-3
+    n_final: int = eqx.field(static=True, default=8)
+    seed: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        check_int(self.periods, "periods", 1)
+        check_number(self.perturbation, "perturbation", 0)
+        check_int(self.n_trials, "n_trials", 1)
+        check_number(self.leave_tol, "leave_tol", 0, strict_min=True)
+        check_int(self.n_final, "n_final", 1, int(self.periods))
+        check_int(self.seed, "seed", 0)

@@ -13,7 +13,7 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from .._batching import chunks, pad_rows, progress_bar
-from .._codec import array_field, items_field, result_type
+from .._codec import array_field, custom_field, items_field, result_type
 from .._devices import local_devices, shard_rows
 from .._format import format_table
 from .._matching import group_attractors, same_attractor
@@ -22,13 +22,13 @@ from .._poincare import sample_trajectory, stroboscopic_map
 from .._status import Status, count_statuses
 from .._system import ForcedSystem, check_state_shape, check_system
 from .._version import __version__
-from ..integrate import AbstractIntegrator, resolve_integrator
+from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ._floquet import Instability, check_period
 from ._options import SearchOptions, ShootOptions, with_changes
 from ._orbit import ShootResult, check_shooting, shoot_kernel
 from ._solve import check_segments
 
-__all__ = ["PeriodicOrbit", "OrbitSearch", "find_periodic_orbits", "NEWTON_STATUSES"]
+__all__ = ["PeriodicOrbit", "OrbitSearch", "SearchSettings", "find_periodic_orbits", "NEWTON_STATUSES"]
 
 NEWTON_STATUSES = (Status.CONVERGED, Status.NOT_CONVERGED, Status.SINGULAR, Status.DIVERGED)
 """The outcomes a Newton run can have."""
@@ -87,6 +87,35 @@ class PeriodicOrbit:
         }
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SearchSettings:
+    """What a search of :func:`find_periodic_orbits` was run with (saved field by field).
+
+    Attributes:
+        options: the :class:`SearchOptions` (every option of each solve and of the search).
+        periods: the ``k`` tried, increasing.
+        t0: phase of the stroboscopic section (system time unit).
+        integrator: the integrator of the reported orbits (the rounds ran with
+            ``options.search_integrator`` when it is given).
+    """
+
+    options: SearchOptions
+    periods: tuple[int, ...]
+    t0: float
+    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
+
+    @property
+    def search_integrator(self) -> AbstractIntegrator:
+        """The integrator of the rounds (``options.search_integrator``, or :attr:`integrator`)."""
+        return self.integrator if self.options.search_integrator is None else self.options.search_integrator
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every setting, JSON-able and flat: the options (:meth:`SearchOptions.to_dict`),
+        ``periods``, ``t0``, ``integrator`` and the rounds' ``search_integrator``."""
+        return dict(self.options.to_dict(), periods=list(self.periods), t0=float(self.t0),
+                    integrator=self.integrator.to_dict(), search_integrator=self.search_integrator.to_dict())
+
+
 @result_type
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class OrbitSearch:
@@ -104,8 +133,8 @@ class OrbitSearch:
         system: the system's name; state_names: its coordinate names;
         section_index: its default section coordinate (or ``None``).
         params: the full parameter set as a dict (canonical names for the gear models).
-        settings: the options of the search (:meth:`SearchOptions.to_dict`, the periods,
-            ``t0`` and the integrator), JSON-able.
+        settings: a :class:`SearchSettings`: the :class:`SearchOptions`, the periods
+            tried, ``t0`` and the integrator.
         version: jaxgear version; runtime_s: wall time of the search (s).
         convergence: per ``k`` (keys ``"1"``, ``"2"``, ...): ``runs`` (seed runs, all
             deflation rounds), ``seeds``, ``converged`` (runs that converged to an orbit of
@@ -126,7 +155,7 @@ class OrbitSearch:
     state_names: tuple[str, ...] = ()
     section_index: int | None = None
     params: dict = dataclasses.field(default_factory=dict)
-    settings: dict = dataclasses.field(default_factory=dict)
+    settings: SearchSettings
     version: str = ""
     runtime_s: float = float("nan")
     convergence: dict = dataclasses.field(default_factory=dict)
@@ -168,7 +197,7 @@ class OrbitSearch:
         """Everything but the per-seed arrays and trajectories, JSON-able."""
         return dict(
             jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
-            params=self.params, settings=self.settings, n_seeds=self.n_seeds,
+            params=self.params, settings=self.settings.to_dict(), n_seeds=self.n_seeds,
             status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
             convergence=dict(self.convergence), checks=dict(self.checks),
             runtime_s=self.runtime_s, version=self.version,
@@ -528,8 +557,7 @@ def find_periodic_orbits(system: ForcedSystem, params, seeds: Float[ArrayLike, "
     orbits = _with_trajectories(system, params, orbits, opts.trajectory_samples, integrator)
     counts = count_statuses(np.concatenate([np.asarray(r.status).reshape(-1) for r in shots.values()]),
                             NEWTON_STATUSES)
-    settings = dict(opts.to_dict(), periods=sorted(groups), t0=float(t0), integrator=integrator.to_dict(),
-                    search_integrator=search_int.to_dict())
+    settings = SearchSettings(options=opts, periods=tuple(sorted(groups)), t0=float(t0), integrator=integrator)
     return OrbitSearch(orbits=tuple(orbits), shots=shots, status_counts=counts, seeds=groups, system=system.name,
                        state_names=tuple(system.state_names), section_index=system.section_index,
                        params=params_to_dict(params), settings=settings, version=__version__,

@@ -11,6 +11,7 @@ import numpy as np
 from .._poincare import stroboscopic_orbit
 from .._system import ForcedSystem, check_state_shape
 from ..integrate import AbstractIntegrator
+from ._options import VerifyOptions, with_changes
 
 __all__ = ["OrbitCheck", "verify_orbit"]
 
@@ -39,9 +40,8 @@ class OrbitCheck(NamedTuple):
     diverged: np.ndarray
 
 
-def verify_orbit(system: ForcedSystem, params, orbit, *, periods: int = 300, perturbation: float = 1e-6,
-                 n_trials: int = 4, leave_tol: float = 1e-3, n_final: int = 8, seed: int = 0, t0=0.0,
-                 integrator: AbstractIntegrator | None = None) -> OrbitCheck:
+def verify_orbit(system: ForcedSystem, params, orbit, *, t0=0.0, integrator: AbstractIntegrator | None = None,
+                 options: VerifyOptions | None = None, **changes) -> OrbitCheck:
     """Check an orbit by direct integration from perturbed starts (paper §4.1).
 
     Starts at ``points[0] + perturbation * (1 + ||points[0]||) * u`` for ``n_trials``
@@ -51,32 +51,30 @@ def verify_orbit(system: ForcedSystem, params, orbit, *, periods: int = 300, per
     unstable one is left (the perturbation grows like ``|lambda_max|^n``).
 
     Args:
+        system, params: the :class:`~jaxgear.ForcedSystem` and its parameters.
         orbit: a :class:`PeriodicOrbit`, or its points ``(m, dim)`` at phase ``t0``.
-        periods: forcing periods integrated per trial.
-        perturbation: relative size of the initial perturbation (dimensionless).
-        leave_tol: distance (state units) above which the motion has left the orbit.
-        n_final: number of final stroboscopic points returned per trial.
         t0: phase of the orbit's points (system time unit).
+        integrator: any integrator object; default :func:`~jaxgear.default_integrator`.
+        options: :class:`VerifyOptions` (``periods``, ``perturbation``, ``n_trials``,
+            ``leave_tol``, ``n_final``, ``seed``); ``None``: the defaults.
+        **changes: fields of ``options`` to change, e.g. ``periods=100``.
     Returns:
         :class:`OrbitCheck` (``distance`` of shape ``(n_trials, periods)``,
         ``final_points`` ``(n_trials, n_final, dim)``).
     """
+    opts = with_changes(options, VerifyOptions, changes)
     pts = np.asarray(getattr(orbit, "points", orbit), dtype=float)
     if pts.ndim == 1:
         pts = pts[None]
     check_state_shape(system, pts)
-    if int(periods) < 1 or int(n_trials) < 1 or not (1 <= int(n_final) <= int(periods)):
-        raise ValueError("need periods >= 1, n_trials >= 1 and 1 <= n_final <= periods.")
-    if not (perturbation >= 0 and leave_tol > 0):
-        raise ValueError("perturbation must be >= 0 and leave_tol > 0.")
-    u = np.array(jax.random.normal(jax.random.PRNGKey(int(seed)), (int(n_trials), system.dim), jnp.float64))
+    u = np.array(jax.random.normal(jax.random.PRNGKey(opts.seed), (opts.n_trials, system.dim), jnp.float64))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
-    x0 = pts[0] + perturbation * (1.0 + np.linalg.norm(pts[0])) * u
-    traj = np.asarray(stroboscopic_orbit(system, params, x0, n_points=int(periods), t0=t0, integrator=integrator))
+    x0 = pts[0] + opts.perturbation * (1.0 + np.linalg.norm(pts[0])) * u
+    traj = np.asarray(stroboscopic_orbit(system, params, x0, n_points=opts.periods, t0=t0, integrator=integrator))
     dist = np.min(np.linalg.norm(traj[:, :, None, :] - pts[None, None], axis=-1), axis=-1)
     dist = np.where(np.isfinite(dist), dist, np.inf)
-    out = dist > leave_tol
+    out = dist > opts.leave_tol
     left_at = np.where(out.any(axis=1), np.argmax(out, axis=1) + 1, -1)
     diverged = ~np.all(np.isfinite(traj), axis=(1, 2))
     return OrbitCheck(kept=bool(np.all(left_at < 0)), left_at=left_at, distance=dist,
-                      final_points=traj[:, -int(n_final):], diverged=diverged)
+                      final_points=traj[:, -opts.n_final:], diverged=diverged)

@@ -4,6 +4,7 @@
 - :mod:`._basins` — :func:`basin_sweep` (global analysis per value, attractors matched);
 - :mod:`._basin_map` — :func:`basin_map` (global analysis over a grid of two parameters);
 - :mod:`._parameter_map` — :func:`parameter_map` (a grid of two parameters);
+- :mod:`._options` — :class:`SequenceOptions`, :class:`BasinOptions`;
 - :mod:`._kernels` — the batched (values x starts) kernels;
 - :mod:`._classify` — period codes and distinct attractors of recorded sequences;
 - :mod:`._values` — checking and applying parameter values;
@@ -14,10 +15,11 @@ from ._basin_map import BasinMap, basin_map, match_on_grid
 from ._basins import BasinSweep, basin_sweep, match_across_values
 from ._bifurcation import DIRECTIONS, BifurcationDiagram, SequenceSettings, bifurcation_diagram
 from ._classify import APERIODIC, ESCAPED, period_label, type_label
+from ._options import BasinOptions, SequenceOptions
 from ._parameter_map import ParameterMap, parameter_map
 from ._values import check_values
 
-__all__ = ["BifurcationDiagram", "SequenceSettings", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram",
+__all__ = ["SequenceOptions", "BasinOptions", "BifurcationDiagram", "SequenceSettings", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram",
            "basin_sweep", "basin_map", "parameter_map", "match_on_grid", "ESCAPED", "APERIODIC", "DIRECTIONS",
            "period_label", "type_label", "match_across_values",
            "check_values"]

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .._cells import CellGrid
-from .._checks import check_bool
+from .._checks import check_bool, with_changes
 from .._codec import array_field, result_type
 from .._devices import process_index
 from .._format import format_table
@@ -28,10 +28,10 @@ from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod
-from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_options, uncertainty_setting
 from ._bifurcation import read_only
 from ._classify import label_order
+from ._options import BasinOptions
 from ._values import apply_values, check_values, coord_name, sorted_values
 
 __all__ = ["BasinMap", "basin_map", "match_on_grid"]
@@ -174,8 +174,8 @@ def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarra
 
 def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y,
               grid: CellGrid | None = None, *, method: AbstractGlobalMethod | str | None = None,
-              match_tol: float | None = None, progress: bool = True, out=None, restart: bool = False,
-              save: bool = True, batched: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> BasinMap:
+              options: BasinOptions | None = None, progress: bool = True, out=None, restart: bool = False,
+              save: bool = True, **changes) -> BasinMap:
     """Basin shares over a grid of two parameters, attractors identified across the grid.
 
     At every point of ``values_y x values_x`` :func:`~jaxgear.analyze_global` runs
@@ -183,7 +183,7 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     region D). The attractors of every type (cycles, and quasi-periodic and chaotic
     attractors with their clouds) are given global ids by :func:`match_on_grid`: matched
     to those of the left and lower neighbours, cycles by the Hausdorff distance of their
-    stroboscopic point sets, pairs farther than ``match_tol`` not matched (default: 5 %
+    stroboscopic point sets, pairs farther than ``options.match_tol`` not matched (default: 5 %
     of the diagonal of the grid's box), clouds by the overlap of the boxes they occupy
     (as in :func:`~jaxgear.basin_sweep`). ``dominant`` and ``coexisting`` count
     attractors of every type (``coexisting_of`` one type). A map of ``ny x nx`` points costs ``ny * nx``
@@ -200,10 +200,12 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
             to ``DIR/parts/value_NNNNN.nc`` (``NNNNN = iy * nx + ix``) when done; the final
             ``DIR/basin_map.nc`` (``save=False``: only the parts); restart: discard a
             folder of other settings.
-        batched: run the points of a block in one lane pool (as in
-            :func:`~jaxgear.basin_sweep`).
-        uncertainty: cells sampled at each point for its label uncertainty (kept as
-            ``uncertainty_step`` and ``uncertainty_start``); 0 skips it.
+        options: :class:`~jaxgear.BasinOptions` (as in :func:`~jaxgear.basin_sweep`:
+            ``match_tol``; ``batched``, the points of a block in one lane pool;
+            ``uncertainty``, cells sampled at each point for its label uncertainty, kept as
+            ``uncertainty_step`` and ``uncertainty_start``, 0 skips it); ``None``: the defaults.
+        progress: show a progress bar.
+        **changes: fields of ``options`` to change.
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), process ``p`` of
     ``P`` computes the points ``i % P == p`` into ``out`` (required then), every process
@@ -213,7 +215,8 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     Returns:
         :class:`BasinMap`.
     """
-    system, params, method, grid, match_tol = resolve_basin_options(system, params, method, grid, match_tol)
+    opts = with_changes(options, BasinOptions, changes)
+    system, params, method, grid, opts = resolve_basin_options(system, params, method, grid, opts)
     fields_x, fields_y = param_targets(params, param_x), param_targets(params, param_y)
     if set(fields_x) & set(fields_y):
         raise ValueError(f"param_x={param_x!r} and param_y={param_y!r} set the same field.")
@@ -226,16 +229,16 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     check_bool(save, "save")
     settings = dict(kind="basin_map", system=system.name, param_x=param_x, values_x=vx.tolist(), param_y=param_y,
                     values_y=vy.tolist(), params=params_to_dict(params), grid=grid.to_dict(),
-                    method=method.to_dict(), match_tol=match_tol, **uncertainty_setting(uncertainty),
+                    method=method.to_dict(), match_tol=opts.match_tol, **uncertainty_setting(opts.uncertainty),
                     version=__version__)
-    results = analyses_at(system, [apply_values(params, names, v) for v in VV], grid, method, out, "basin_map",
-                          settings, restart, batched, progress, f"basin map {param_x} x {param_y}", int(uncertainty))
+    results = analyses_at(system, [apply_values(params, names, v) for v in VV], grid, method, opts, settings, out,
+                          restart, progress)
     ny, nx = len(vy), len(vx)
-    arrays = global_arrays(results, match_on_grid(results, ny, nx, match_tol), grid, system.dim)
+    arrays = global_arrays(results, match_on_grid(results, ny, nx, opts.match_tol), grid, system.dim)
     bmap = BasinMap(
         param_x=param_x, fields_x=fields_x, values_x=vx, param_y=param_y, fields_y=fields_y, values_y=vy,
         **{k: a.reshape(ny, nx, *a.shape[1:]) for k, a in arrays.items()}, grid=grid, method=method,
-        match_tol=match_tol, uncertainty_samples=int(uncertainty), system=system.name,
+        match_tol=opts.match_tol, uncertainty_samples=opts.uncertainty, system=system.name,
         state_names=tuple(system.state_names), params=params_to_dict(params), version=__version__)
     if out is not None and save and process_index() == 0:  # one process writes
         bmap.save(Path(out) / "basin_map.nc")

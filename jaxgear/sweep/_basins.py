@@ -21,7 +21,7 @@ import numpy as np
 
 from .._batching import progress_bar
 from .._cells import CellGrid
-from .._checks import check_bool, check_int, check_number
+from .._checks import check_bool, check_int, with_changes
 from .._codec import array_field, custom_field, result_type
 from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
@@ -45,6 +45,7 @@ from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._bifurcation import read_only
 from ._checkpoint import open_shared_checkpoint
 from ._classify import type_label
+from ._options import BasinOptions
 from ._values import check_values, coord_name, sorted_values
 
 __all__ = ["BasinSweep", "GlobalShares", "basin_sweep", "match_across_values"]
@@ -368,9 +369,9 @@ def _analyze_values(system, params_list, grid, method, batched: bool = False, un
 
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
-                method: AbstractGlobalMethod | str | None = None, match_tol: float | None = None,
+                method: AbstractGlobalMethod | str | None = None, options: BasinOptions | None = None,
                 progress: bool = True, out=None, restart: bool = False, save: bool = True,
-                batched: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> BasinSweep:
+                **changes) -> BasinSweep:
     """Basin shares across a parameter, attractors continued from value to value.
 
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
@@ -385,7 +386,8 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     (default: 5 % of the diagonal of the grid's box over its gridded axes); clouds by
     the overlap of the boxes of edge ``match_tol / 2`` they occupy (matched when they
     share at least half of the boxes of the one with fewer), not by point distance; a
-    cycle never matches a cloud. Greedily, closest pairs first. An attractor that
+    cycle never matches a cloud (``match_tol``, ``batched`` and ``uncertainty`` are the
+    fields of ``options``). Greedily, closest pairs first. An attractor that
     appears gets a new global id; one that vanishes keeps its id (it is not matched
     again later). Per value and global attractor the result records its type
     (``attractor_type``) and largest Lyapunov exponent with its error.
@@ -394,11 +396,9 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
         param, values: as in :func:`~jaxgear.bifurcation_diagram`.
         method: a global-analysis method object (default :class:`~jaxgear.Direct`) or
             its name; it carries every option (integrator, ``max_period``, ...).
-        out: kill-and-resume folder: each value's :class:`~jaxgear.GlobalResult` is saved
-            to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``
-            (``save=False``: only the parts; the command line writes the result with its
-            summary and figures as one set); restart: discard a folder of other settings.
-        batched: run the values of a block in one lane pool over (value, cell) pairs
+        options: :class:`~jaxgear.BasinOptions`; ``None``: the defaults. Its fields:
+            ``match_tol`` (``None``: 5 % of the grid's diagonal); ``batched``: run the
+            values of a block in one lane pool over (value, cell) pairs
             (:func:`~jaxgear.analysis.analyze_global_values`) instead of one analysis
             after another: the same attractors, and the same labels whenever a value's
             pilot finds all of its attractors (otherwise the capture radius changes at
@@ -409,11 +409,17 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             the cells' integration dominates, and what one pool saves, the pilot's and
             the tail's draining, is a small part of each analysis), while a sweep value by
             value saves and reports each value as it ends; one pool saves more on a GPU,
-            whose pools drain with most lanes idle.
-        uncertainty: cells sampled at each value for its label uncertainty
-            (:func:`~jaxgear.analysis.label_uncertainty`, kept as ``uncertainty_step`` and
-            ``uncertainty_start``); 0 skips it. On a small grid it is a large part of the
-            sweep (40 % on 20 x 12 x 24 cells, about 5 % on the paper's 90,000).
+            whose pools drain with most lanes idle. ``uncertainty``: cells sampled at each
+            value for its label uncertainty (:func:`~jaxgear.analysis.label_uncertainty`,
+            kept as ``uncertainty_step`` and ``uncertainty_start``); 0 skips it. On a small
+            grid it is a large part of the sweep (40 % on 20 x 12 x 24 cells, about 5 % on
+            the paper's 90,000).
+        progress: show a progress bar.
+        out: kill-and-resume folder: each value's :class:`~jaxgear.GlobalResult` is saved
+            to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``
+            (``save=False``: only the parts; the command line writes the result with its
+            summary and figures as one set); restart: discard a folder of other settings.
+        **changes: fields of ``options`` to change, e.g. ``uncertainty=0``.
 
     Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
     as several JAX processes (:func:`jaxgear._devices.initialize`, e.g. one per host
@@ -425,7 +431,8 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     Returns:
         :class:`BasinSweep`.
     """
-    system, params, method, grid, match_tol = resolve_basin_options(system, params, method, grid, match_tol)
+    opts = with_changes(options, BasinOptions, changes)
+    system, params, method, grid, opts = resolve_basin_options(system, params, method, grid, opts)
     param_targets(params, param)
     vals = sorted_values(values, param)
     check_values(system, params, (param,), vals[:, None])
@@ -434,12 +441,11 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     check_bool(save, "save")
     settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
-                    match_tol=float(match_tol), **uncertainty_setting(uncertainty), version=__version__)
+                    match_tol=float(opts.match_tol), **uncertainty_setting(opts.uncertainty), version=__version__)
     me = process_index()
-    results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, out, "basins",
-                          settings, restart, batched, progress, f"basins {param}", int(uncertainty))
-    sweep = _assemble_basins(results, param, param_targets(params, param), vals, grid, method, float(match_tol),
-                             int(uncertainty), system, params_to_dict(params), __version__)
+    results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, opts, settings, out,
+                          restart, progress)
+    sweep = _assemble_basins(results, param, vals, grid, method, opts, system, params)
     if out is not None and save and me == 0:  # one process writes
         sweep.save(Path(out) / "basins.nc")
     return sweep
@@ -453,11 +459,11 @@ def uncertainty_setting(uncertainty) -> dict:
     return {} if int(uncertainty) == DEFAULT_SAMPLES else {"uncertainty": int(uncertainty)}
 
 
-def resolve_basin_options(system, params, method, grid, match_tol):
+def resolve_basin_options(system, params, method, grid, options: BasinOptions):
     """The defaults and checks shared by :func:`basin_sweep` and
-    :func:`~jaxgear.basin_map`: ``(system, params, method, grid, match_tol)`` (the reduced
-    model and the paper's parameters, the default method and its grid, and 5 % of the
-    grid's diagonal when not given)."""
+    :func:`~jaxgear.basin_map`: ``(system, params, method, grid, options)`` (the reduced
+    model and the paper's parameters, the default method and its grid, and ``match_tol``
+    5 % of the grid's diagonal when not given)."""
     if system is None:
         system = REDUCED
     if params is None:
@@ -476,21 +482,26 @@ def resolve_basin_options(system, params, method, grid, match_tol):
     if grid.dim != system.dim:
         raise ValueError(f"the grid has {grid.dim} coordinates, the system {system.dim}.")
     method.check(system, grid)
-    if match_tol is None:
-        match_tol = 0.05 * float(np.linalg.norm(np.asarray(grid.upper) - np.asarray(grid.lower)))
-    check_number(match_tol, "match_tol", 0, strict_min=True)
-    return system, params, method, grid, float(match_tol)
+    if options.match_tol is None:
+        diagonal = float(np.linalg.norm(np.asarray(grid.upper) - np.asarray(grid.lower)))
+        options = dataclasses.replace(options, match_tol=0.05 * diagonal)
+    return system, params, method, grid, options
 
 
-def analyses_at(system, params_list, grid, method, out, kind: str, settings: dict, restart: bool, batched: bool,
-                progress: bool, label: str, uncertainty: int = DEFAULT_SAMPLES) -> list:
+def analyses_at(system, params_list, grid, method, options: BasinOptions, settings: dict, out, restart: bool,
+                progress: bool) -> list:
     """The global analysis at every parameter set of ``params_list`` (with the label
-    uncertainty of ``uncertainty`` sampled cells), resumable: each
-    result is saved to ``out/parts/value_NNNNN.nc`` (``NNNNN`` its index) as its block
-    of at most :data:`BLOCK_CELLS` cells ends, and a rerun loads the saved ones. With
-    several JAX processes, process ``p`` of ``P`` computes the indices ``i % P == p``
-    (``out`` required) and reads the others' parts. A progress bar (``label``) counts
-    the finished ones."""
+    uncertainty of ``options.uncertainty`` sampled cells, in one lane pool per block when
+    ``options.batched``), resumable: each result is saved to
+    ``out/parts/value_NNNNN.nc`` (``NNNNN`` its index) as its block of at most
+    :data:`BLOCK_CELLS` cells ends, and a rerun loads the saved ones (``settings``: the
+    manifest's, of ``kind`` ``"basins"`` or ``"basin_map"``; ``restart``: discard parts of
+    other settings). With several JAX processes, process ``p`` of ``P`` computes the
+    indices ``i % P == p`` (``out`` required) and reads the others' parts. A progress bar
+    counts the finished ones."""
+    kind = settings["kind"]
+    label = (f"basins {settings['param']}" if kind == "basins"
+             else f"basin map {settings['param_x']} x {settings['param_y']}")
     n = len(params_list)
     n_proc, me = process_count(), process_index()
     if n_proc > 1 and out is None:
@@ -513,7 +524,8 @@ def analyses_at(system, params_list, grid, method, out, kind: str, settings: dic
     for b in range(0, len(todo), per_block):
         block = todo[b:b + per_block]
         with values_over_processes():  # this process's values: each analysis on this process's devices
-            done = _analyze_values(system, [params_list[i] for i in block], grid, method, batched, uncertainty)
+            done = _analyze_values(system, [params_list[i] for i in block], grid, method, options.batched,
+                                   options.uncertainty)
         for i, r in zip(block, done):
             if ck.dir is not None:
                 r.save(ck.path(f"value_{i:05d}.nc"))
@@ -584,9 +596,11 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
     return out
 
 
-def _assemble_basins(results, param, fields, vals, grid, method, match_tol, uncertainty_samples, system, params_dict,
-                     version):
-    arrays = global_arrays(results, match_across_values(results, match_tol), grid, system.dim)
-    return BasinSweep(param=param, fields=tuple(fields), values=vals, **arrays, grid=grid, method=method,
-                      match_tol=match_tol, uncertainty_samples=uncertainty_samples, system=system.name,
-                      state_names=tuple(system.state_names), params=params_dict, version=version)
+def _assemble_basins(results, param: str, values, grid, method, options: BasinOptions, system, params) -> BasinSweep:
+    """The :class:`BasinSweep` of the analyses ``results`` at ``values`` of ``param``, their
+    attractors matched from value to value (``options.match_tol`` resolved)."""
+    arrays = global_arrays(results, match_across_values(results, options.match_tol), grid, system.dim)
+    return BasinSweep(param=param, fields=tuple(param_targets(params, param)), values=values, **arrays, grid=grid,
+                      method=method, match_tol=float(options.match_tol), uncertainty_samples=options.uncertainty,
+                      system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
+                      version=__version__)

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
-from .._checks import check_bool, check_choice, check_int, check_number
+from .._checks import check_bool, check_choice, with_changes
 from .._codec import array_field, custom_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
@@ -42,6 +42,7 @@ from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integr
 from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import APERIODIC, ESCAPED, classify_sequences, group_starts, label_order, type_label
 from ._kernels import independent_points, sequential_points, values_exponent_estimates
+from ._options import DIAGRAM_RECORD, SequenceOptions
 from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
 
 __all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "DIRECTIONS", "check_common", "read_only"]
@@ -58,27 +59,17 @@ def read_only(a) -> np.ndarray:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SequenceSettings:
-    """The options of a sweep that follows each start for a number of forcing periods
-    and classifies the recorded stroboscopic points (:func:`bifurcation_diagram`,
+    """What a sweep that follows each start for a number of forcing periods and classifies
+    the recorded stroboscopic points ran with (:func:`bifurcation_diagram`,
     :func:`~jaxgear.parameter_map`).
 
     Attributes:
-        transient: forcing periods integrated before recording.
-        record: forcing periods recorded (R stroboscopic points per start).
+        options: the :class:`~jaxgear.SequenceOptions` (``record`` as used, never ``None``).
         integrator: the integrator.
-        max_period: largest period k detected.
-        tol: relative recurrence tolerance of the period detection.
-        merge_tol: relative distance under which two starts reached the same attractor.
-        escape_bound: a state beyond it (any coordinate, in absolute value) escaped.
     """
 
-    transient: int
-    record: int
+    options: SequenceOptions
     integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict)
-    max_period: int
-    tol: float
-    merge_tol: float
-    escape_bound: float
 
 
 @result_type
@@ -105,7 +96,8 @@ class BifurcationDiagram:
             the stroboscopic map per forcing period on an aperiodic attractor and its
             standard error (NaN for P-k and escaped lanes, and in older files).
         system, state_names, params (the base parameter set, canonical names), settings
-        (a :class:`SequenceSettings`: transient, record, integrator, tolerances), version.
+        (a :class:`SequenceSettings`: the :class:`~jaxgear.SequenceOptions` and the
+        integrator), version.
     """
 
     param: str
@@ -211,7 +203,7 @@ class BifurcationDiagram:
         attractors of the same type, count as equal);
         for ``"up"`` and ``"down"`` this marks the hysteresis."""
         da, db = self._d(a), self._d(b)
-        tol = self.settings.merge_tol
+        tol = self.settings.options.merge_tol
         out = np.zeros(len(self.values), dtype=bool)
         for i in range(len(self.values)):
             A, B = self._attractor_sets(da, i), self._attractor_sets(db, i)
@@ -282,27 +274,21 @@ class BifurcationDiagram:
         return save_result(self, path)
 
 
-def check_common(system, params, transient, record, max_period, tol, chunk_size):
-    """Defaults (the gear model and the paper preset) and the checks shared by the sweeps."""
+def check_common(system, params):
+    """The defaults shared by the sweeps: the gear model and the paper preset."""
     if system is None:
         system = REDUCED
     if params is None:
         if system is not REDUCED:
             raise ValueError("pass the parameters of your system.")
         params = paper_params()
-    check_int(transient, "transient", 0)
-    check_int(max_period, "max_period", 1)
-    check_int(chunk_size, "chunk_size", 1)
-    check_int(record, "record", 2 * int(max_period) + 1)
-    check_number(tol, "tol", 0, strict_min=True)
     return system, params
 
 
-def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values, x0s, *, transient: int = 400,
-                        record: int = 64, direction: str = "independent", integrator: AbstractIntegrator | None = None,
-                        max_period: int = 16, tol: float = 1e-6, merge_tol: float = 1e-3,
-                        escape_bound: float = 1e6, chunk_size: int = 1024, progress: bool = True,
-                        out=None, restart: bool = False, save: bool = True) -> BifurcationDiagram:
+def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values, x0s, *,
+                        direction: str = "independent", integrator: AbstractIntegrator | None = None,
+                        options: SequenceOptions | None = None, progress: bool = True, out=None,
+                        restart: bool = False, save: bool = True, **changes) -> BifurcationDiagram:
     """Bifurcation diagram: stroboscopic points against one parameter, classified by period.
 
     For each value of ``param`` and each initial state: ``transient`` forcing periods,
@@ -310,7 +296,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     successive periods), classified as P-k (the smallest ``k <= max_period`` with
     ``|x_j - x_(j-k)| <= tol (1 + |x_j|)`` over the last k+1 points), aperiodic (none:
     quasi-periodic, chaotic or a slow transient) or escaped (non-finite, or a norm above
-    ``escape_bound``). Each aperiodic attractor (per direction and value) then gets its
+    ``escape_bound``); those are the fields of ``options``. Each aperiodic attractor (per direction and value) then gets its
     type, chaotic or quasi-periodic, from the largest Lyapunov exponent of the
     stroboscopic map (:func:`aperiodic_types`: a few hundred periods from its last
     point, every aperiodic attractor of the diagram in one batch; kept as
@@ -334,14 +320,16 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
             restarts from its ``x0`` at the next value.
         integrator: default :func:`~jaxgear.integrate.default_integrator` (for a fixed-step
             integrator the step is ``h = T/steps`` per value).
-        max_period, tol: period detection; merge_tol: relative distance under which two
-            starts reached the same attractor.
-        chunk_size: trajectories per compiled batch (values per block = chunk_size // S);
-            also the block written to ``out``.
+        options: :class:`~jaxgear.SequenceOptions` (``transient``, ``record`` (``None``:
+            :data:`DIAGRAM_RECORD`), ``max_period``, ``tol``, ``merge_tol``,
+            ``escape_bound``, ``chunk_size``: trajectories per compiled batch, values per
+            block ``chunk_size // S``, also the block written to ``out``); ``None``: the defaults.
+        progress: show a progress bar.
         out: folder for kill-and-resume (``DIR/parts``, ``DIR/manifest.json``) and the
             final ``DIR/bifurcation.nc``; restart: discard a folder of other settings;
             save: ``False`` keeps only the resume parts in ``out`` (the command line writes
             the result with its summary and figures as one set).
+        **changes: fields of ``options`` to change, e.g. ``transient=200, max_period=8``.
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), every process
     calls this with the same arguments: each block of independent values is split over
@@ -353,40 +341,36 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     Returns:
         :class:`BifurcationDiagram`.
     """
-    system, params, vals, X0, integrator = _check_diagram(system, params, param, values, x0s, transient, record,
-                                                          direction, integrator, max_period, tol, merge_tol,
-                                                          escape_bound, chunk_size, restart, save)
-    passes, dirs, blocks = _passes(direction, len(vals), len(X0), int(chunk_size))
+    opts = with_changes(options, SequenceOptions, changes).with_record(DIAGRAM_RECORD)
+    system, params, vals, X0, integrator = _check_diagram(system, params, param, values, x0s, direction, integrator,
+                                                          restart, save)
+    passes, dirs, blocks = _passes(direction, len(vals), len(X0), opts.chunk_size)
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
-                    starts=X0.tolist(), params=params_to_dict(params), transient=int(transient), record=int(record),
-                    direction=direction, integrator=integrator.to_dict(), max_period=int(max_period),
-                    tol=float(tol), merge_tol=float(merge_tol), escape_bound=float(escape_bound),
+                    starts=X0.tolist(), params=params_to_dict(params), transient=opts.transient, record=opts.record,
+                    direction=direction, integrator=integrator.to_dict(), max_period=opts.max_period,
+                    tol=float(opts.tol), merge_tol=float(opts.merge_tol), escape_bound=float(opts.escape_bound),
                     block_values=blocks, version=__version__)
     ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
-    run = _Run(system, params, (param,), vals, X0, int(transient), int(record), integrator, float(escape_bound))
+    run = _Run(system, params, (param,), vals, X0, opts, integrator)
     points = _record_passes(run, passes, dirs, blocks, ck, progress, f"sweep {param}")
-    period = classify_sequences(points, int(max_period), float(tol), float(escape_bound))
-    attractor = group_starts(points[..., -int(max_period):, :], period, float(merge_tol))
-    kind, lam, err = aperiodic_types(run, points, period, attractor, int(chunk_size))
+    period = classify_sequences(points, opts.max_period, float(opts.tol), float(opts.escape_bound))
+    attractor = group_starts(points[..., -opts.max_period:, :], period, float(opts.merge_tol))
+    kind, lam, err = aperiodic_types(run, points, period, attractor)
     diagram = BifurcationDiagram(
         param=param, fields=param_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
         period=period, attractor=attractor, attractor_type=kind, largest_exponent=lam, exponent_error=err,
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
-        settings=SequenceSettings(transient=int(transient), record=int(record), integrator=integrator,
-                                  max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
-                                  escape_bound=float(escape_bound)),
-        version=__version__,
+        settings=SequenceSettings(options=opts, integrator=integrator), version=__version__,
     )
     if out is not None and save and cell_processes()[0] == 0:  # one process writes
         diagram.save(Path(out) / "bifurcation.nc")
     return diagram
 
 
-def _check_diagram(system, params, param, values, x0s, transient, record, direction, integrator, max_period, tol,
-                   merge_tol, escape_bound, chunk_size, restart, save):
+def _check_diagram(system, params, param, values, x0s, direction, integrator, restart, save):
     """The defaults and checks of :func:`bifurcation_diagram`: ``(system, params, values
     (sorted), starts (S, dim), integrator)``."""
-    system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
+    system, params = check_common(system, params)
     check_choice(direction, "direction", DIRECTIONS)
     check_bool(restart, "restart")
     check_bool(save, "save")
@@ -395,8 +379,6 @@ def _check_diagram(system, params, param, values, x0s, transient, record, direct
     X0 = check_starts(system, x0s)
     check_system(system, with_param(params, param, vals[0]), X0[0])
     check_values(system, params, (param,), vals[:, None])
-    check_number(merge_tol, "merge_tol", 0, strict_min=True)
-    check_number(escape_bound, "escape_bound", 0, strict_min=True)
     return system, params, vals, X0, resolve_integrator(integrator)
 
 
@@ -420,19 +402,17 @@ def _passes(direction: str, V: int, S: int, chunk_size: int):
 
 @dataclasses.dataclass(frozen=True)
 class _Run:
-    """What every block of a diagram integrates with: the system, base parameters, swept
-    names, sorted values ``(V,)``, starts ``(S, dim)``, transient and record periods, the
-    integrator and the escape bound."""
+    """What every block of a sweep integrates with: the system, base parameters, swept
+    names, sorted values ``(V,)`` (a diagram) or grid points ``(n, len(names))`` (a
+    parameter map), starts ``(S, dim)``, the options (``record`` set) and the integrator."""
 
     system: Any
     params: Any
     names: tuple[str, ...]
     values: np.ndarray
     starts: np.ndarray
-    transient: int
-    record: int
+    options: SequenceOptions
     integrator: Any
-    bound: float
 
 
 def _compute_block(run: _Run, name: str, B: int, orders, a: int, b: int, carry) -> dict:
@@ -440,18 +420,19 @@ def _compute_block(run: _Run, name: str, B: int, orders, a: int, b: int, carry) 
     carried out of the block (sequential passes; the carry in for independent ones)."""
     if name == "independent":
         pts = independent_points(run.system, run.params, run.names, run.values[a:b, None], B, jnp.asarray(run.starts),
-                                 run.transient, run.record, run.integrator)[:, None]
+                                 run.options.transient, run.options.record, run.integrator)[:, None]
     else:
         seq = np.stack([run.values[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
         pts, carry = sequential_points(run.system, run.params, run.names, seq, B, jnp.asarray(run.starts), carry,
-                                       run.transient, run.record, run.integrator, run.bound)
+                                       run.options.transient, run.options.record, run.integrator,
+                                       run.options.escape_bound)
     return dict(points=pts, carry=carry)
 
 
 def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: str) -> np.ndarray:
     """Every pass block by block (each saved to and resumed from ``ck``): the recorded
     points ``(D, V, S, R, dim)``."""
-    V, (S, dim), R = len(run.values), run.starts.shape, run.record
+    V, (S, dim), R = len(run.values), run.starts.shape, run.options.record
     points = np.empty((len(dirs), V, S, R, dim))
     bar = progress_bar(len(dirs) * V, label, progress, unit="value")
     for name, ds in passes:
@@ -473,7 +454,7 @@ def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: s
     return points
 
 
-def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor: np.ndarray, chunk_size: int):
+def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor: np.ndarray):
     """Type and largest Lyapunov exponent of the attractor every (direction, value, start)
     reached: ``attractor_type`` (an :class:`~jaxgear.AttractorType` value: periodic for a P-k lane,
     unknown for an escaped one), ``largest_exponent`` and ``exponent_error`` (per forcing
@@ -499,7 +480,7 @@ def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor
     est, final = values_exponent_estimates(run.system, run.params, run.names, run.values[vv, None],
                                            points[dd, vv, ss, -1], n_exponents=k, periods=LYAPUNOV_PERIODS,
                                            stretches=LYAPUNOV_STRETCHES, integrator=run.integrator,
-                                           chunk_size=chunk_size)
+                                           chunk_size=run.options.chunk_size)
     spectrum = exponent_spectrum(run, vv, est, final)
     types = np.asarray(classify_attractor(spectrum))
     here = (period[dd, vv] == APERIODIC) & (attractor[dd, vv] == attractor[dd, vv, ss][:, None])  # (n, S)

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
-from .._checks import check_choice
+from .._checks import check_choice, with_changes
 from .._codec import array_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
@@ -19,10 +19,11 @@ from .._params import param_targets, params_to_dict
 from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
-from ._bifurcation import SequenceSettings, check_common, read_only
+from ._bifurcation import SequenceSettings, _Run, check_common, read_only
 from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points
+from ._options import SequenceOptions
 from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
 
 __all__ = ["ParameterMap", "parameter_map"]
@@ -117,28 +118,28 @@ class ParameterMap:
 
 
 def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y, x0s, *,
-                  quantity: str = "period", transient: int = 400, record: int | None = None,
-                  integrator: AbstractIntegrator | None = None, max_period: int = 16, tol: float = 1e-6, merge_tol: float = 1e-3,
-                  escape_bound: float = 1e6, chunk_size: int = 1024, progress: bool = True, out=None,
-                  restart: bool = False) -> ParameterMap:
+                  quantity: str = "period", integrator: AbstractIntegrator | None = None,
+                  options: SequenceOptions | None = None, progress: bool = True, out=None, restart: bool = False,
+                  **changes) -> ParameterMap:
     """Two-parameter map: the period of the attractor reached from a fixed initial state
     (``quantity="period"``: from ``x0s[0]``) or the number of distinct attractors reached
     from several starts (``"n_attractors"``), on the grid ``values_y x values_x``.
 
     Every (grid point, start) runs as in :func:`bifurcation_diagram` with
-    ``direction="independent"`` (``transient`` periods, then ``record`` points, default
-    ``2 max_period + 2``), all batched with ``vmap`` in blocks of ``chunk_size``
-    trajectories; both period codes and attractor counts are always computed. ``out``:
-    kill-and-resume folder and the final ``DIR/parameter_map.nc``.
+    ``direction="independent"`` and the :class:`~jaxgear.SequenceOptions` ``options``
+    (``transient`` periods, then ``record`` points, ``None``: ``2 max_period + 2``), all
+    batched with ``vmap`` in blocks of ``chunk_size`` trajectories; ``**changes``: fields
+    of ``options`` to change. Both period codes and attractor counts are always computed.
+    ``out``: kill-and-resume folder and the final ``DIR/parameter_map.nc``.
 
     Several JAX processes (:func:`jaxgear._devices.initialize`), each calling this with
     the same arguments, split every block of grid points over the processes and
     exchange the parts: every process returns the whole, identical map, and only
     process 0 keeps ``out`` and writes the file.
     """
-    if record is None:
-        record = 2 * int(max_period) + 2
-    system, params = check_common(system, params, transient, record, max_period, tol, chunk_size)
+    opts = with_changes(options, SequenceOptions, changes)
+    opts = opts.with_record(2 * opts.max_period + 2)
+    system, params = check_common(system, params)
     param_targets(params, param_x)
     param_targets(params, param_y)
     if set(param_targets(params, param_x)) & set(param_targets(params, param_y)):
@@ -152,33 +153,15 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     check_choice(quantity, "quantity", ("period", "n_attractors"))
     integrator = resolve_integrator(integrator)
     S, n = len(X0), len(VV)
-    B = max(1, min(n, int(chunk_size) // S))
+    B = max(1, min(n, opts.chunk_size // S))
     settings = dict(kind="parameter_map", system=system.name, param_x=param_x, values_x=vx.tolist(),
                     param_y=param_y, values_y=vy.tolist(), starts=X0.tolist(), params=params_to_dict(params),
-                    transient=int(transient), record=int(record), integrator=integrator.to_dict(),
-                    max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
-                    escape_bound=float(escape_bound), block_points=int(B), version=__version__)
+                    transient=opts.transient, record=opts.record, integrator=integrator.to_dict(),
+                    max_period=opts.max_period, tol=float(opts.tol), merge_tol=float(opts.merge_tol),
+                    escape_bound=float(opts.escape_bound), block_points=int(B), version=__version__)
     ck = checkpoint_on_zero(out, "parameter_map", settings, restart)
-    M = int(max_period)
-    period = np.empty((n, S), dtype=np.int64)
-    attractor = np.empty((n, S), dtype=np.int64)
-    last = np.empty((n, S, system.dim))
-    bar = progress_bar(n, f"map {param_x} x {param_y}", progress, unit="point")
-    jX0 = jnp.asarray(X0)
-    for bi, a in enumerate(range(0, n, B)):
-        b = min(a + B, n)
-
-        def compute(a=a, b=b):
-            pts = independent_points(system, params, names, VV[a:b], B, jX0, int(transient), int(record),
-                                     integrator)
-            per = classify_sequences(pts, M, float(tol), float(escape_bound))
-            return dict(period=per, attractor=group_starts(pts[..., -M:, :], per, float(merge_tol)), last=pts[:, :, -1])
-
-        like = dict(period=((b - a, S), np.int64), attractor=((b - a, S), np.int64), last=((b - a, S, system.dim), float))
-        z = shared_block(ck, f"map_{bi:05d}.npz", compute, like)
-        period[a:b], attractor[a:b], last[a:b] = z["period"], z["attractor"], z["last"]
-        bar.update(b - a)
-    bar.close()
+    run = _Run(system, params, names, VV, X0, opts, integrator)
+    period, attractor, last = _map_blocks(run, B, ck, progress, f"map {param_x} x {param_y}")
     ny, nx = len(vy), len(vx)
     n_att = attractor.max(axis=1, initial=-1) + 1
     pmap = ParameterMap(
@@ -187,13 +170,38 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
         period=period.reshape(ny, nx, S), attractor=attractor.reshape(ny, nx, S),
         n_attractors=n_att.reshape(ny, nx).astype(np.int64), last_point=last.reshape(ny, nx, S, system.dim),
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
-        settings=SequenceSettings(transient=int(transient), record=int(record), integrator=integrator,
-                                  max_period=int(max_period), tol=float(tol), merge_tol=float(merge_tol),
-                                  escape_bound=float(escape_bound)),
-        version=__version__,
+        settings=SequenceSettings(options=opts, integrator=integrator), version=__version__,
     )
     if out is not None and cell_processes()[0] == 0:  # one process writes
         pmap.save(Path(out) / "parameter_map.nc")
     return pmap
 
 
+
+
+def _map_blocks(run: _Run, B: int, ck, progress: bool, label: str):
+    """The grid points ``run.values (n, 2)`` in blocks of ``B`` (each saved to and resumed
+    from ``ck``): the period code and attractor id per (point, start), ``(n, S)``, and the
+    last recorded point ``(n, S, dim)``."""
+    (n, _), (S, dim) = run.values.shape, run.starts.shape
+    opts, X0, M = run.options, jnp.asarray(run.starts), run.options.max_period
+    period = np.empty((n, S), dtype=np.int64)
+    attractor = np.empty((n, S), dtype=np.int64)
+    last = np.empty((n, S, dim))
+    bar = progress_bar(n, label, progress, unit="point")
+    for bi, a in enumerate(range(0, n, B)):
+        b = min(a + B, n)
+
+        def compute(a=a, b=b):
+            pts = independent_points(run.system, run.params, run.names, run.values[a:b], B, X0, opts.transient,
+                                     opts.record, run.integrator)
+            per = classify_sequences(pts, M, float(opts.tol), float(opts.escape_bound))
+            return dict(period=per, attractor=group_starts(pts[..., -M:, :], per, float(opts.merge_tol)),
+                        last=pts[:, :, -1])
+
+        like = dict(period=((b - a, S), np.int64), attractor=((b - a, S), np.int64), last=((b - a, S, dim), float))
+        z = shared_block(ck, f"map_{bi:05d}.npz", compute, like)
+        period[a:b], attractor[a:b], last[a:b] = z["period"], z["attractor"], z["last"]
+        bar.update(b - a)
+    bar.close()
+    return period, attractor, last

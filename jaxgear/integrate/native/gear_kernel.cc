@@ -4,16 +4,22 @@
 // vector field of jaxgear/_model.py), written for the CPU: lanes in blocks of struct-of-
 // arrays that stay in cache for all steps of a call, the time-only terms of the vector
 // field (mesh stiffness, transmission errors) tabulated once per stage time and shared
-// by every lane with the same parameters, the trial step vectorised over a block, and
-// the few lanes whose step holds a backlash crossing or a known time break split one
-// by one. Blocks run in parallel (OpenMP).
+// by every lane with the same parameters, the trial step vectorised over a block in one
+// pass, and the few lanes whose step holds a backlash crossing gathered and split together
+// (vectorised over them; lane by lane for a known time break or a further event in the
+// step). Blocks run in parallel (OpenMP).
 //
 // Built by jaxgear/integrate/_native.py on first use; the pure-JAX path stays the
 // reference (for derivatives, GPUs, and machines without a C++ compiler).
 
+// Floating-point exceptions are never read: comparisons under a branch may become selects
+// (what lets the split loops vectorise); no result changes.
+#pragma GCC optimize("no-trapping-math")
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <omp.h>
@@ -50,6 +56,13 @@ struct Model {
 struct Terms {  // time-only terms at one time
   double ksp, krp, E, dE, L1;
 };
+
+// A lane's parameter row as the pure-JAX path reads it (params[r]: a negative index counts
+// from the end, and an index out of range is clamped to the nearest row): never out of bounds.
+inline int row_index(int64_t r, int64_t rows) {
+  if (r < 0) r += rows;
+  return static_cast<int>(std::min<int64_t>(std::max<int64_t>(r, 0), rows - 1));
+}
 
 inline double floor_mod(double x, double m) { return x - m * std::floor(x / m); }
 
@@ -473,80 +486,480 @@ Model make_model(const double* row, int shape) {
 }
 
 // The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
-// lanes: x (4 x L) -> x1, with k1 kept for the lanes that split. Stage s > 1 starts from
-// x + w k_{s-1}; the position components of k_s are the stage's own velocities.
-inline void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
-                          double (*x)[kBlock], double (*x1)[kBlock], double (*k1)[kBlock], double E0, double E1,
-                          bool brk, unsigned char* need) {
-  alignas(64) double kp[4][kBlock], acc[4][kBlock];
+// lanes in one pass (the four stages of a lane in registers): x (4 x L) -> x1, and whether
+// the step holds an event (a switching function changes sign, or a known time break).
+__attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
+                          const double (*x)[kBlock], double (*x1)[kBlock], double E0, double E1, bool brk,
+                          unsigned char* need) {
   const double h2 = 0.5 * h, h6 = h / 6.0;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
+  auto f = [&](const Terms& q, double z0, double z1, double z2, double z3, double& v1, double& v3) {
+    const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
+    // the dead zone as max(x - b, 0) + min(x + b, 0): the same value (exact: one term is 0)
+    const double fsp = std::max(z0 - bsp, 0.0) + std::min(z0 + bsp, 0.0);
+    const double frp = std::max(X - brp, 0.0) + std::min(X + brp, 0.0);
+    const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+    v1 = a2sp * gsp + a2rp * grp + q.L1;
+    v3 = a4sp * gsp + a4rp * grp + L2;
+  };
 #pragma omp simd
   for (int j = 0; j < L; ++j) {
-    const double z0 = x[0][j], z1 = x[1][j], z2 = x[2][j], z3 = x[3][j];
-    const double X = z2 - z0 - q0.E, V = z3 - z1 - q0.dE;
-    const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
-    const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
-    const double gsp = q0.ksp * fsp + csp * z1, grp = q0.krp * frp + crp * V;
-    const double v1 = a2sp * gsp + a2rp * grp + q0.L1, v3 = a4sp * gsp + a4rp * grp + L2;
-    k1[0][j] = kp[0][j] = acc[0][j] = z1;
-    k1[1][j] = kp[1][j] = acc[1][j] = v1;
-    k1[2][j] = kp[2][j] = acc[2][j] = z3;
-    k1[3][j] = kp[3][j] = acc[3][j] = v3;
+    const double y0 = x[0][j], y1 = x[1][j], y2 = x[2][j], y3 = x[3][j];
+    double a1, a3, b1, b3, c1, c3, d1, d3;
+    f(q0, y0, y1, y2, y3, a1, a3);
+    const double u0 = y0 + h2 * y1, u1 = y1 + h2 * a1, u2 = y2 + h2 * y3, u3 = y3 + h2 * a3;
+    f(q1, u0, u1, u2, u3, b1, b3);
+    const double v0 = y0 + h2 * u1, v1 = y1 + h2 * b1, v2 = y2 + h2 * u3, v3 = y3 + h2 * b3;
+    f(q1, v0, v1, v2, v3, c1, c3);
+    const double w0 = y0 + h * v1, w1 = y1 + h * c1, w2 = y2 + h * v3, w3 = y3 + h * c3;
+    f(q2, w0, w1, w2, w3, d1, d3);
+    const double e0 = y0 + h6 * (y1 + 2.0 * (u1 + v1) + w1);
+    const double e1 = y1 + h6 * (a1 + 2.0 * (b1 + c1) + d1);
+    const double e2 = y2 + h6 * (y3 + 2.0 * (u3 + v3) + w3);
+    const double e3 = y3 + h6 * (a3 + 2.0 * (b3 + c3) + d3);
+    x1[0][j] = e0;
+    x1[1][j] = e1;
+    x1[2][j] = e2;
+    x1[3][j] = e3;
+    // (lanes that are not finite are told apart in the split: lane_finite)
+    const double X0 = y2 - y0 - E0, X1 = e2 - e0 - E1;
+    // (x - b >= 0 is x >= b, x + b >= 0 is x >= -b: the sign of a rounded difference is exact)
+    const bool cr = ((y0 >= bsp) != (e0 >= bsp)) | ((y0 >= -bsp) != (e0 >= -bsp)) | ((X0 >= brp) != (X1 >= brp)) |
+                    ((X0 >= -brp) != (X1 >= -brp));
+    need[j] = cr | brk;
   }
-  for (int st = 1; st < 4; ++st) {
-    const Terms& q = st == 3 ? q2 : q1;
-    const double w = st == 3 ? h : h2;
-    const double m = st == 3 ? 1.0 : 2.0;
-#pragma omp simd
-    for (int j = 0; j < L; ++j) {
-      const double z0 = x[0][j] + w * kp[0][j], z1 = x[1][j] + w * kp[1][j];
-      const double z2 = x[2][j] + w * kp[2][j], z3 = x[3][j] + w * kp[3][j];
-      const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-      const double fsp = z0 >= bsp ? z0 - bsp : (z0 <= -bsp ? z0 + bsp : 0.0);
-      const double frp = X >= brp ? X - brp : (X <= -brp ? X + brp : 0.0);
-      const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
-      const double v1 = a2sp * gsp + a2rp * grp + q.L1, v3 = a4sp * gsp + a4rp * grp + L2;
-      kp[0][j] = z1;
-      kp[1][j] = v1;
-      kp[2][j] = z3;
-      kp[3][j] = v3;
-      acc[0][j] += m * z1;
-      acc[1][j] += m * v1;
-      acc[2][j] += m * z3;
-      acc[3][j] += m * v3;
+}
+
+// Whether a lane's sign test is meaningful (its step is split only then, unless a time break
+// lies inside the step): the crossing coordinates finite at both ends of the trial step.
+inline bool lane_finite(double E0, double E1, const double* y, const double* y1) {
+  const double X0 = y[2] - y[0] - E0, X1 = y1[2] - y1[0] - E1;
+  return (y1[0] - y1[0] == 0.0) & (X1 - X1 == 0.0) & (y[0] - y[0] == 0.0) & (X0 - X0 == 0.0);
+}
+
+// Whether the split of a row's lanes can run vectorised (split_block): no time breaks (the
+// sine mesh stiffness), and every time met inside a step close enough to its start for the
+// short series of small_sincos (|W (tau - t)| <= 1.25 W h plus round-off, below 0.2).
+inline bool vector_split_ok(const Model& m, double h) { return m.n_breaks == 0 && 1.3 * m.p[OMEGA] * h <= 0.2; }
+
+// Scratch of split_block: the lanes of a block that split in one step, struct of arrays.
+struct SplitScratch {
+  alignas(64) double y[4][kBlock], k1[4][kBlock], ym[4][kBlock], y1[4][kBlock], sd[4][kBlock];
+  alignas(64) double th[kBlock], tt[kBlock], hh[kBlock];
+  alignas(64) double s0[4 * kBlock + 8], s1[4 * kBlock + 8], d0[4 * kBlock + 8], d1[4 * kBlock + 8];
+  alignas(64) double root[4 * kBlock + 8];
+  alignas(64) double S0[4][kBlock], S1[4][kBlock], D0[4][kBlock], D1[4][kBlock];
+  alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
+  alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
+  alignas(64) long long actl[4 * kBlock];
+  alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock];
+};
+
+// Roots of the Hermite cubics of `np` crossings at once: hermite_root on eight at a time
+// (GCC vector extensions; the selects and the arithmetic of hermite_root, the loop left when
+// all eight have converged: each root keeps its own iterations). The inputs are padded to
+// a multiple of eight with a harmless cubic, so every root takes the same instructions
+// wherever it stands.
+typedef double v8d __attribute__((vector_size(64)));
+typedef long long v8l __attribute__((vector_size(64)));
+
+inline v8d load8(const double* p) {
+  v8d v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+inline void hermite_roots(SplitScratch& w, int np) {
+  const int np8 = (np + 7) / 8 * 8;
+  for (int k = np; k < np8; ++k) {
+    w.s0[k] = 1.0;
+    w.s1[k] = -1.0;
+    w.d0[k] = 0.0;
+    w.d1[k] = 0.0;
+  }
+  const v8d zero = {}, one = zero + 1.0;
+  // the iterations of all groups of eight interleaved (independent chains: they overlap)
+  auto p = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+    const v8d t2 = th * th, t3 = t2 * th;
+    return (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + th) * d0 + (-2.0 * t3 + 3.0 * t2) * s1 +
+           (t3 - t2) * d1;
+  };
+  auto dp = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+    const v8d t2 = th * th;
+    return (6.0 * t2 - 6.0 * th) * s0 + (3.0 * t2 - 4.0 * th + 1.0) * d0 + (-6.0 * t2 + 6.0 * th) * s1 +
+           (3.0 * t2 - 2.0 * th) * d1;
+  };
+  auto store = [](double* dst, v8d v) { __builtin_memcpy(dst, &v, sizeof v); };
+  for (int k0 = 0; k0 < np8; k0 += 8) {
+    const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0);
+    const v8d denom = s0 - s1;
+    const v8d q = s0 / (denom != 0.0 ? denom : one);
+    v8d th = denom != 0.0 ? q : zero + 0.5;
+    th = th < 0.0 ? zero : th;  // std::max(th, 0.0)
+    th = 1.0 < th ? one : th;   // std::min(th, 1.0)
+    store(w.root + k0, th);
+    store(w.lo + k0, zero);
+    store(w.hi + k0, one);
+    store(w.sg0 + k0, s0 > 0.0 ? one : (s0 < 0.0 ? -one : zero));
+    const v8l all = zero == zero;
+    __builtin_memcpy(w.actl + k0, &all, sizeof all);
+  }
+  for (int it = 0; it < kHermiteIters; ++it) {
+    v8l left = zero != zero;
+    for (int k0 = 0; k0 < np8; k0 += 8) {
+      const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0), d0 = load8(w.d0 + k0), d1 = load8(w.d1 + k0);
+      v8d th = load8(w.root + k0), lo = load8(w.lo + k0), hi = load8(w.hi + k0);
+      const v8d sg0 = load8(w.sg0 + k0);
+      v8l act;
+      __builtin_memcpy(&act, w.actl + k0, sizeof act);
+      const v8d v = p(th, s0, s1, d0, d1), d = dp(th, s0, s1, d0, d1);
+      const v8d sv = v > 0.0 ? one : (v < 0.0 ? -one : zero);
+      const v8l same = sv == sg0;
+      const v8d nlo = same ? th : lo, nhi = same ? hi : th;
+      const v8l dnz = d != 0.0;
+      const v8d nn = th - v / (dnz ? d : one), mid = 0.5 * (nlo + nhi);
+      const v8d step = nn - th;
+      const v8d ast = step < 0.0 ? -step : step;
+      const v8l done = (v == 0.0) | (dnz & (ast <= 4.0 * kEps));
+      const v8l inside = (nn > nlo) & (nn < nhi) & dnz;
+      const v8d nt = inside ? nn : mid;
+      lo = act ? nlo : lo;
+      hi = act ? nhi : hi;
+      act = act & ~done;
+      th = act ? nt : th;
+      store(w.root + k0, th);
+      store(w.lo + k0, lo);
+      store(w.hi + k0, hi);
+      __builtin_memcpy(w.actl + k0, &act, sizeof act);
+      left |= act;
+    }
+    const v8l a4 = left | __builtin_shufflevector(left, left, 4, 5, 6, 7, 0, 1, 2, 3);
+    const v8l a2 = a4 | __builtin_shufflevector(a4, a4, 2, 3, 0, 1, 6, 7, 4, 5);
+    if (!(a2[0] | a2[1])) break;
+  }
+  for (int k0 = 0; k0 < np8; k0 += 8) {
+    const v8d s0 = load8(w.s0 + k0), s1 = load8(w.s1 + k0), d0 = load8(w.d0 + k0), d1 = load8(w.d1 + k0);
+    const v8d th = load8(w.root + k0);
+    const v8d d = dp(th, s0, s1, d0, d1);
+    store(w.root + k0, th - p(th, s0, s1, d0, d1) / (d != 0.0 ? d : one));
+  }
+}
+
+// The split of the lanes `idx[0..K)` of a block (all of one parameter row, vector_split_ok)
+// in step s from t: the arithmetic of first_crossing and split_lane, with the crossing, the
+// sub-step to it, the landing and the rest of the step done eight lanes at a time (every
+// lane through the same instructions, so its result does not depend on its neighbours);
+// the few lanes with a further event in the same step (or max_splits > 2) continue lane by
+// lane. Lanes that are not finite keep their trial step (lane_finite). x: the states at t,
+// x1: the trial states at t + h, overwritten with the split ones.
+void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t, double h, int max_splits,
+                 const int* idx, int K, const double (*x)[kBlock], double (*x1)[kBlock], SplitScratch& w) {
+  const double* p = m.p;
+  const Clock& ck = tb.clock[s];
+  const Terms q0 = tb.stage[3 * s], q2 = tb.stage[3 * s + 2];
+  const double te = t + h, E0 = tb.E0[s], E1 = tb.E1[s];
+  // the crossing of the trial step (first_crossing): switching functions and rates at both
+  // ends, vectorised over the lanes (padded to a multiple of eight with copies of the last
+  // one, whose results are dropped), then the crossed functions gathered for hermite_roots
+  const int Kp = (K + 7) / 8 * 8;
+  int ix[kBlock];
+  for (int g = 0; g < Kp; ++g) ix[g] = idx[g < K ? g : K - 1];
+  double (*S0a)[kBlock] = w.S0;
+  double (*S1a)[kBlock] = w.S1;
+  double (*D0a)[kBlock] = w.D0;
+  double (*D1a)[kBlock] = w.D1;
+  const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
+  const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
+#pragma omp simd simdlen(8)
+  for (int g = 0; g < Kp; ++g) {
+    // field(q0, y) (k1), switching at both ends, switching_rate at both ends (field(q2, y1)
+    // enters through its position components only), on scalars
+    const int j = ix[g];
+    const double y0 = x[0][j], y1 = x[1][j], y2 = x[2][j], y3 = x[3][j];
+    const double e0 = x1[0][j], e1 = x1[1][j], e2 = x1[2][j], e3 = x1[3][j];
+    const double X = y2 - y0 - q0.E, V = y3 - y1 - q0.dE;
+    const double zl = y0 - bsp, zh = y0 + bsp, Xl = X - brp, Xh = X + brp;
+    const double fsp = y0 >= bsp ? zl : (y0 <= -bsp ? zh : 0.0);
+    const double frp = X >= brp ? Xl : (X <= -brp ? Xh : 0.0);
+    const double gsp = q0.ksp * fsp + csp * y1, grp = q0.krp * frp + crp * V;
+    const double k1v = a2sp * gsp + a2rp * grp + q0.L1, k3v = a4sp * gsp + a4rp * grp + L2;
+    const double Xa = y2 - y0 - E0, Xb = e2 - e0 - E1;
+    w.fin[g] = (e0 - e0 == 0.0) & (Xb - Xb == 0.0) & (y0 - y0 == 0.0) & (Xa - Xa == 0.0) ? 1.0 : 0.0;
+    const double S00 = y0 - bsp, S01 = y0 + bsp, S02 = Xa - brp, S03 = Xa + brp;
+    const double S10 = e0 - bsp, S11 = e0 + bsp, S12 = Xb - brp, S13 = Xb + brp;
+    const double r0 = y3 - y1 - q0.dE, r1 = e3 - e1 - q2.dE;
+    w.y[0][g] = y0;
+    w.y[1][g] = y1;
+    w.y[2][g] = y2;
+    w.y[3][g] = y3;
+    w.k1[0][g] = y1;
+    w.k1[1][g] = k1v;
+    w.k1[2][g] = y3;
+    w.k1[3][g] = k3v;
+    w.sd[0][g] = S00 >= 0.0 ? 1.0 : -1.0;
+    w.sd[1][g] = S01 >= 0.0 ? 1.0 : -1.0;
+    w.sd[2][g] = S02 >= 0.0 ? 1.0 : -1.0;
+    w.sd[3][g] = S03 >= 0.0 ? 1.0 : -1.0;
+    S0a[0][g] = S00;
+    S0a[1][g] = S01;
+    S0a[2][g] = S02;
+    S0a[3][g] = S03;
+    S1a[0][g] = S10;
+    S1a[1][g] = S11;
+    S1a[2][g] = S12;
+    S1a[3][g] = S13;
+    for (int i = 0; i < 4; ++i) w.thl[i][g] = 2.0;
+    D0a[0][g] = y1;
+    D0a[1][g] = y1;
+    D0a[2][g] = r0;
+    D0a[3][g] = r0;
+    D1a[0][g] = e1;
+    D1a[1][g] = e1;
+    D1a[2][g] = r1;
+    D1a[3][g] = r1;
+  }
+  int np = 0;
+  for (int g = 0; g < K; ++g) {
+    // (written whatever the test, kept when it holds: no branch to mispredict)
+    const bool fin = w.fin[g] != 0.0;  // not finite: the trial step stands (lane_finite)
+    for (int i = 0; i < 4; ++i) {
+      const double S0 = S0a[i][g], S1 = S1a[i][g];
+      w.s0[np] = S0;
+      w.s1[np] = S1;
+      w.d0[np] = D0a[i][g] * h;
+      w.d1[np] = D1a[i][g] * h;
+      w.pair_lane[np] = g;
+      w.pair_fn[np] = i;
+      np += fin & (side(S1) != w.sd[i][g]) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0);
     }
   }
-  // the new state, and whether the step holds an event (a switching function changes sign)
-#pragma omp simd
-  for (int j = 0; j < L; ++j) {
-    const double y0 = x[0][j] + h6 * acc[0][j], y1 = x[1][j] + h6 * acc[1][j];
-    const double y2 = x[2][j] + h6 * acc[2][j], y3 = x[3][j] + h6 * acc[3][j];
-    x1[0][j] = y0;
-    x1[1][j] = y1;
-    x1[2][j] = y2;
-    x1[3][j] = y3;
-    const double X0 = x[2][j] - x[0][j] - E0, X1 = y2 - y0 - E1;
-    const bool fin = (y0 - y0 == 0.0) & (X1 - X1 == 0.0) & (x[0][j] - x[0][j] == 0.0) & (X0 - X0 == 0.0);
-    const bool cr = ((x[0][j] - bsp >= 0) != (y0 - bsp >= 0)) | ((x[0][j] + bsp >= 0) != (y0 + bsp >= 0)) |
-                    ((X0 - brp >= 0) != (X1 - brp >= 0)) | ((X0 + brp >= 0) != (X1 + brp >= 0));
-    need[j] = (cr & fin) | brk;
+  hermite_roots(w, np);
+  for (int k = 0; k < np; ++k) w.thl[w.pair_fn[k]][w.pair_lane[k]] = std::min(std::max(w.root[k], 0.0), 1.0);
+  // the first crossing of each lane (as first_crossing), eight lanes at a time
+  const double thb = tb.thb[s];
+  for (int g0 = 0; g0 < Kp; g0 += 8) {
+    const v8d zero = {}, one = zero + 1.0;
+    const v8d t0 = load8(w.thl[0] + g0), t1 = load8(w.thl[1] + g0), t2 = load8(w.thl[2] + g0),
+              t3 = load8(w.thl[3] + g0);
+    v8d th_s = zero + 2.0, jf = zero;  // the first smallest
+    jf = t0 < th_s ? zero : jf;
+    th_s = t0 < th_s ? t0 : th_s;
+    jf = t1 < th_s ? one : jf;
+    th_s = t1 < th_s ? t1 : th_s;
+    jf = t2 < th_s ? zero + 2.0 : jf;
+    th_s = t2 < th_s ? t2 : th_s;
+    jf = t3 < th_s ? zero + 3.0 : jf;
+    th_s = t3 < th_s ? t3 : th_s;
+    const v8l use_break = thb < th_s;
+    const v8d which = use_break ? -one : (th_s > 1.0 ? -one : jf);
+    v8d th = use_break ? zero + thb : th_s;
+    th = 1.0 < th ? one : th;  // std::min(th, 1.0)
+    const v8d lim = th_s + kSimultaneous;
+    const v8l any = which >= 0.0;
+    const v8d f0 = any & (t0 <= lim) ? -one : one, f1 = any & (t1 <= lim) ? -one : one;
+    const v8d f2 = any & (t2 <= lim) ? -one : one, f3 = any & (t3 <= lim) ? -one : one;
+    __builtin_memcpy(w.wh + g0, &which, sizeof which);
+    __builtin_memcpy(w.th + g0, &th, sizeof th);
+    __builtin_memcpy(w.fl[0] + g0, &f0, sizeof f0);
+    __builtin_memcpy(w.fl[1] + g0, &f1, sizeof f1);
+    __builtin_memcpy(w.fl[2] + g0, &f2, sizeof f2);
+    __builtin_memcpy(w.fl[3] + g0, &f3, sizeof f3);
+  }
+  // the sub-step to the crossing on the piece being left (rk4_lane with k1 known), the
+  // landing on the surface (land), the flip, and the rest of the step on the new piece
+  // (field_piece, switching and switching_rate written out on scalars, the same arithmetic)
+  struct T8 {
+    v8d ksp, krp, E, dE, L1;
+  };
+  const v8d zero = {}, one = zero + 1.0;
+  // terms_at (sine shape) at eight times at once, and at the step's own ends the tabulated
+  // terms (as the TermCache of the lane-by-lane split holds them)
+  auto terms8 = [&](v8d tau) {
+    const double W = p[OMEGA];
+    const v8d xx = W * (tau - ck.t);
+    const v8d x2 = xx * xx;
+    const v8d sx = xx * (1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 + x2 * (-1.0 / 39916800))))));
+    const v8d cx = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320 + x2 * (-1.0 / 3628800 +
+                                                                                         x2 * (1.0 / 479001600))))));
+    const v8d S0 = ck.sn[0] * cx + ck.cs[0] * sx, S1 = ck.sn[1] * cx + ck.cs[1] * sx;
+    const v8d S2 = ck.sn[2] * cx + ck.cs[2] * sx, C2 = ck.cs[2] * cx - ck.sn[2] * sx;
+    const v8d S3 = ck.sn[3] * cx + ck.cs[3] * sx, C3 = ck.cs[3] * cx - ck.sn[3] * sx;
+    const v8d e_sp = p[ESA] * S2;
+    const v8d de_sp = p[ESA] * W * C2;
+    const v8d dde_sp = -p[ESA] * W * W * S2;
+    const v8l at0 = tau == t, at1 = tau == te;
+    const v8d ksp = p[KSM] + p[KSA] * S0, krp = p[KRM] + p[KRA] * S1, E = e_sp + p[ERA] * S3;
+    const v8d dE = de_sp + p[ERA] * W * C3, L1 = p[MU_S] * p[F_D] + p[MU_C] * p[F_L] - dde_sp;
+    T8 q;
+    q.ksp = at1 ? zero + q2.ksp : (at0 ? zero + q0.ksp : ksp);
+    q.krp = at1 ? zero + q2.krp : (at0 ? zero + q0.krp : krp);
+    q.E = at1 ? zero + q2.E : (at0 ? zero + q0.E : E);
+    q.dE = at1 ? zero + q2.dE : (at0 ? zero + q0.dE : dE);
+    q.L1 = at1 ? zero + q2.L1 : (at0 ? zero + q0.L1 : L1);
+    return q;
+  };
+  // field_piece's velocity components on eight lanes
+  auto piece = [&](const T8& q, v8d z0, v8d z1, v8d z2, v8d z3, v8d s0, v8d s1, v8d s2, v8d s3, v8d& v1,
+                   v8d& v3) {
+    const v8d X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
+    const v8d zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
+    const v8d fsp = s0 > 0.0 ? zl : (s1 < 0.0 ? zh : zero);  // (sides are +-1: never NaN)
+    const v8d frp = s2 > 0.0 ? Xl : (s3 < 0.0 ? Xh : zero);
+    const v8d gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+    v1 = a2sp * gsp + a2rp * grp + q.L1;
+    v3 = a4sp * gsp + a4rp * grp + L2;
+  };
+  auto store = [](double* dst, v8d v) { __builtin_memcpy(dst, &v, sizeof v); };
+  const double habs = std::fabs(h);
+  for (int g = 0; g < Kp; g += 8) {
+    v8d sd0 = load8(w.sd[0] + g), sd1 = load8(w.sd[1] + g), sd2 = load8(w.sd[2] + g), sd3 = load8(w.sd[3] + g);
+    const v8d y0 = load8(w.y[0] + g), y1 = load8(w.y[1] + g), y2 = load8(w.y[2] + g), y3 = load8(w.y[3] + g);
+    const v8d a0 = load8(w.k1[0] + g), a1 = load8(w.k1[1] + g), a2 = load8(w.k1[2] + g), a3 = load8(w.k1[3] + g);
+    v8d h1 = load8(w.th + g) * h;
+    const v8d hm = 0.5 * h1;
+    v8d b1, b3, c1, c3, d1, d3;
+    const T8 qm = terms8(t + hm);
+    const v8d u0 = y0 + hm * a0, u1 = y1 + hm * a1, u2 = y2 + hm * a2, u3 = y3 + hm * a3;
+    piece(qm, u0, u1, u2, u3, sd0, sd1, sd2, sd3, b1, b3);
+    const v8d v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
+    piece(qm, v0, v1, v2, v3, sd0, sd1, sd2, sd3, c1, c3);
+    const v8d z0 = y0 + h1 * v1, z1 = y1 + h1 * c1, z2 = y2 + h1 * v3, z3 = y3 + h1 * c3;
+    const T8 qe = terms8(t + h1);
+    piece(qe, z0, z1, z2, z3, sd0, sd1, sd2, sd3, d1, d3);
+    const v8d h16 = h1 / 6.0;
+    v8d m0 = y0 + h16 * (a0 + 2.0 * (u1 + v1) + z1);
+    v8d m1 = y1 + h16 * (a1 + 2.0 * (b1 + c1) + d1);
+    v8d m2 = y2 + h16 * (a2 + 2.0 * (u3 + v3) + z3);
+    v8d m3 = y3 + h16 * (a3 + 2.0 * (b3 + c3) + d3);
+    // land: one Newton correction along the piece being left
+    {
+      const v8d wh = load8(w.wh + g);
+      v8d F1, F3;
+      piece(qe, m0, m1, m2, m3, sd0, sd1, sd2, sd3, F1, F3);
+      const v8d F0 = m1, F2 = m3;
+      const v8d Xr = m2 - m0 - qe.E;
+      const v8d r2 = F2 - F0 - qe.dE;
+      const v8d rate = wh < 2.0 ? F0 : r2;
+      const v8d Sa = m0 - bsp, Sb = m0 + bsp, Sc = Xr - brp, Sd = Xr + brp;
+      const v8d Sw = wh == 0.0 ? Sa : (wh == 1.0 ? Sb : (wh == 2.0 ? Sc : Sd));
+      const v8l rnz = rate != 0.0;
+      const v8d dt = -Sw / (rnz ? rate : one);
+      const v8d adt = dt < 0.0 ? -dt : dt;
+      const v8l ok = (wh >= 0.0) & rnz & (dt - dt == 0.0) & (adt <= 0.25 * habs);
+      const v8d n0 = m0 + F0 * dt, n1 = m1 + F1 * dt, n2 = m2 + F2 * dt, n3 = m3 + F3 * dt, nh = h1 + dt;
+      m0 = ok ? n0 : m0;
+      m1 = ok ? n1 : m1;
+      m2 = ok ? n2 : m2;
+      m3 = ok ? n3 : m3;
+      h1 = ok ? nh : h1;
+    }
+    sd0 = sd0 * load8(w.fl[0] + g);
+    sd1 = sd1 * load8(w.fl[1] + g);
+    sd2 = sd2 * load8(w.fl[2] + g);
+    sd3 = sd3 * load8(w.fl[3] + g);
+    // the rest of the step (rk4_lane from the surface)
+    const v8d tt = t + h1, hh = h - h1, hh2 = 0.5 * hh;
+    v8d e1, e3;
+    const T8 qa = terms8(tt);
+    piece(qa, m0, m1, m2, m3, sd0, sd1, sd2, sd3, e1, e3);
+    const v8d K0 = m1, K1 = e1, K2 = m3, K3 = e3;
+    const T8 qb = terms8(tt + hh2);
+    const v8d p0 = m0 + hh2 * K0, p1 = m1 + hh2 * K1, p2 = m2 + hh2 * K2, p3 = m3 + hh2 * K3;
+    piece(qb, p0, p1, p2, p3, sd0, sd1, sd2, sd3, b1, b3);
+    const v8d r0 = m0 + hh2 * p1, r1 = m1 + hh2 * b1, r2 = m2 + hh2 * p3, r3 = m3 + hh2 * b3;
+    piece(qb, r0, r1, r2, r3, sd0, sd1, sd2, sd3, c1, c3);
+    const v8d s0 = m0 + hh * r1, s1 = m1 + hh * c1, s2 = m2 + hh * r3, s3 = m3 + hh * c3;
+    const T8 qc = terms8(tt + hh);
+    piece(qc, s0, s1, s2, s3, sd0, sd1, sd2, sd3, d1, d3);
+    const v8d hh6 = hh / 6.0;
+    const v8d Y0 = m0 + hh6 * (K0 + 2.0 * (p1 + r1) + s1);
+    const v8d Y1 = m1 + hh6 * (K1 + 2.0 * (b1 + c1) + d1);
+    const v8d Y2 = m2 + hh6 * (K2 + 2.0 * (p3 + r3) + s3);
+    const v8d Y3 = m3 + hh6 * (K3 + 2.0 * (b3 + c3) + d3);
+    // a further event in the rest of the step? (the sign test of first_crossing)
+    const v8d X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
+    const v8d T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
+    const v8d T0[4] = {m0 - bsp, m0 + bsp, X0 - brp, X0 + brp};
+    const v8d SD[4] = {sd0, sd1, sd2, sd3};
+    v8l more = zero != zero;
+    for (int i = 0; i < 4; ++i)
+      more |= ((T1[i] >= 0.0 ? one : -one) != SD[i]) & (T1[i] - T1[i] == 0.0) & (T0[i] - T0[i] == 0.0);
+    store(w.ym[0] + g, m0);
+    store(w.ym[1] + g, m1);
+    store(w.ym[2] + g, m2);
+    store(w.ym[3] + g, m3);
+    store(w.y1[0] + g, Y0);
+    store(w.y1[1] + g, Y1);
+    store(w.y1[2] + g, Y2);
+    store(w.y1[3] + g, Y3);
+    store(w.k1[0] + g, K0);
+    store(w.k1[1] + g, K1);
+    store(w.k1[2] + g, K2);
+    store(w.k1[3] + g, K3);
+    store(w.sd[0] + g, sd0);
+    store(w.sd[1] + g, sd1);
+    store(w.sd[2] + g, sd2);
+    store(w.sd[3] + g, sd3);
+    store(w.tt + g, tt);
+    store(w.hh + g, hh);
+    for (int i = 0; i < 8; ++i)  // continues lane by lane
+      w.cont[g + i] = max_splits >= 2 && (more[i] != 0 || max_splits > 2);
+  }
+  for (int g = 0; g < K; ++g) {
+    const int j = idx[g];
+    if (w.fin[g] == 0.0) continue;
+    if (!w.cont[g]) {
+      for (int i = 0; i < 4; ++i) x1[i][j] = w.y1[i][g];
+      continue;
+    }
+    // the rest of split_lane from its second event on, lane by lane
+    TermCache tc;
+    tc.t[0] = t;
+    tc.q[0] = q0;
+    tc.t[1] = te;
+    tc.q[1] = q2;
+    tc.n = 2;
+    const double tt = w.tt[g], hh = w.hh[g];
+    double Ym[4], Y1[4], K1[4], sides[4], S0[4], S1[4], out4[4];
+    for (int i = 0; i < 4; ++i) {
+      Ym[i] = w.ym[i][g];
+      Y1[i] = w.y1[i][g];
+      K1[i] = w.k1[i][g];
+      sides[i] = w.sd[i][g];
+    }
+    switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
+    switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
+    double th2;
+    int which2;
+    bool flips2[4];
+    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, break_fraction(m, tt, hh), &th2, &which2,
+                   flips2);
+    const bool more = th2 < 1.0;
+    if (!more && max_splits == 2) {
+      for (int i = 0; i < 4; ++i) x1[i][j] = Y1[i];
+      continue;
+    }
+    for (int i = 0; i < 4; ++i) flips2[i] = more && flips2[i];
+    split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides, max_splits - 1,
+               out4);
+    for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
   }
 }
 
 // Advance one block of lanes [a, b) by `periods` periods.
 void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, const int32_t* lane_row,
                const std::vector<Model>& models, const std::vector<Coef>& coefs, const std::vector<Table>& tables,
-               double t0, int periods, int steps, int max_splits) {
+               double t0, int periods, int steps, int max_splits, SplitScratch& w) {
   const int L = static_cast<int>(b - a);
-  alignas(64) double xa[4][kBlock], xb[4][kBlock], k1[4][kBlock];
+  const int rows = static_cast<int>(models.size());
+  alignas(64) double xa[4][kBlock], xb[4][kBlock];
   double (*x)[kBlock] = xa;
   double (*x1)[kBlock] = xb;
   int row[kBlock], lane[kBlock];  // lane j of the block is lane a + lane[j] of the batch
   for (int j = 0; j < L; ++j) {
     lane[j] = j;
-    row[j] = lane_row ? lane_row[a + j] : 0;
+    row[j] = lane_row ? row_index(lane_row[a + j], rows) : 0;
   }
   bool uniform = true;
   for (int j = 1; j < L; ++j) uniform &= row[j] == row[0];
@@ -558,60 +971,76 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
     row[j] = row_sorted[j];
     for (int i = 0; i < 4; ++i) x[i][j] = Y[i * n + a + lane[j]];
   }
+  // runs of one parameter row: [run[k], run[k + 1])
+  int run[kBlock + 1], nrun = 0;
+  for (int j = 0; j < L; ++j)
+    if (j == 0 || row[j] != row[j - 1]) run[nrun++] = j;
+  run[nrun] = L;
   alignas(64) unsigned char need[kBlock];
+  int idx[kBlock];
   for (int per = 0; per < periods; ++per) {
     for (int s = 0; s < steps; ++s) {
-      if (uniform) {
-        const int r = row[0];
-        const Table& tb = tables[r];
-        const double h = models[r].T / steps;
-        trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, L, x, x1, k1,
-                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
-      } else {
-        // lanes with different parameter rows: each run of one row vectorised as above
-        for (int j0 = 0; j0 < L;) {
-          int j1 = j0 + 1;
-          while (j1 < L && row[j1] == row[j0]) ++j1;
-          const int r = row[j0];
-          const Table& tb = tables[r];
-          const double h = models[r].T / steps;
-          auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
-          trial_uniform(coefs[r], tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x),
-                        at(x1), at(k1), tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
-          j0 = j1;
-        }
-      }
-      // lanes with an event: split them one by one
-      for (int j = 0; j < L; ++j) {
-        if (!need[j]) continue;
-        const int r = uniform ? row[0] : row[j];
+      for (int k = 0; k < nrun; ++k) {
+        const int j0 = run[k], j1 = run[k + 1];
+        const int r = row[j0];
         const Model& m = models[r];
         const Coef& c = coefs[r];
         const Table& tb = tables[r];
         const double h = m.T / steps;
         const double t = t0 + s * h;
-        double y[4], y1[4], kl[4], S0[4], S1[4], sides[4], th, out4[4];
-        int which;
-        for (int i = 0; i < 4; ++i) {
-          y[i] = x[i][j];
-          y1[i] = x1[i][j];
-          kl[i] = k1[i][j];
+        auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
+        trial_uniform(c, tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x), at(x1),
+                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
+        // lanes with an event: split, all at once where the model allows, else one by one
+        int K = 0;
+        int j = j0;
+        for (; j + 64 <= j1; j += 64) {  // 64 flags (0 or 1) to the bits of a mask, then its set bits
+          uint64_t mask = 0;
+          for (int b8 = 0; b8 < 8; ++b8) {
+            uint64_t word;
+            __builtin_memcpy(&word, need + j + 8 * b8, 8);
+            mask |= (((word & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56) << (8 * b8);
+          }
+          while (mask) {
+            idx[K++] = j + __builtin_ctzll(mask);
+            mask &= mask - 1;
+          }
         }
-        switching(c, tb.E0[s], y, S0);
-        switching(c, tb.E1[s], y1, S1);
-        for (int i = 0; i < 4; ++i) sides[i] = side(S0[i]);
-        TermCache tc;
-        if (m.n_breaks == 0) {  // the step's own (unclipped) stage times are tabulated
-          tc.t[0] = t;
-          tc.q[0] = tb.stage[3 * s];
-          tc.t[1] = t + h;
-          tc.q[1] = tb.stage[3 * s + 2];
-          tc.n = 2;
+        for (; j < j1; ++j) {
+          idx[K] = j;
+          K += need[j] != 0;
         }
-        bool flips[4];
-        first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which, flips);
-        split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, flips, sides, max_splits, out4);
-        for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+        if (K == 0) continue;
+        if (vector_split_ok(m, h)) {
+          split_block(m, c, tb, s, t, h, max_splits, idx, K, x, x1, w);
+          continue;
+        }
+        for (int g = 0; g < K; ++g) {
+          const int j = idx[g];
+          double y[4], y1[4], kl[4], S0[4], S1[4], sides[4], th, out4[4];
+          int which;
+          for (int i = 0; i < 4; ++i) {
+            y[i] = x[i][j];
+            y1[i] = x1[i][j];
+          }
+          if (tb.thb[s] >= 1.0 && !lane_finite(tb.E0[s], tb.E1[s], y, y1)) continue;  // the trial step stands
+          TermCache tc;
+          if (m.n_breaks == 0) {  // the step's own (unclipped) stage times are tabulated
+            tc.t[0] = t;
+            tc.q[0] = tb.stage[3 * s];
+            tc.t[1] = t + h;
+            tc.q[1] = tb.stage[3 * s + 2];
+            tc.n = 2;
+          }
+          field(c, tb.stage[3 * s], y, kl);  // the trial step's first stage
+          switching(c, tb.E0[s], y, S0);
+          switching(c, tb.E1[s], y1, S1);
+          for (int i = 0; i < 4; ++i) sides[i] = side(S0[i]);
+          bool flips[4];
+          first_crossing(m, c, tb.clock[s], tc, t, h, y, y1, kl, S0, S1, sides, tb.thb[s], &th, &which, flips);
+          split_lane(m, c, tb.clock[s], tc, t, h, y, kl, th, which, flips, sides, max_splits, out4);
+          for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+        }
       }
       std::swap(x, x1);
     }
@@ -638,6 +1067,7 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
   const int64_t prank = pd.size();
   if (prank < 2 || pd[prank - 1] != NPARAM) return ffi::Error::InvalidArgument("parameter rows must have 24 entries");
   const int64_t rows = pd[prank - 2];
+  if (rows < 1) return ffi::Error::InvalidArgument("at least one parameter row is needed");
   const int64_t pbatch = P.element_count() / (rows * NPARAM);
   const int64_t rbatch = lane_row.element_count() / std::max<int64_t>(n, 1);
   const int64_t tbatch = t0_buf.element_count();
@@ -658,8 +1088,7 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
     // only the rows of active lanes are tabulated (a pool of many rows holds few at a time)
     std::vector<unsigned char> used(rows, 0);
-    for (int64_t j = 0; j < n_act; ++j)
-      if (rowp[j] >= 0 && rowp[j] < rows) used[rowp[j]] = 1;
+    for (int64_t j = 0; j < n_act; ++j) used[row_index(rowp[j], rows)] = 1;
     for (int64_t r = 0; r < rows; ++r) {
       models[r] = make_model(pb + r * NPARAM, static_cast<int>(shape));
       coefs[r] = coef(models[r]);
@@ -676,12 +1105,16 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     int64_t bl = (n_act + threads * kBlocksPerThread - 1) / (threads * kBlocksPerThread);
     bl = std::min<int64_t>(kBlock, std::max<int64_t>(kMinBlock, (bl + 7) / 8 * 8));
     const int nb = static_cast<int>((n_act + bl - 1) / bl);
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int blk = 0; blk < nb; ++blk) {
-      const int64_t a = static_cast<int64_t>(blk) * bl;
-      const int64_t b = std::min<int64_t>(a + bl, n_act);
-      run_block(yb, ob, n, a, b, rowp, models, coefs, tables, t0, static_cast<int>(periods),
-                static_cast<int>(steps), static_cast<int>(max_splits));
+#pragma omp parallel
+    {
+      std::unique_ptr<SplitScratch> scratch(new SplitScratch);
+#pragma omp for schedule(dynamic, 1)
+      for (int blk = 0; blk < nb; ++blk) {
+        const int64_t a = static_cast<int64_t>(blk) * bl;
+        const int64_t b = std::min<int64_t>(a + bl, n_act);
+        run_block(yb, ob, n, a, b, rowp, models, coefs, tables, t0, static_cast<int>(periods),
+                  static_cast<int>(steps), static_cast<int>(max_splits), *scratch);
+      }
     }
   }
   return ffi::Error::Success();
