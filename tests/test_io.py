@@ -31,7 +31,8 @@ def assert_same(a, b, where="result"):
         assert a.dtype == b.dtype, f"{where}: dtype {a.dtype} != {b.dtype}"
         assert a.shape == b.shape, f"{where}: shape {a.shape} != {b.shape}"
         if a.dtype.kind in "fc":
-            assert np.array_equal(a.view(np.uint8), b.view(np.uint8)) or np.array_equal(a, b, equal_nan=True), where
+            assert np.array_equal(a.reshape(-1).view(np.uint8), b.reshape(-1).view(np.uint8)) \
+                or np.array_equal(a, b, equal_nan=True), where
             assert np.array_equal(np.signbit(a.real), np.signbit(b.real)), f"{where}: signed zeros differ"
         else:
             assert np.array_equal(a, b), where
