@@ -391,6 +391,25 @@ def test_bad_options_are_refused():
         rec.partition_from_box([0, 0], [1, 1], 0)
 
 
+def test_bad_verification_options_are_refused():
+    """The verification's options are checked, by name: a negative or too short stretch
+    (it must hold the last 2 max_period points it judges), no lanes, a share outside (0, 1]."""
+    from jaxgear import Direct
+
+    with pytest.raises(ValueError, match="verify_periods"):
+        rec.RecurrenceOptions(verify_periods=-1)
+    with pytest.raises(ValueError, match="verify_lanes"):
+        rec.RecurrenceOptions(verify_lanes=0)
+    with pytest.raises(ValueError, match="leave_share"):
+        rec.RecurrenceOptions(leave_share=0.0)
+    with pytest.raises(ValueError, match="verify_periods=20"):
+        rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 2)),
+                                   options=rec.RecurrenceOptions(verify_periods=20), max_period=16)
+    with pytest.raises(ValueError, match="recurrence.verify_periods=20"):
+        Direct(recurrence=rec.RecurrenceOptions(verify_periods=20), max_period=16)
+    assert Direct(recurrence=rec.RecurrenceOptions(verify_periods=0)).recurrence.verify_periods == 0
+
+
 # --------------------------------------------------------------------------- the gear train in its chaotic band
 
 

@@ -887,6 +887,9 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
     if options.cloud_periods // CLOUD_STAGES < 2 * M + 1:
         raise ValueError(f"options.cloud_periods={options.cloud_periods} must be at least {CLOUD_STAGES * (2 * M + 1)} "
                          f"({CLOUD_STAGES} stages of 2 max_period + 1 periods) for max_period={M}.")
+    if 0 < options.verify_periods < 2 * M:
+        raise ValueError(f"options.verify_periods={options.verify_periods} must be 0 (no verification) or at least "
+                         f"2 max_period = {2 * M}.")
     R = check_int(round_periods, "round_periods", 1)
     L = check_int(chunk, "chunk", 1)
     check_number(escape_bound, "escape_bound", 0, strict_min=True)
