@@ -114,6 +114,79 @@ def test_chaotic_and_periodic_attractors_coexist(duffing_result, duffing_brute_f
     assert np.mean(back < 0.05) > 0.95
 
 
+# Just past the boundary crisis (about gamma = 0.31515 with this RK4 step) the chaotic
+# attractor above is a chaotic saddle: states wander on it for a mean of about 500 periods
+# (half of those on it after 600 periods are still there) and then settle on the cycles.
+SADDLE_GAMMA = 0.315151
+
+
+def _numpy_period(x, steps: int = DUFF_STEPS):
+    """One forcing period of the Duffing oscillator (``SADDLE_GAMMA``) from the states ``x
+    (n, 2)`` by numpy RK4 (``steps`` per period)."""
+    d, a, b, w = (DUFF[k] for k in ("delta", "alpha", "beta", "omega"))
+    h = DUFF_T / steps
+
+    def f(t, y):
+        return np.stack([y[:, 1], SADDLE_GAMMA * np.cos(w * t) - d * y[:, 1] - a * y[:, 0] - b * y[:, 0] ** 3], axis=1)
+
+    y = np.array(x, dtype=float)
+    for i in range(steps):
+        t = i * h
+        k1 = f(t, y)
+        k2 = f(t + h / 2, y + h / 2 * k1)
+        k3 = f(t + h / 2, y + h / 2 * k2)
+        k4 = f(t + h, y + h * k3)
+        y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return y
+
+
+def test_a_long_chaotic_transient_is_no_attractor():
+    """A chaotic saddle (a long chaotic transient into cycles) is not reported as an
+    attractor: its cells are labelled with the cycles the brute force's long integration
+    of the same states ends on (in its shares), or left unresolved, never given an
+    aperiodic attractor.
+
+    The brute force integrates every cell centre 3,000 periods (the stroboscopic orbit,
+    outside the analysis's lane pool) and checks that its ends are cycles with a numpy
+    RK4 of its own; at 300 periods a large share still wanders (the transient outlasts
+    the 80-period wait and the 600-period cloud of a candidate attractor of boxes)."""
+    p = DuffingParams(**{**DUFF, "gamma": SADDLE_GAMMA})
+    X = DUFF_GRID.centres()
+    orbit = np.asarray(jaxgear.stroboscopic_orbit(DUFFING, p, X, n_points=3000, integrator=RK4(DUFF_STEPS)))
+
+    def cycle_period(tail):  # (n, m, 2) -> period of each (0: none within 1e-6 over the tail)
+        k_of = np.zeros(len(tail), int)
+        for k in range(8, 0, -1):
+            k_of[np.max(np.abs(tail[:, k:] - tail[:, :-k]), axis=(1, 2)) < 1e-6] = k
+        return k_of
+
+    assert np.mean(cycle_period(orbit[:, 270:300]) == 0) > 0.3  # a long transient
+    period = cycle_period(orbit[:, -30:])
+    assert np.all(period > 0)  # every state ends on a cycle ...
+    ends = orbit[:, -1]
+    # ... which an independent numpy RK4 confirms: each end returns after its period
+    y, after = ends, []
+    for _ in range(max(period)):
+        y = _numpy_period(y)
+        after.append(y)
+    returned = np.stack(after)[period - 1, np.arange(len(ends))]
+    assert np.max(np.abs(returned - ends)) < 1e-5
+
+    r = jaxgear.analyze_global(DUFFING, p, DUFF_GRID, METHOD, progress=False, uncertainty=0)
+    assert all(a.period > 0 for a in r.attractors), [a.label for a in r.attractors]
+    assert r.n_sink == 0 and r.n_unresolved <= 0.05 * r.n_cells
+    # the cycles reported are those the brute force ends on, with its shares within 3
+    # binomial standard errors (which cycle a wandering state takes is decided by round-off
+    # over hundreds of chaotic periods: the same cell may take another in the analysis)
+    covered = np.zeros(len(ends), bool)
+    for a in r.attractors:
+        on = np.array([np.min(np.linalg.norm(a.points - e, axis=1)) < 1e-4 for e in ends])
+        covered |= on
+        se = np.sqrt(2 * on.mean() * (1 - on.mean()) / len(ends))
+        assert on.any() and abs(a.share - on.mean()) <= 3 * se + r.n_unresolved / r.n_cells, (a.label, a.share)
+    assert covered.mean() >= 0.95
+
+
 def test_duffing_exponents_obey_liouville(duffing_result):
     """The divergence of the field is -delta: every period contracts areas by exp(-delta T),
     so the two exponents of each attractor sum to -delta T (to the RK4 map's error at 64

@@ -309,6 +309,79 @@ def test_chaotic_and_periodic_attractors_coexist():
     assert int(r.dropped_cells) == 0 and not bool(r.attractor_overflow)
 
 
+def test_settled_lanes():
+    """Last 2 M points (newest first): a lane on a P-3 cycle to 1e-5 box widths has settled;
+    one still approaching it (errors 0.05 box widths), one on an irrational rotation of a
+    tiny circle (a tenth of a box wide: it comes back near itself without repeating) and
+    one without history (NaN) have not."""
+    M = 4
+    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    w = float(part.width[0])
+    t = np.arange(2 * M)
+    cyc = np.array([[0.5, 0.1], [-0.3, 0.7], [0.2, -0.4]])[t % 3]
+    on = cyc + 1e-5 * w * np.sin(t)[:, None]
+    near = cyc + 0.05 * w * 0.9 ** (2 * M - t)[:, None]
+    rot = 0.05 * w * np.column_stack([np.cos(2.4 * t), np.sin(2.4 * t)])
+    young = np.full((2 * M, 2), np.nan)
+    pts = jnp.asarray(np.stack([on, near, rot, young], axis=-1))
+    assert np.asarray(rec.settled_lanes(pts, part.width, M)).tolist() == [True, False, False, False]
+
+
+# Just past its boundary crisis (about gamma = 0.31515 with RK4 at 64 steps a period) the
+# chaotic attractor of DUFF is a chaotic saddle: a mean of about 500 periods on it, then a cycle.
+SADDLE = {**DUFF, "gamma": 0.315151}
+
+
+def _still_wandering(params, X, periods):
+    """Those of the states ``X (n, 2)`` still aperiodic after ``periods`` periods (by the
+    stroboscopic orbit: no repeat to 1e-6 with a period up to 8 over the last 24 points),
+    at their last point (on the chaotic set)."""
+    o = np.asarray(jaxgear.stroboscopic_orbit(DUFFING, DuffingParams(**params), X, n_points=periods,
+                                              integrator=RK4(64)))
+    tail = o[:, -24:]
+    periodic = np.zeros(len(X), bool)
+    for k in range(1, 9):
+        periodic |= np.max(np.abs(tail[:, k:] - tail[:, :-k]), axis=(1, 2)) < 1e-6
+    return o[~periodic, -1]
+
+
+def test_leaving_share_tells_a_saddle_from_an_attractor():
+    """Points of the chaotic attractor (gamma = 0.3) stay on it for 2,000 periods: none
+    leaves. Points of the chaotic saddle (still wandering after 300 periods) mostly settle
+    on a cycle within 2,000 periods: about 1 - exp(-2000 / 500); at least the share of
+    those whose brute-force orbit of 2,000 periods ends on a cycle, less 3 binomial errors."""
+    part = rec.partition_from_box([-2, -2], [2, 2], 100)
+    on_attractor = _still_wandering(DUFF, np.random.default_rng(1).uniform(-2, 2, (120, 2)), 300)[:64]
+    assert len(on_attractor) == 64
+    share = rec.leaving_share(DUFFING, DuffingParams(**DUFF), RK4(64), part, jnp.asarray(on_attractor.T),
+                              periods=2000, max_period=8, bound=1e6)
+    assert float(share) == 0.0
+
+    on_saddle = _still_wandering(SADDLE, np.random.default_rng(2).uniform(-2, 2, (200, 2)), 300)[:64]
+    assert len(on_saddle) >= 32
+    share = float(rec.leaving_share(DUFFING, DuffingParams(**SADDLE), RK4(64), part, jnp.asarray(on_saddle.T),
+                                    periods=2000, max_period=8, bound=1e6))
+    left = 1.0 - len(_still_wandering(SADDLE, on_saddle, 2000)) / len(on_saddle)
+    se = np.sqrt(max(left * (1 - left), 0.05) / len(on_saddle))
+    assert left > 0.8 and share >= left - 3 * se
+
+
+def test_chaotic_saddle_is_no_attractor():
+    """The standalone classifier registers no aperiodic attractor for the chaotic saddle:
+    only cycles, which the states it decides end on (their periods those of the brute
+    force's ends, a long orbit of the same random states)."""
+    rng = np.random.default_rng(3)
+    n = 64
+    X = rng.uniform(-2, 2, (n, 2))
+    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**SADDLE), X, integrator=RK4(64), chunk=n,
+                                   max_periods=3000, max_period=8)
+    periods = np.asarray(r.periods)
+    assert len(periods) and np.all(periods > 0), periods.tolist()
+    labels = np.asarray(r.labels)
+    assert np.mean(labels >= 0) >= 0.9
+    assert len(_still_wandering(SADDLE, X, 3000)) <= 0.1 * n  # the brute force: (nearly) all on cycles
+
+
 def test_bad_options_are_refused():
     with pytest.raises(ValueError, match="accept_share"):
         rec.RecurrenceOptions(accept_share=1.5)
@@ -316,6 +389,25 @@ def test_bad_options_are_refused():
         rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 3)))
     with pytest.raises(ValueError, match="resolution"):
         rec.partition_from_box([0, 0], [1, 1], 0)
+
+
+def test_bad_verification_options_are_refused():
+    """The verification's options are checked, by name: a negative or too short stretch
+    (it must hold the last 2 max_period points it judges), no lanes, a share outside (0, 1]."""
+    from jaxgear import Direct
+
+    with pytest.raises(ValueError, match="verify_periods"):
+        rec.RecurrenceOptions(verify_periods=-1)
+    with pytest.raises(ValueError, match="verify_lanes"):
+        rec.RecurrenceOptions(verify_lanes=0)
+    with pytest.raises(ValueError, match="leave_share"):
+        rec.RecurrenceOptions(leave_share=0.0)
+    with pytest.raises(ValueError, match="verify_periods=20"):
+        rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 2)),
+                                   options=rec.RecurrenceOptions(verify_periods=20), max_period=16)
+    with pytest.raises(ValueError, match="recurrence.verify_periods=20"):
+        Direct(recurrence=rec.RecurrenceOptions(verify_periods=20), max_period=16)
+    assert Direct(recurrence=rec.RecurrenceOptions(verify_periods=0)).recurrence.verify_periods == 0
 
 
 # --------------------------------------------------------------------------- the gear train in its chaotic band

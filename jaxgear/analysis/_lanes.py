@@ -29,7 +29,12 @@ lane still undecided after ``transient`` periods, and not approaching a cycle (i
 repetition errors within a box and shrinking), is the candidate: a cloud of its
 trajectory is integrated, and when the cloud recurs in its own boxes it is an attractor
 (a new slot of its value's table, marked :func:`aperiodic_mark`, its cloud kept), or
-joins the attractor of boxes it overlaps; its boxes enter the table.
+joins the attractor of boxes it overlaps; its boxes enter the table. A new set is
+verified first: a sample of its cloud's points is continued for thousands of periods, and
+when a clear share of them leaves it (settles on a cycle, escapes, reaches another known
+set) it is a chaotic saddle, a long transient (:func:`saddle_mark`): its boxes enter the
+table so that the lanes wandering on it are no candidates again, but it labels no cell
+(they integrate on until they leave it, or time out).
 
 Several parameter sets (the values of a sweep) share one pool: each cell carries its
 value's row, a lane integrates with its row's parameters (``integrator.advance_rows``)
@@ -60,16 +65,18 @@ from ._recurrence import (
     attractor_cloud,
     empty_table,
     insert,
+    leaving_share,
     lookup,
     near_periodic,
     oldest_off_cycle,
     recurrence_share,
     row_keys,
     track_hits,
+    verification_starts,
 )
 
 __all__ = ["PoolOptions", "PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
-           "table_slots", "NOT_DONE", "aperiodic_mark"]
+           "table_slots", "NOT_DONE", "aperiodic_mark", "saddle_mark"]
 
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
@@ -140,6 +147,20 @@ def aperiodic_mark(M: int) -> int:
     """The period entry of a table slot that holds an attractor of boxes (no cycle of
     period <= ``M``): ``M + 1``."""
     return int(M) + 1
+
+
+def saddle_mark(M: int) -> int:
+    """The period entry of a table slot that holds a chaotic saddle: a set of boxes that
+    recurred like an attractor but whose points leave it (a long transient; see
+    :func:`~jaxgear.analysis._recurrence.leaving_share`): ``M + 2``. Its boxes keep the
+    lanes that visit them from being candidates again, and it never labels a cell (they
+    integrate on); the host drops it from the attractors."""
+    return int(M) + 2
+
+
+def _of_boxes(att_k, M: int):
+    """Whether table slots ``att_k`` hold a set of boxes (an attractor or a saddle)."""
+    return (att_k == aperiodic_mark(M)) | (att_k == saddle_mark(M))
 
 
 class PoolState(NamedTuple):
@@ -241,7 +262,7 @@ def _seeded_table(boxes: Boxes | None, att_k, att_cloud, M: int) -> CellTable:
     pts = att_cloud.reshape(V * A * Q, dim).T
     rows = jnp.repeat(jnp.arange(V, dtype=jnp.int32), A * Q)
     slot = jnp.tile(jnp.repeat(jnp.arange(A, dtype=jnp.int32), Q), V)
-    mark = jnp.repeat((att_k == aperiodic_mark(M)).reshape(-1), Q)
+    mark = jnp.repeat(_of_boxes(att_k, M).reshape(-1), Q)
     keys = jnp.where(mark, row_keys(boxes.partition, pts, rows, V), -1)
     table, _ = insert(empty_table(boxes.options.capacity), keys, slot)
     return table
@@ -309,7 +330,7 @@ def one_period(system, params, integrator, o: PoolOptions, boxes: Boxes | None, 
         hit_att, hits, misses = track_hits(lab, s.hit_att, s.hits, s.misses, boxes.options.max_misses)
         return s._replace(hit_att=hit_att, hits=hits, misses=misses)
 
-    return jax.lax.cond(jnp.any(s.att_k == aperiodic_mark(o.max_period)), track, lambda s: s, s)
+    return jax.lax.cond(jnp.any(_of_boxes(s.att_k, o.max_period)), track, lambda s: s, s)
 
 
 # ----------------------------------------------------------------------------- decisions
@@ -379,7 +400,7 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
     they integrate on (an attractor's slot still takes them)."""
     P = s.att_pts[v, a]  # (M, dim)
     repeller = s.att_k[v, a] < 0
-    cycle = s.att_k[v, a] != aperiodic_mark(o.max_period)  # an attractor of boxes is matched by its boxes
+    cycle = ~_of_boxes(s.att_k[v, a], o.max_period)  # a set of boxes is matched by its boxes
     k = jnp.where(cycle, jnp.abs(s.att_k[v, a]), 0)
     valid = jnp.arange(o.max_period, dtype=jnp.int32) < k
     dn = jnp.where(valid[:, None], jnp.sqrt(_sqdist(s.Y[None], P[:, :, None])), jnp.inf)  # (M, L)
@@ -483,11 +504,20 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
     :func:`~jaxgear.analysis._recurrence.oldest_off_cycle`). Its cloud
     (:func:`~jaxgear.analysis._recurrence.attractor_cloud`, staged, stopped on a cycle or
     an escape) is accepted when it recurs in its own boxes; it then joins the attractor of
-    boxes of its value that it overlaps, or takes a new slot; its boxes enter the table and
-    the lane takes the attractor's label (its cloud's periods are charged to it)."""
+    boxes (or the saddle) of its value that it overlaps, or takes a new slot; its boxes
+    enter the table and the lane takes the attractor's label (its cloud's periods are
+    charged to it).
+
+    A new set is verified first (``verify_periods > 0``): ``verify_lanes`` of its cloud's
+    points are continued ``verify_periods`` periods
+    (:func:`~jaxgear.analysis._recurrence.leaving_share`); when at least ``leave_share``
+    of them settle on a cycle, escape or reach another known set, it is a chaotic saddle
+    (a long transient, not an attractor): its slot is marked :func:`saddle_mark`, its
+    boxes enter the table (lanes visiting them are no candidates again) and the lane
+    integrates on."""
     opt, part = boxes.options, boxes.partition
     M, V = o.max_period, s.att_k.shape[0]
-    mark = aperiodic_mark(M)
+    mark, saddle = aperiodic_mark(M), saddle_mark(M)
     eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
                 & (s.age - s.tried >= opt.transient) & (s.hits == 0))
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
@@ -510,24 +540,39 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         rows = jnp.full(second.shape[1], v0, jnp.int32)
         box_label = lookup(s.table, row_keys(part, second, rows, V))
         over = jnp.mean((box_label[None] == jnp.arange(A, dtype=jnp.int32)[:, None]).astype(jnp.float64), axis=1)
-        over = jnp.where(s.att_k[v0] == mark, over, 0.0)  # only attractors of boxes absorb clouds
+        over = jnp.where(_of_boxes(s.att_k[v0], M), over, 0.0)  # only sets of boxes absorb clouds
         best = jnp.argmax(over).astype(jnp.int32)
         joins = over[best] >= opt.overlap_share
+        transient = jnp.asarray(False)
+        if opt.verify_periods:
+            def leaves(_):
+                def elsewhere(pts):  # (2M, dim, K): every last point in a known set's boxes
+                    flat = jnp.moveaxis(pts, 1, 0).reshape(pts.shape[1], -1)
+                    lab = lookup(s.table, row_keys(part, flat, jnp.full(flat.shape[1], v0, jnp.int32), V))
+                    return jnp.all(lab.reshape(pts.shape[0], -1) >= 0, axis=0)
+
+                return leaving_share(system, p0, integrator, part, verification_starts(second, opt.verify_lanes),
+                                     periods=opt.verify_periods, max_period=M, bound=o.escape_bound,
+                                     elsewhere=elsewhere) >= opt.leave_share
+
+            transient = jax.lax.cond(ok & ~joins, leaves, lambda _: jnp.asarray(False), None)
         room = s.n_att[v0] < A
         slot = jnp.where(joins, best, s.n_att[v0]).astype(jnp.int32)
         step = max(second.shape[1] // Q, 1)
         pts = jnp.full((Q, second.shape[0]), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
         new = ok & ~joins & room
         taken = ok & (joins | room)
+        attractor = taken & ~transient & ~(joins & (s.att_k[v0, best] == saddle))  # the lane is labelled
         keys = jnp.where(taken, row_keys(part, second, rows, V), -1)
         table, dropped = insert(s.table, keys, slot)
+        charged = ran + jnp.where(new, opt.verify_periods, 0)
         s = s._replace(
-            att_k=jnp.where(new, s.att_k.at[v0, slot].set(mark), s.att_k),
+            att_k=jnp.where(new, s.att_k.at[v0, slot].set(jnp.where(transient, saddle, mark)), s.att_k),
             att_cloud=jnp.where(new, s.att_cloud.at[v0, slot].set(pts), s.att_cloud),
             n_att=s.n_att.at[v0].add(new.astype(jnp.int32)), overflow=s.overflow | (ok & ~joins & ~room),
             table=table, dropped=s.dropped + dropped, tried=s.tried.at[l0].set(s.age[l0]),
-            age=s.age.at[l0].add(jnp.where(taken, ran, 0)))
-        return s, label.at[l0].set(jnp.where(taken, slot, label[l0])).astype(jnp.int32)
+            age=s.age.at[l0].add(jnp.where(attractor, charged, 0)))
+        return s, label.at[l0].set(jnp.where(attractor, slot, label[l0])).astype(jnp.int32)
 
     return jax.lax.cond(found, characterise, lambda c: c, (s, label))
 
@@ -545,7 +590,8 @@ def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: P
     att_pts, att_k, n_att, radius, label, overflow = _register_new(o, s, lanes, label, radius)
     s = s._replace(att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius, overflow=overflow)
     if boxes is not None:
-        hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits)
+        on_saddle = s.att_k[s.row, jnp.maximum(s.hit_att, 0)] == saddle_mark(o.max_period)  # integrates on
+        hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
         label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
         s, label = _candidate(system, params, integrator, o, boxes, s, lanes, label)
     unres = lanes.live & (label < 0) & (s.age >= o.max_periods)

@@ -26,7 +26,7 @@ import numpy as np
 
 from .._batching import progress_bar
 from ..integrate import stack_params
-from ._lanes import Boxes, PoolOptions, aperiodic_mark, seed_tables
+from ._lanes import Boxes, PoolOptions, aperiodic_mark, saddle_mark, seed_tables
 from ._placement import OneDevice, run_blocks
 
 __all__ = ["PoolOptions", "Boxes", "run_pool", "run_pools", "drive"]
@@ -149,19 +149,29 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
             used[v][p] = use[start:start + len(p)]
             start += len(p)
     bar.close()
-    return [(labels[v], _attractors(att, v, o.max_period), used[v]) for v in range(V)]
+    out = []
+    for v in range(V):
+        found, lut = _attractors(att, v, o.max_period)
+        out.append((np.where(labels[v] >= 0, lut[np.maximum(labels[v], 0)], labels[v]), found, used[v]))
+    return out
 
 
-def _attractors(att, v: int, M: int) -> list:
+def _attractors(att, v: int, M: int):
     """Value ``v``'s table as ``[(points, k)]``: a cycle's ``k`` points, an attractor of
-    boxes' cloud (its finite points) with period 0."""
+    boxes' cloud (its finite points) with period 0; a chaotic saddle's slot
+    (:func:`saddle_mark`, which labels no cell) is left out. Also the label of each slot
+    in that list ``(A,)`` (-1 for a saddle)."""
     att_pts, att_k, n_att, clouds = (np.asarray(a) for a in att)
     out = []
+    lut = np.full(max(att_k.shape[1], 1), -1, np.int64)
     for a in range(int(n_att[v])):
         k = int(att_k[v, a])
+        if k == saddle_mark(M):
+            continue
+        lut[a] = len(out)
         if k == aperiodic_mark(M):
             cloud = clouds[v, a]
             out.append((cloud[np.all(np.isfinite(cloud), axis=1)], 0))
         else:
             out.append((att_pts[v, a, : abs(k)], k))
-    return out
+    return out, lut

@@ -25,6 +25,10 @@ Pure functions the direct method's lane pool calls per period or per round:
 - :func:`attractor_cloud`, :func:`recurrence_share`, :func:`near_periodic`,
   :func:`overlap_shares` — a candidate's point cloud, whether it recurs, whether it is a
   cycle the point-level recognition will take, and which known attractor it overlaps;
+- :func:`leaving_share` (:func:`continue_states`, :func:`settled_lanes`,
+  :func:`verification_starts`) — the verification of a new attractor of boxes: the share
+  of its points that leave it within ``verify_periods`` periods (a chaotic saddle, a long
+  chaotic transient, loses them at its escape rate; an attractor keeps them);
 - :func:`classify_by_recurrence` — a standalone batched classifier built from them, one
   ``lax.while_loop`` over rounds of a refilled lane queue inside one ``jit``: the
   reference for the pool's wiring.
@@ -41,7 +45,10 @@ Wiring into the lane pool (:mod:`jaxgear.analysis._pool`), as the classifier doe
   the :data:`CANDIDATE_POOL` oldest) gets a staged cloud (``CLOUD_STAGES``, stopped on a
   cycle, :func:`near_periodic`, or an escape); an accepted cloud joins the attractor of
   boxes it overlaps or takes a new slot, and its boxes enter the table in the round's one
-  :func:`insert`.
+  :func:`insert`. A cloud that would take a new slot is verified first
+  (:func:`leaving_share` of ``verify_lanes`` of its points over ``verify_periods``):
+  when ``leave_share`` of them leave, it is a chaotic saddle and no attractor (the
+  classifier drops it; the pool keeps its boxes as a saddle that labels no cell).
 - "approaching a cycle" means repetition errors within one box that shrink, not within
   one box alone: an attractor that spans only a few boxes (the gear model's chaotic
   attractor at b = 1.455 is about one box of the partition over region D wide in x1 and
@@ -77,6 +84,7 @@ from ..integrate import resolve_integrator
 __all__ = ["FinePartition", "partition_from_box", "cell_keys", "row_keys", "CellTable", "empty_table", "lookup", "insert",
            "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "oldest_off_cycle",
            "overlap_shares",
+           "continue_states", "settled_lanes", "verification_starts", "leaving_share", "SETTLED",
            "RecurrenceOptions", "RecurrenceResult", "classify_by_recurrence", "APERIODIC", "INDEX_BITS",
            "MAX_PROBES"]
 
@@ -435,6 +443,77 @@ def oldest_off_cycle(eligible, age, ring, width, max_period: int):
     return lanes[j].astype(jnp.int32), ok[j]
 
 
+SETTLED = 1e-3
+"""A continued state has settled on a cycle when its last ``2 M`` points repeat with some
+period ``k <= M`` to this many box widths on every coordinate: far below a chaotic
+motion's spread over a box, even on an attractor about a box wide."""
+
+
+def continue_states(system, params, integrator, Y, *, periods: int, keep: int):
+    """The states ``Y (dim, K)`` (at forcing phase 0) continued ``periods`` forcing periods
+    on the stroboscopic map: their last ``keep`` points ``(keep, dim, K)``, newest first
+    (``keep <= periods``). Only those are stored (one ``lax.scan`` of the integrator's
+    ``advance`` without output, then one that keeps them)."""
+    if not 1 <= keep <= periods:
+        raise ValueError(f"keep={keep} must be between 1 and periods={periods}.")
+
+    def step(Y, _):
+        return integrator.advance(system, params, Y, jnp.asarray(0.0), 1), None
+
+    def kept(Y, _):
+        Y = integrator.advance(system, params, Y, jnp.asarray(0.0), 1)
+        return Y, Y
+
+    Y, _ = jax.lax.scan(step, Y, None, length=periods - keep)
+    _, pts = jax.lax.scan(kept, Y, None, length=keep)
+    return pts[::-1]
+
+
+def settled_lanes(points, width, max_period: int):
+    """Per lane, whether its last points ``points (2 max_period, dim, K)`` (newest first)
+    lie on a cycle of some period ``k <= max_period``: ``|x_t - x_(t-k)|`` at most
+    :data:`SETTLED` box widths ``width (dim,)`` on every coordinate over the newest
+    ``max_period`` points. ``(K,)`` bool (NaN points never settle)."""
+    M = max_period
+    w = width.reshape((1, -1) + (1,) * (points.ndim - 2))
+
+    def rep(k):
+        e = jnp.abs(jax.lax.dynamic_slice_in_dim(points, k, M, axis=0) - points[:M]) / w  # (M, dim, K)
+        return jnp.max(e, axis=(0, 1)) <= SETTLED
+
+    return jnp.any(jax.vmap(rep)(jnp.arange(1, M + 1)), axis=0)
+
+
+def verification_starts(second, lanes: int):
+    """``lanes`` states ``(dim, lanes)`` spread evenly over the points ``second (dim, m)``
+    of a cloud's second half (periods and copies interleaved), where a verification
+    continues the set."""
+    m = second.shape[1]
+    idx = (jnp.arange(lanes) * m) // lanes
+    return second[:, idx]
+
+
+def leaving_share(system, params, integrator, partition: FinePartition, starts, *, periods: int, max_period: int,
+                  bound, elsewhere=None):
+    """Share of the states ``starts (dim, K)``, points of a candidate attractor of boxes,
+    that leave it within ``periods`` forcing periods: their continuation
+    (:func:`continue_states`) ends on a cycle (:func:`settled_lanes`), escapes (norm
+    above ``bound`` or not finite), or (``elsewhere``, optional: a function of the last
+    points ``(2 max_period, dim, K)`` giving ``(K,)`` bool) ends on another known attractor.
+
+    An attractor keeps its points: none leave. A chaotic saddle (a long chaotic transient,
+    Lai & Tél, *Transient Chaos*, Springer 2011, ch. 1-2) loses them at the escape rate
+    ``kappa``: a share ``1 - exp(-kappa periods)`` leaves, so a cloud that recurred for a
+    few hundred periods on a saddle of mean lifetime ``1 / kappa`` of the order of
+    ``periods`` is told from an attractor."""
+    pts = continue_states(system, params, integrator, starts, periods=periods, keep=2 * max_period)
+    norm = jnp.sqrt(sum(pts[0, d] ** 2 for d in range(pts.shape[1])))
+    left = settled_lanes(pts, partition.width, max_period) | ~(norm <= bound)
+    if elsewhere is not None:
+        left = left | elsewhere(pts)
+    return jnp.mean(left.astype(jnp.float64))
+
+
 @functools.partial(jax.jit, static_argnames="n_labels")
 def overlap_shares(table: CellTable, partition: FinePartition, points, n_labels: int):
     """Share of ``points (dim, m)`` lying in boxes of each label ``0 .. n_labels - 1`` of the
@@ -473,6 +552,13 @@ class RecurrenceOptions(eqx.Module):
         capacity: slots of the box table (static, a power of two; ``8 * capacity`` bytes
             of keys, whatever the state dimension).
         max_attractors: attractor slots (static).
+        verify_periods: periods a new attractor of boxes is continued from
+            ``verify_lanes`` of its cloud's points before it is registered (static; 0: no
+            verification): when at least ``leave_share`` of them leave it (settle on a
+            cycle, escape or reach another known attractor) the set is a chaotic saddle,
+            a long transient, and no attractor (:func:`leaving_share`).
+        verify_lanes: cloud points continued by the verification (static).
+        leave_share: share of the continued points that leaving makes the set a saddle.
     """
 
     resolution: Any = eqx.field(converter=_as(jnp.float64), default=100.0)
@@ -486,6 +572,9 @@ class RecurrenceOptions(eqx.Module):
     max_points: int = eqx.field(static=True, default=2048)
     capacity: int = eqx.field(static=True, default=2 ** 16)
     max_attractors: int = eqx.field(static=True, default=16)
+    verify_periods: int = eqx.field(static=True, default=2000)
+    verify_lanes: int = eqx.field(static=True, default=64)
+    leave_share: Any = eqx.field(converter=_as(jnp.float64), default=0.25)
 
     def to_dict(self) -> dict:
         """Every knob as a plain number (JSON-able; ``RecurrenceOptions(**d)`` rebuilds it)."""
@@ -509,6 +598,9 @@ class RecurrenceOptions(eqx.Module):
         if c & (c - 1):
             raise ValueError(f"capacity={c} must be a power of two.")
         check_int(self.max_attractors, "max_attractors", 1)
+        check_int(self.verify_periods, "verify_periods", 0)
+        check_int(self.verify_lanes, "verify_lanes", 1)
+        check_number(float(self.leave_share), "leave_share", 0, 1, strict_min=True)
 
 
 class RecurrenceResult(eqx.Module):
@@ -669,12 +761,22 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         over = overlap_shares(s.table, part, second, A)
         over = jnp.where(s.kind > 0, 0.0, over)  # only attractors of boxes absorb clouds
         best = jnp.argmax(over)
+        joins = over[best] >= opt.overlap_share
+        if opt.verify_periods:  # a new set is continued first: a chaotic saddle is no attractor
+            def leaves(_):
+                return leaving_share(system, params, integrator, part, verification_starts(second, opt.verify_lanes),
+                                     periods=opt.verify_periods, max_period=M, bound=bound,
+                                     elsewhere=lambda pts: jnp.all(
+                                         lookup(s.table, cell_keys(part, _flat(pts))).reshape(
+                                             pts.shape[0], -1) >= 0, axis=0))
+            share = jax.lax.cond(ok & ~joins, leaves, lambda _: jnp.asarray(0.0), None)
+            ok = ok & (joins | (share < opt.leave_share))
         keys = cell_keys(part, flat)
         step = max(second.shape[1] // Q, 1)
         pts = jnp.full((Q, dim), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
 
         def accept(s):
-            return jax.lax.cond(over[best] >= opt.overlap_share, lambda s: (s, best.astype(jnp.int32)),
+            return jax.lax.cond(joins, lambda s: (s, best.astype(jnp.int32)),
                                 lambda s: _register(s, pts, jnp.asarray(APERIODIC, jnp.int32)), s)
 
         s, a = jax.lax.cond(ok, accept, lambda s: (s, jnp.asarray(-1, jnp.int32)), s)
@@ -788,6 +890,9 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
     if options.cloud_periods // CLOUD_STAGES < 2 * M + 1:
         raise ValueError(f"options.cloud_periods={options.cloud_periods} must be at least {CLOUD_STAGES * (2 * M + 1)} "
                          f"({CLOUD_STAGES} stages of 2 max_period + 1 periods) for max_period={M}.")
+    if 0 < options.verify_periods < 2 * M:
+        raise ValueError(f"options.verify_periods={options.verify_periods} must be 0 (no verification) or at least "
+                         f"2 max_period = {2 * M}.")
     R = check_int(round_periods, "round_periods", 1)
     L = check_int(chunk, "chunk", 1)
     check_number(escape_bound, "escape_bound", 0, strict_min=True)
