@@ -33,6 +33,10 @@ COVERED = {
     # the small-forcing linear limit, a bad system's error): tests/test_any_system.py checks
     # the same calls on the same parameters, tests/test_design.py the gradient of an RMS
     "06_any_forced_system",
+    # attractor types (a chaotic Duffing beside its cycle, a torus, the gear's chaotic band,
+    # basin entropy): tests/test_attractors.py, tests/test_sweep_attractors.py and
+    # tests/test_fractal.py check the same calls
+    "07_attractors",
 }
 """Notebooks whose calls test modules already check (named above): run by ``pytest -m slow``
 too, so that the default suite stays within five minutes on two cores."""
