@@ -1,7 +1,7 @@
 """The notebooks: each runs top to bottom on its reduced setting (FULL = False), writes
-nothing into the repository, and matches its paired script (the three heaviest runs, and
-the two whose calls test modules check, are ``slow``: ``python -m pytest -m slow
-tests/test_notebooks.py``).
+nothing into the repository, and matches its paired script. The runs are ``slow`` (the
+four heaviest, and the three whose calls test modules check): ``python -m pytest -m slow
+tests/test_notebooks.py``; the default suite checks the pairing and where each writes.
 
 Key numbers are asserted inside the notebooks; a failing assert fails the test. Each
 notebooks/<name>.ipynb (stored without outputs) is paired by jupytext with

@@ -392,8 +392,8 @@ def test_bad_options_are_refused():
 
 
 def test_bad_verification_options_are_refused():
-    """The verification's options are checked, by name: a negative or too short stretch
-    (it must hold the last 2 max_period points it judges), no lanes, a share outside (0, 1]."""
+    """The verification's options are checked, by name: a negative stretch, no lanes, a share
+    outside (0, 1]; a stretch shorter than the last 2 max_period points it judges is lengthened."""
     from jaxgear import Direct
 
     with pytest.raises(ValueError, match="verify_periods"):
@@ -402,11 +402,9 @@ def test_bad_verification_options_are_refused():
         rec.RecurrenceOptions(verify_lanes=0)
     with pytest.raises(ValueError, match="leave_share"):
         rec.RecurrenceOptions(leave_share=0.0)
-    with pytest.raises(ValueError, match="verify_periods=20"):
-        rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 2)),
-                                   options=rec.RecurrenceOptions(verify_periods=20), max_period=16)
-    with pytest.raises(ValueError, match="recurrence.verify_periods=20"):
-        Direct(recurrence=rec.RecurrenceOptions(verify_periods=20), max_period=16)
+    # a verification shorter than the cycle test's history runs that history instead
+    assert rec.verify_length(rec.RecurrenceOptions(verify_periods=20), 16) == 32
+    assert rec.verify_length(rec.RecurrenceOptions(), 16) == rec.RecurrenceOptions().verify_periods
     assert Direct(recurrence=rec.RecurrenceOptions(verify_periods=0)).recurrence.verify_periods == 0
 
 

@@ -92,9 +92,6 @@ class Direct(AbstractGlobalMethod):
         if self.capture_radius is not None:
             check_number(self.capture_radius, "capture_radius", 0)
         check_number(self.escape_bound, "escape_bound", 0, strict_min=True)
-        if self.recurrence is not None and 0 < self.recurrence.verify_periods < 2 * self.max_period:
-            raise ValueError(f"recurrence.verify_periods={self.recurrence.verify_periods} must be 0 (no verification "
-                             f"of new attractors of boxes) or at least 2 max_period = {2 * self.max_period}.")
 
     def check(self, system, grid: CellGrid) -> None:
         return None

@@ -73,6 +73,7 @@ from ._recurrence import (
     row_keys,
     track_hits,
     verification_starts,
+    verify_length,
 )
 
 __all__ = ["PoolOptions", "PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
@@ -552,7 +553,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
                     return jnp.all(lab.reshape(pts.shape[0], -1) >= 0, axis=0)
 
                 return leaving_share(system, p0, integrator, part, verification_starts(second, opt.verify_lanes),
-                                     periods=opt.verify_periods, max_period=M, bound=o.escape_bound,
+                                     periods=verify_length(opt, M), max_period=M, bound=o.escape_bound,
                                      elsewhere=elsewhere) >= opt.leave_share
 
             transient = jax.lax.cond(ok & ~joins, leaves, lambda _: jnp.asarray(False), None)
@@ -565,7 +566,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         attractor = taken & ~transient & ~(joins & (s.att_k[v0, best] == saddle))  # the lane is labelled
         keys = jnp.where(taken, row_keys(part, second, rows, V), -1)
         table, dropped = insert(s.table, keys, slot)
-        charged = ran + jnp.where(new, opt.verify_periods, 0)
+        charged = ran + jnp.where(new, verify_length(opt, M) if opt.verify_periods else 0, 0)
         s = s._replace(
             att_k=jnp.where(new, s.att_k.at[v0, slot].set(jnp.where(transient, saddle, mark)), s.att_k),
             att_cloud=jnp.where(new, s.att_cloud.at[v0, slot].set(pts), s.att_cloud),

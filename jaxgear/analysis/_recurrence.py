@@ -531,6 +531,12 @@ def _as(dtype):
     return lambda x: jnp.asarray(x, dtype=dtype) if isinstance(x, jax.Array) else np.asarray(x, dtype=dtype)
 
 
+def verify_length(options, max_period: int) -> int:
+    """Periods the verification of a new attractor of boxes runs: ``verify_periods``, and
+    at least ``2 max_period`` (the history :func:`settled_lanes` judges)."""
+    return max(int(options.verify_periods), 2 * int(max_period))
+
+
 class RecurrenceOptions(eqx.Module):
     """Knobs of the detection by recurrences (numeric fields are arrays: changing them does
     not recompile; those that set shapes are static).
@@ -556,7 +562,9 @@ class RecurrenceOptions(eqx.Module):
             ``verify_lanes`` of its cloud's points before it is registered (static; 0: no
             verification): when at least ``leave_share`` of them leave it (settle on a
             cycle, escape or reach another known attractor) the set is a chaotic saddle,
-            a long transient, and no attractor (:func:`leaving_share`).
+            a long transient, and no attractor (:func:`leaving_share`). At least ``2
+            max_period`` periods are run (:func:`verify_length`): the cycle test reads the
+            last ``2 max_period`` points.
         verify_lanes: cloud points continued by the verification (static).
         leave_share: share of the continued points that leaving makes the set a saddle.
     """
@@ -765,7 +773,7 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         if opt.verify_periods:  # a new set is continued first: a chaotic saddle is no attractor
             def leaves(_):
                 return leaving_share(system, params, integrator, part, verification_starts(second, opt.verify_lanes),
-                                     periods=opt.verify_periods, max_period=M, bound=bound,
+                                     periods=verify_length(opt, M), max_period=M, bound=bound,
                                      elsewhere=lambda pts: jnp.all(
                                          lookup(s.table, cell_keys(part, _flat(pts))).reshape(
                                              pts.shape[0], -1) >= 0, axis=0))
@@ -890,9 +898,6 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
     if options.cloud_periods // CLOUD_STAGES < 2 * M + 1:
         raise ValueError(f"options.cloud_periods={options.cloud_periods} must be at least {CLOUD_STAGES * (2 * M + 1)} "
                          f"({CLOUD_STAGES} stages of 2 max_period + 1 periods) for max_period={M}.")
-    if 0 < options.verify_periods < 2 * M:
-        raise ValueError(f"options.verify_periods={options.verify_periods} must be 0 (no verification) or at least "
-                         f"2 max_period = {2 * M}.")
     R = check_int(round_periods, "round_periods", 1)
     L = check_int(chunk, "chunk", 1)
     check_number(escape_bound, "escape_bound", 0, strict_min=True)
