@@ -810,6 +810,27 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
+  // one RK4 step of length hs from time t0 on the pieces ``s``, eight lanes: y -> o, with k the
+  // field at (t0, y) (velocity rows k0 = y1, k2 = y3); returns the time terms at t0 + hs
+  auto substep = [&](v8d t0, v8d hs, v8d y0, v8d y1, v8d y2, v8d y3, v8d k0, v8d k1, v8d k2, v8d k3, v8d s0,
+                     v8d s1, v8d s2, v8d s3, v8d& o0, v8d& o1, v8d& o2, v8d& o3) {
+    const v8d hm = 0.5 * hs;
+    v8d b1, b3, c1, c3, d1, d3;
+    const T8 qm = terms8(t0 + hm);
+    const v8d u0 = y0 + hm * k0, u1 = y1 + hm * k1, u2 = y2 + hm * k2, u3 = y3 + hm * k3;
+    piece(qm, u0, u1, u2, u3, s0, s1, s2, s3, b1, b3);
+    const v8d v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
+    piece(qm, v0, v1, v2, v3, s0, s1, s2, s3, c1, c3);
+    const v8d z0 = y0 + hs * v1, z1 = y1 + hs * c1, z2 = y2 + hs * v3, z3 = y3 + hs * c3;
+    const T8 qe = terms8(t0 + hs);
+    piece(qe, z0, z1, z2, z3, s0, s1, s2, s3, d1, d3);
+    const v8d h6 = hs / 6.0;
+    o0 = y0 + h6 * (k0 + 2.0 * (u1 + v1) + z1);
+    o1 = y1 + h6 * (k1 + 2.0 * (b1 + c1) + d1);
+    o2 = y2 + h6 * (k2 + 2.0 * (u3 + v3) + z3);
+    o3 = y3 + h6 * (k3 + 2.0 * (b3 + c3) + d3);
+    return qe;
+  };
   auto store = [](double* dst, v8d v) { __builtin_memcpy(dst, &v, sizeof v); };
   const double habs = std::fabs(h);
   for (int g = 0; g < Kp; g += 8) {
@@ -817,21 +838,8 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     const v8d y0 = load8(w.y[0] + g), y1 = load8(w.y[1] + g), y2 = load8(w.y[2] + g), y3 = load8(w.y[3] + g);
     const v8d a0 = load8(w.k1[0] + g), a1 = load8(w.k1[1] + g), a2 = load8(w.k1[2] + g), a3 = load8(w.k1[3] + g);
     v8d h1 = load8(w.th + g) * h;
-    const v8d hm = 0.5 * h1;
-    v8d b1, b3, c1, c3, d1, d3;
-    const T8 qm = terms8(t + hm);
-    const v8d u0 = y0 + hm * a0, u1 = y1 + hm * a1, u2 = y2 + hm * a2, u3 = y3 + hm * a3;
-    piece(qm, u0, u1, u2, u3, sd0, sd1, sd2, sd3, b1, b3);
-    const v8d v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
-    piece(qm, v0, v1, v2, v3, sd0, sd1, sd2, sd3, c1, c3);
-    const v8d z0 = y0 + h1 * v1, z1 = y1 + h1 * c1, z2 = y2 + h1 * v3, z3 = y3 + h1 * c3;
-    const T8 qe = terms8(t + h1);
-    piece(qe, z0, z1, z2, z3, sd0, sd1, sd2, sd3, d1, d3);
-    const v8d h16 = h1 / 6.0;
-    v8d m0 = y0 + h16 * (a0 + 2.0 * (u1 + v1) + z1);
-    v8d m1 = y1 + h16 * (a1 + 2.0 * (b1 + c1) + d1);
-    v8d m2 = y2 + h16 * (a2 + 2.0 * (u3 + v3) + z3);
-    v8d m3 = y3 + h16 * (a3 + 2.0 * (b3 + c3) + d3);
+    v8d m0, m1, m2, m3;
+    const T8 qe = substep(t + zero, h1, y0, y1, y2, y3, a0, a1, a2, a3, sd0, sd1, sd2, sd3, m0, m1, m2, m3);
     // land: one Newton correction along the piece being left
     {
       const v8d wh = load8(w.wh + g);
@@ -859,24 +867,13 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     sd2 = sd2 * load8(w.fl[2] + g);
     sd3 = sd3 * load8(w.fl[3] + g);
     // the rest of the step (rk4_lane from the surface)
-    const v8d tt = t + h1, hh = h - h1, hh2 = 0.5 * hh;
+    const v8d tt = t + h1, hh = h - h1;
     v8d e1, e3;
     const T8 qa = terms8(tt);
     piece(qa, m0, m1, m2, m3, sd0, sd1, sd2, sd3, e1, e3);
     const v8d K0 = m1, K1 = e1, K2 = m3, K3 = e3;
-    const T8 qb = terms8(tt + hh2);
-    const v8d p0 = m0 + hh2 * K0, p1 = m1 + hh2 * K1, p2 = m2 + hh2 * K2, p3 = m3 + hh2 * K3;
-    piece(qb, p0, p1, p2, p3, sd0, sd1, sd2, sd3, b1, b3);
-    const v8d r0 = m0 + hh2 * p1, r1 = m1 + hh2 * b1, r2 = m2 + hh2 * p3, r3 = m3 + hh2 * b3;
-    piece(qb, r0, r1, r2, r3, sd0, sd1, sd2, sd3, c1, c3);
-    const v8d s0 = m0 + hh * r1, s1 = m1 + hh * c1, s2 = m2 + hh * r3, s3 = m3 + hh * c3;
-    const T8 qc = terms8(tt + hh);
-    piece(qc, s0, s1, s2, s3, sd0, sd1, sd2, sd3, d1, d3);
-    const v8d hh6 = hh / 6.0;
-    const v8d Y0 = m0 + hh6 * (K0 + 2.0 * (p1 + r1) + s1);
-    const v8d Y1 = m1 + hh6 * (K1 + 2.0 * (b1 + c1) + d1);
-    const v8d Y2 = m2 + hh6 * (K2 + 2.0 * (p3 + r3) + s3);
-    const v8d Y3 = m3 + hh6 * (K3 + 2.0 * (b3 + c3) + d3);
+    v8d Y0, Y1, Y2, Y3;
+    const T8 qc = substep(tt, hh, m0, m1, m2, m3, K0, K1, K2, K3, sd0, sd1, sd2, sd3, Y0, Y1, Y2, Y3);
     // a further event in the rest of the step? (the sign test of first_crossing)
     const v8d X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
     const v8d T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
