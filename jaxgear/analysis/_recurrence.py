@@ -507,8 +507,7 @@ def leaving_share(system, params, integrator, partition: FinePartition, starts, 
     few hundred periods on a saddle of mean lifetime ``1 / kappa`` of the order of
     ``periods`` is told from an attractor."""
     pts = continue_states(system, params, integrator, starts, periods=periods, keep=2 * max_period)
-    norm = jnp.sqrt(sum(pts[0, d] ** 2 for d in range(pts.shape[1])))
-    left = settled_lanes(pts, partition.width, max_period) | ~(norm <= bound)
+    left = settled_lanes(pts, partition.width, max_period) | ~(jnp.sqrt(_sqn(pts[0])) <= bound)
     if elsewhere is not None:
         left = left | elsewhere(pts)
     return jnp.mean(left.astype(jnp.float64))
