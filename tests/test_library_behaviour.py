@@ -57,18 +57,6 @@ def test_import_sets_float64_and_nothing_else():
         assert before[key] == after[key], key
 
 
-ANALYSIS_SCRIPT = r'''
-import threading, multiprocessing
-import jaxgear as jg
-p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
-grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
-r = jg.analyze_global(jg.DUFFING, p, grid, jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False,
-                      uncertainty=32)
-assert len(r.attractors) >= 1
-print(sorted(t.name for t in threading.enumerate()), len(multiprocessing.active_children()))
-'''
-
-
 def test_import_starts_no_backend_so_a_multi_process_run_can_begin():
     """``jax.distributed.initialize`` must come before any JAX computation; a package whose
     import builds an array (a default option, a constant) makes every multi-process run
@@ -89,12 +77,6 @@ jax.distributed.shutdown()
     assert r.stdout.split() == ["1", "3.0"]
 
 
-def test_an_analysis_starts_no_threads_or_processes():
-    r = _python(ANALYSIS_SCRIPT)
-    assert r.returncode == 0, r.stderr[-2000:]
-    assert r.stdout.strip().splitlines()[-1] == "['MainThread'] 0"
-
-
 class _Planted:
     """An object whose unpickling runs code: it writes ``marker`` (the attack a shared
     cache folder allows when a library unpickles from it)."""
@@ -106,18 +88,24 @@ class _Planted:
         return (Path(self.marker).write_text, ("executed",))
 
 
-def test_no_pickle_in_a_cache_folder_is_executed(tmp_path):
+def test_an_analysis_executes_no_planted_pickle_and_starts_no_threads_or_processes(tmp_path):
     """Every file name a cache could hold computations under (the old ``kept/*.bin``,
     JAX's ``xla/`` entries, anything else) holds a pickle that writes a marker when
-    loaded; a command run with that folder as its cache leaves no marker."""
+    loaded; a command run with that folder as its cache leaves no marker, and when it has
+    finished the interpreter runs no thread but its main one and no child process."""
     cache, marker = tmp_path / "cache", tmp_path / "marker"
     payload = pickle.dumps(_Planted(marker))
     for rel in ("kept/a.bin", "kept/index.pkl", "xla/jit_run-0123456789abcdef", "analysis.pkl", "pool.bin"):
         (cache / rel).parent.mkdir(parents=True, exist_ok=True)
         (cache / rel).write_bytes(payload)
     env = dict(os.environ, JAXGEAR_CACHE_DIR=str(cache))
-    r = _python("from jaxgear.cli import main; raise SystemExit(main(['analyze', '--grid', '4,3,4', '--no-figures', "
-                f"'--quiet', '--uncertainty-samples', '0', '--out', {str(tmp_path / 'out')!r}]))", env=env)
+    r = _python("import multiprocessing, threading\n"
+                "from jaxgear.cli import main\n"
+                "rc = main(['analyze', '--grid', '4,3,4', '--no-figures', '--quiet', '--uncertainty-samples', '16', "
+                f"'--out', {str(tmp_path / 'out')!r}])\n"
+                "print(rc, sorted(t.name for t in threading.enumerate()), len(multiprocessing.active_children()))",
+                env=env)
     assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip().splitlines()[-1] == "0 ['MainThread'] 0"
     assert (tmp_path / "out" / "result.nc").exists()
     assert not marker.exists()

@@ -496,15 +496,35 @@ def _assert_periodic_by_reintegration(out, integrator):
             assert np.linalg.norm(one - pts[:1]) > 1e-3
 
 
+SHOOT_ARGV = ["--random", "8", "--steps-per-period", "100", "--verify", "50", "--json"]
+"""A small search over the paper's region D, from 8 random seeds at a coarse step (100
+steps per period): the transient brings the seeds near the attractor, the solver on P^k
+from there reaches the unstable orbits."""
+
+
+def test_cli_shoot_one_period_is_the_periods_search_of_that_period():
+    # one search: --period 1 and --periods 1-1 from the same seeds converge from the same seeds
+    # to the same P-1, the unstable (flip) orbit of region D (--period once ran without the
+    # transient, with another solver, and converged from none of them)
+    one = _cli_json(["shoot", "--period", "1"] + SHOOT_ARGV)
+    out = _cli_json(["shoot", "--periods", "1-1"] + SHOOT_ARGV)
+    _assert_periodic_by_reintegration(one, jg.default_integrator(100))
+    assert one["settings"]["periods_tried"] == [1] and one["convergence"]["1"] == out["convergence"]["1"]
+    assert one["settings"]["search"] == out["settings"]["search"]
+    assert one["convergence"]["1"]["runs"] == 8 and one["convergence"]["1"]["converged"] >= 1
+    assert len(one["orbits"]) == len(out["orbits"]) == 1
+    p1 = one["orbits"][0]
+    assert p1["period"] == 1 and not p1["stable"] and p1["instability"] == "flip" and p1["multipliers"][0][0] < -1
+    np.testing.assert_allclose(out["orbits"][0]["points"], p1["points"], atol=1e-9)
+    assert len(one["checks"]) == 1 and all(v["consistent"] for v in one["checks"].values())
+
+
+@pytest.mark.slow
 def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
-    # a small search over the paper's region D, from 8 random seeds at a coarse step
-    # (100 steps per period): the transient brings the seeds near the attractor, the solver on
-    # P^1 and P^2 from there reaches the unstable P-1 (flip) and P-2 born from it
-    n = 100
-    argv = ["--random", "8", "--steps-per-period", str(n), "--verify", "50", "--json"]
-    out = _cli_json(["shoot", "--periods", "1-2"] + argv)
+    # P^1 and P^2 searched together reach the unstable P-1 (flip) and the P-2 born from it
+    out = _cli_json(["shoot", "--periods", "1-2"] + SHOOT_ARGV)
     assert out["settings"]["periods_tried"] == [1, 2]
-    _assert_periodic_by_reintegration(out, jg.default_integrator(n))
+    _assert_periodic_by_reintegration(out, jg.default_integrator(100))
     periods = sorted(o["period"] for o in out["orbits"])
     assert 1 in periods and 2 in periods, periods
     p1 = next(o for o in out["orbits"] if o["period"] == 1)
@@ -513,12 +533,9 @@ def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
     assert c["1"]["runs"] == 8 and c["1"]["converged"] >= 1 and c["2"]["converged"] >= 1
     # each orbit checked by direct integration, consistent with its multipliers
     assert len(out["checks"]) == len(out["orbits"]) and all(v["consistent"] for v in out["checks"].values())
-    # one search: --period 1 from the same seeds converges from the same seeds to the same P-1
-    # (it once ran without the transient and converged from none of them)
-    one = _cli_json(["shoot", "--period", "1"] + argv)
+    one = _cli_json(["shoot", "--period", "1"] + SHOOT_ARGV)
     assert one["convergence"]["1"] == c["1"]
     assert one["settings"]["search"] == dict(out["settings"]["search"], periods=[1])
-    assert len(one["orbits"]) == 1
     np.testing.assert_allclose(one["orbits"][0]["points"], p1["points"], atol=1e-9)
 
 

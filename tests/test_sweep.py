@@ -26,6 +26,7 @@ import pytest
 
 import jaxgear as jg
 from jaxgear import basin_sweep, bifurcation_diagram, parameter_map
+from jaxgear.analysis import DEFAULT_SAMPLES
 from jaxgear.sweep import APERIODIC, ESCAPED
 from jaxgear.sweep import _basins as basins_module
 from jaxgear.sweep import _bifurcation as bifurcation_module
@@ -330,11 +331,11 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
     _assert_same_file(tmp_path / "full" / "basins.nc", tmp_path / "run" / "basins.nc")
 
 
-def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method):
+def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method, uncertainty=DEFAULT_SAMPLES):
     """Every value of the (one-pool) basin sweep ``s`` holds what :func:`analyze_global`
     gives at that value alone: the same shares, periods, uncertainty and labels."""
     for i, v in enumerate(values):
-        r = jg.analyze_global(system, jg.with_param(p, param, v), grid, method, progress=False)
+        r = jg.analyze_global(system, jg.with_param(p, param, v), grid, method, progress=False, uncertainty=uncertainty)
         present = np.flatnonzero(s.present[i])
         assert len(present) == len(r.attractors)
         # the local attractor of each global id, read off the labels
@@ -359,9 +360,9 @@ def test_basin_sweep_in_one_pool_is_each_value_alone():
     p = jg.paper_params()
     grid = jg.CellGrid.paper((10, 6, 12))
     values = [4.5, 5.5]
-    s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False, batched=True)
+    s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False, batched=True, uncertainty=64)
     assert not np.allclose(s.shares[0], s.shares[-1])  # the values differ
-    _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct())
+    _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct(), uncertainty=64)
 
 
 def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
