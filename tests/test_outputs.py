@@ -242,7 +242,7 @@ def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path, kills)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kills", [1, 3])
+@pytest.mark.parametrize("kills", KILLS)
 def test_sweep_killed_at_random_moments_leaves_a_whole_result(tmp_path, kills):
     # (slow: the default suite kills `jaxgear analyze` here, and interrupts sweeps in-process
     # in tests/test_sweep.py)
