@@ -403,3 +403,25 @@ def test_systems_without_switching_functions_take_plain_rk4_steps(system, params
         z = z + h / 6 * (k1 + 2 * (k2 + k3) + k4)
     out = np.asarray(KinkAwareRK4(steps, native=False).advance(system, params, jnp.asarray(y[:, None]), 0.3, 1))
     assert rel_diff(out[:, 0], z) < TOL
+
+
+@pytest.mark.slow  # compiles both derivatives of the gathered step (~35 s on the loaded 2 cores)
+def test_gathered_lanes_are_differentiated_as_the_whole_batch_select():
+    """Derivatives through the gathered path (forward and reverse mode) are those of the
+    same lanes stepped in a small batch (the select path), lane by lane."""
+    rng = np.random.default_rng(11)
+    p = random_params(rng)
+    h = 2 * math.pi / float(p.Omega) / STEPS
+    t = float(rng.uniform(0, 10))
+    base = jnp.asarray(reduced_states(rng, 12, p, t))
+    n = DENSE_MAX + 8
+    source = np.arange(n) % 12
+    direction = jnp.asarray(rng.normal(size=(4, 12)))
+    _, small = jax.jvp(lambda Y: step(jg.REDUCED, p, t, Y, h), (base,), (direction,))
+    _, big = jax.jvp(lambda Y: step(jg.REDUCED, p, t, Y, h), (base[:, source],), (direction[:, source],))
+    assert rel_diff(big, np.asarray(small)[:, source]) < TOL
+    weights = jnp.asarray(rng.normal(size=(4, 12)))
+    g_small = jax.grad(lambda Y: jnp.sum(weights * step(jg.REDUCED, p, t, Y, h)))(base)
+    g_big = jax.grad(lambda Y: jnp.sum(weights[:, source] * step(jg.REDUCED, p, t, Y, h)))(base[:, source])
+    assert rel_diff(g_big, np.asarray(g_small)[:, source]) < TOL
+    assert float(jnp.max(jnp.abs(g_small - weights))) > 1e-3  # the step is not the identity
