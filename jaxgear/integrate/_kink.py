@@ -33,6 +33,8 @@ import jax.numpy as jnp
 # through the landing's stop-gradient step lengths need (jax.grad of an orbit scalar
 # through implicit differentiation); import it with the steps, not by accident elsewhere
 import lineax  # noqa: F401
+import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from .._checks import check_bool, check_int
 from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, batch_field, check_steps_per_period
@@ -226,7 +228,7 @@ def _first_crossing(system, params, t, Y, Y1, h, k1, S0, S1, sides, th_break):
     return jnp.minimum(theta, 1.0), which, flips
 
 
-def _land(system, params, t, Ym, h1, h, which, flips, sides, window):
+def _land(system, params, t, Ym, h1, h, which, flips, sides, window, lazy=False):
     """Put the end ``Ym`` of the sub-step to a crossing on the crossed surface.
 
     The located crossing (a root of the trial step's interpolant) is off the true one
@@ -265,10 +267,15 @@ def _land(system, params, t, Ym, h1, h, which, flips, sides, window):
         # how the Jacobian's kink moves with the crossing time; the exact flow differs from
         # it by -w dtc^2 / 2, w = d/dt (f- - f+) along the flow at the surface and dtc the
         # crossing-time shift (value and first derivative zero; Hessians and mixed
-        # parameter-state derivatives of the monodromy matrix come out right). Its value
-        # being zero, it is computed only where the step is differentiated
+        # parameter-state derivatives of the monodromy matrix come out right). ``lazy``:
+        # its value being zero, computed only where the step is differentiated (large
+        # batches; in small ones, the derivative paths, tracing that rule under every
+        # transformation costs more than evaluating the term)
         inv_rate = jnp.where(ok & (rate != 0), 1.0 / sg(jnp.where(rate != 0, rate, 1.0)), 0.0)
-        Ym = _kink_motion(system, Ym, tm, params, which, F, sides, other, inv_rate)
+        if lazy:
+            Ym = _kink_motion(system, Ym, tm, params, which, F, sides, other, inv_rate)
+        else:
+            Ym = Ym - _kink_term(system, params, tm, Ym, F, sides, other, which, inv_rate)
     return Ym, h1 + dt
 
 
@@ -284,29 +291,61 @@ def _kink_motion(system, Ym, tm, params, which, F, sides, other, inv_rate):
     return Ym
 
 
-@_kink_motion.defjvp
 def _kink_motion_jvp(system, primals, tangents):
-    sg = jax.lax.stop_gradient
     Ym, tm, params, which, F, sides, other, inv_rate = primals
-    dYm, dtm, dparams = tangents[0], tangents[1], tangents[2]
+    zero = lambda d: isinstance(d, SymbolicZero)  # noqa: E731
     w = jnp.maximum(which, 0)[None]
+    # the crossed switching function moves only along the inputs that are differentiated
+    # (symbolic zeros: no derivative of the parameters when only states are, and so on)
+    moving = [(i, a, d) for i, (a, d) in enumerate(((Ym, tangents[0]), (tm, tangents[1]))) if not zero(d)]
+    if not all(zero(d) for d in jax.tree.leaves(tangents[2], is_leaf=zero)):
+        dp = jax.tree.map(lambda d, a: _zero_tangent(a) if zero(d) else d, tangents[2], params, is_leaf=zero)
+        moving.append((2, params, dp))
 
-    def crossed(tm, Ym, params):
-        return jnp.take_along_axis(_switching(system, params, tm, Ym), w, axis=0)[0]
+    def crossed(*vals):
+        args = [Ym, tm, params]
+        for (i, _, _), v in zip(moving, vals):
+            args[i] = v
+        return jnp.take_along_axis(_switching(system, args[2], args[1], args[0]), w, axis=0)[0]
 
-    s_w, ds_w = jax.jvp(crossed, (tm, Ym, params), (dtm, dYm, dparams))
+    dYm = jnp.zeros_like(Ym) if zero(tangents[0]) else tangents[0]
+    if not moving:
+        return Ym, dYm
+    s_w, ds_w = jax.jvp(crossed, tuple(a for _, a, _ in moving), tuple(d for _, _, d in moving))
+    return Ym, dYm - _rate_of_jump(system, params, tm, Ym, F, sides, other) * (
+        (s_w - jax.lax.stop_gradient(s_w)) * inv_rate * inv_rate * ds_w)[None]
+
+
+def _rate_of_jump(system, params, tm, Ym, F, sides, other):
+    """``w = d/dt (f_sides - f_other)`` along ``F`` at ``(tm, Ym)`` (held fixed)."""
+    sg = jax.lax.stop_gradient
     tt = jnp.broadcast_to(tm, (Ym.shape[1],))
 
-    def rate_of_jump(ti, y, f, sa, sb):
+    def one(ti, y, f, sa, sb):
         gap = lambda a, b: system.piece_field(a, b, params, sa) - system.piece_field(a, b, params, sb)  # noqa: E731
         return jax.jvp(gap, (ti, y), (jnp.ones_like(ti), f))[1]
 
-    wj = jax.vmap(rate_of_jump, in_axes=(0, 1, 1, 1, 1), out_axes=1)(sg(tt), sg(Ym), sg(F), sides, other)
-    shift = (s_w - sg(s_w)) * inv_rate
-    return Ym, dYm - wj * (shift * inv_rate * ds_w)[None]
+    return jax.vmap(one, in_axes=(0, 1, 1, 1, 1), out_axes=1)(sg(tt), sg(Ym), sg(F), sides, other)
 
 
-def _event(system, params, state):
+def _kink_term(system, params, tm, Ym, F, sides, other, which, inv_rate):
+    """The term ``w dtc^2 / 2`` of :func:`_kink_motion`, evaluated (value zero)."""
+    s_w = jnp.take_along_axis(_switching(system, params, tm, Ym), jnp.maximum(which, 0)[None], axis=0)[0]
+    shift = (s_w - jax.lax.stop_gradient(s_w)) * inv_rate
+    return _rate_of_jump(system, params, tm, Ym, F, sides, other) * (0.5 * shift * shift)[None]
+
+
+_kink_motion.defjvp(_kink_motion_jvp, symbolic_zeros=True)
+
+
+def _zero_tangent(a):
+    a = jnp.asarray(a)
+    if jnp.issubdtype(a.dtype, jnp.inexact):
+        return jnp.zeros_like(a)
+    return np.zeros(a.shape, jax.dtypes.float0)
+
+
+def _event(system, params, state, lazy=False):
     """One event of the lanes in ``state`` (each holding one): locate the first event of
     the (sub-)step ``Ys -> Ye`` (from ``tt``, length ``hh``), sub-step to it, land, flip
     the crossed surface's side, step the rest of the step. Returns the new state and
@@ -335,7 +374,7 @@ def _event(system, params, state):
     h1 = th * hh
     Ym, _ = _rk4(system, params, tt, Ys, h1, window=window, sides=pieces(sides), k1=None if window else k1)
     if sided:
-        Ym, h1 = _land(system, params, tt, Ym, h1, hh, which, flips, sides, window)
+        Ym, h1 = _land(system, params, tt, Ym, h1, hh, which, flips, sides, window, lazy)
     sides = jnp.where(flips, -sides, sides)
     tt, hh = tt + h1, hh - h1
     Ye, k1 = _rk4(system, params, tt, Ym, hh, window=window, sides=pieces(sides))
@@ -382,19 +421,17 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
     need = _pending(system, params, t, h, S0, S1, sides)
 
     if n <= DENSE_MAX:
+        # every lane of the batch through every event (a lane without a further event
+        # steps the rest of its step whole again), selected at the end
         lane = lambda a: jnp.broadcast_to(a, (n,))  # noqa: E731
         state = (Y, lane(t), lane(h), k1, Y1, sides, S0, S1)
 
-        def level(_, c):
-            def run(c):
-                state, need = c
-                new, more = _event(system, params, state)
-                sel = lambda a, b: jnp.where(need, a, b)  # noqa: E731
-                return jax.tree.map(sel, new, state), need & more
+        def dense(_):
+            ev = lambda _, c: _event(system, params, c[0])  # noqa: E731
+            end = jax.lax.fori_loop(0, max_splits, ev, (state, need))[0][4]
+            return jnp.where(need[None], end, Y1)
 
-            return jax.lax.cond(jnp.any(c[1]), run, lambda c: c, c)
-
-        return jax.lax.fori_loop(0, max_splits, level, (state, need))[0][4]
+        return jax.lax.cond(jnp.any(need), dense, lambda _: Y1, None)
 
     # larger batches: the lanes with an event are listed (``idx``, the first ``count``) and
     # gathered chunk by chunk; nothing but the step's end is kept for the whole batch (a
@@ -419,7 +456,8 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
                 sub = sub[:1] + (jnp.broadcast_to(tt, (C,)), jnp.broadcast_to(hh, (C,))) + sub[3:]
 
                 def ev(i, c):
-                    return jax.lax.cond(i <= lev, lambda c: _event(system, params, c[0]), lambda c: c, c)
+                    return jax.lax.cond(i <= lev, lambda c: _event(system, params, c[0], lazy=True),
+                                        lambda c: c, c)
 
                 (_, _, _, _, Ye, *_), more = jax.lax.fori_loop(
                     0, max_splits, ev, (sub, jnp.zeros((C,), bool)))
