@@ -425,3 +425,21 @@ def test_gathered_lanes_are_differentiated_as_the_whole_batch_select():
     g_big = jax.grad(lambda Y: jnp.sum(weights[:, source] * step(jg.REDUCED, p, t, Y, h)))(base[:, source])
     assert rel_diff(g_big, np.asarray(g_small)[:, source]) < TOL
     assert float(jnp.max(jnp.abs(g_small - weights))) > 1e-3  # the step is not the identity
+
+
+def test_gathered_lanes_with_time_breaks_equal_the_small_batch():
+    """The rectangular mesh-stiffness wave jumps at known times (time breaks): a large
+    batch's gathered lanes split there as the same lanes in a small batch do, over steps
+    that hold a break and crossings (a lane with a break and no crossing is split too)."""
+    rng = np.random.default_rng(13)
+    p = jg.paper_params().replace(kappa_sp_amp=0.02, kappa_rp_amp=0.02, mesh_shape="rectangular")
+    breaks = np.asarray(jg.REDUCED.time_breaks(p))
+    T = 2 * math.pi / float(p.Omega)
+    h = T / STEPS
+    base = jnp.asarray(reduced_states(rng, 12, p, 0.0))
+    source = np.arange(DENSE_MAX + 8) % 12
+    # a break 0.3 and 0.6 of a step after the step's start, and a step without one
+    for t in (float(breaks[0]) * T - 0.3 * h, float(breaks[1]) * T - 0.6 * h, 0.37):
+        small = np.asarray(step(jg.REDUCED, p, t, base, h))
+        big = np.asarray(step(jg.REDUCED, p, t, base[:, source], h))
+        assert rel_diff(big, small[:, source]) < TOL
