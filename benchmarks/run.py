@@ -3,6 +3,7 @@
     python benchmarks/run.py            # full run (~20 min on 2 cores)
     python benchmarks/run.py --quick    # ~5 min (no cell-label agreement, n <= 400, fewer sizes)
     python benchmarks/run.py --json out.json
+    python benchmarks/run.py --kink-jax # item 1b alone (~3 min)
 
 Measures, in one run on one machine (compile time reported apart from execution:
 ``compile = first call - steady state``, ``steady state = min(timeit.repeat(...))``):
@@ -14,6 +15,11 @@ Measures, in one run on one machine (compile time reported apart from execution:
    baselines of ``benchmarks/baselines.py`` written for the benchmark (blocked,
    tabulated, vectorised: plain RK4 and kink-aware); the *kernel ratio* = default
    integrator / numba kink-aware;
+1b. the pure-JAX kink-aware step (what a GPU and every derivative run) against pure-JAX
+   plain RK4 on the paper grid (CPU time, one process), the fraction of steps that cross
+   a switching surface, HLO operation/fusion counts of one step and its compile time, the
+   first-call time of a shooting solve and of a 20,000-lane advance, and user systems
+   (Duffing, spur pair with and without declared surfaces);
 2. other CPU styles of the same map: numba naive per-cell, ``scipy.integrate.solve_ivp``
    (RK45) in a Python loop, diffrax Tsit5 vmapped;
 3. the whole job: ``jaxgear analyze`` (the command line, a fresh process: cold with an
@@ -254,8 +260,199 @@ def bench_kernel(X, repeat, R):
         out["kernel_ratio_plain"] = out["default"]["steady_s"] / out["numba_blocked"]["steady_s"]
     out["diffs"] = diffs
     out["n_cells"] = n
+    out["kink_jax_ratio"] = out["kink_jax"]["steady_s"] / out["rk4"]["steady_s"]
     R["kernel"] = out
     R["_Y"] = Ys
+
+
+# =========================================================================== item 1b
+HLO_BEFORE = {"ops": 277, "fusions": 200, "instructions": 6201, "compile_s": None,
+              "note": "main before the chunked gather (kink step of 2026-12-03, f8edbcd): see RESULTS.md"}
+""":func:`hlo_counts` of one pure-JAX kink-aware step of the paper grid as it was before the
+lanes with an event were gathered in chunks (measured once on that code, printed beside
+today's figures)."""
+
+
+def bench_kink_jax(R, X, repeat: int = 5, first_calls: bool = True):
+    """Item 1b: the pure-JAX kink-aware step (what a GPU and every derivative run) against
+    pure-JAX plain RK4, in one process: CPU time (``time.process_time``, all threads) best
+    of ``repeat`` of one period of the paper grid, the fraction of steps that cross a
+    switching surface, HLO operation and fusion counts of one step with its compile time,
+    the first-call time of a shooting solve and the compile time of a 20,000-lane advance
+    (fresh processes), and user systems (Duffing, spur pair) kink-aware vs plain RK4."""
+    import jax.numpy as jnp
+
+    import jaxgear
+
+    p = jaxgear.paper_params()
+    Y0 = jnp.asarray(X).T
+    n = Y0.shape[1]
+    out = {"n_cells": n}
+    for key, integ in (("rk4", jaxgear.RK4(STEPS)), ("kink_jax", jaxgear.KinkAwareRK4(STEPS, native=False))):
+        out[key] = cpu_best(lambda Y, integ=integ: integ.advance(jaxgear.REDUCED, p, Y, 0.0, 1), Y0, repeat)
+    out["ratio"] = out["kink_jax"]["cpu_s"] / out["rk4"]["cpu_s"]
+    out["crossing_fraction"] = crossing_fraction(p, Y0)
+    out["hlo_one_step"] = {"rk4": step_hlo_counts(p, Y0, "rk4"), "kink_jax": step_hlo_counts(p, Y0, "kink"),
+                           "kink_jax_before": HLO_BEFORE}
+    if first_calls:
+        out["first_calls"] = {k: _first_call(k) for k in ("periodic_orbit", "advance_20k")}
+    out["user_systems"] = user_systems(repeat)
+    R["kink_jax"] = out
+
+
+def cpu_best(fn, Y, repeat: int) -> dict:
+    """``jax.jit(fn)(Y)``: first call (wall) and the best CPU time of ``repeat`` calls."""
+    import jax
+
+    f = jax.jit(fn)
+    t = time.perf_counter()
+    _block(f(Y))
+    first = time.perf_counter() - t
+    best = math.inf
+    for _ in range(repeat):
+        c = time.process_time()
+        _block(f(Y))
+        best = min(best, time.process_time() - c)
+    return {"first_s": first, "cpu_s": best, "ns_per_step_cell": ns_per_step(best, Y.shape[1])}
+
+
+def crossing_fraction(p, Y, periods: int = 2) -> list[float]:
+    """Fraction of the kink-aware steps of the grid whose step changes the side of a
+    switching surface, per period (the lanes that pay the split)."""
+    import jax
+    import jax.numpy as jnp
+
+    import jaxgear
+    from jaxgear.integrate._kink import _sides, _switching, kink_step
+
+    S = jaxgear.REDUCED
+    h = S.period(p) / STEPS
+
+    @jax.jit
+    def one_period(Y):
+        def body(Y, i):
+            t = i * h
+            Y1 = kink_step(S, p, t, Y, h)
+            cr = jnp.any(_sides(_switching(S, p, t, Y)) != _sides(_switching(S, p, t + h, Y1)), axis=0)
+            return Y1, jnp.sum(cr)
+
+        return jax.lax.scan(body, Y, jnp.arange(STEPS, dtype=jnp.float64))
+
+    out = []
+    for _ in range(periods):
+        Y, c = one_period(Y)
+        out.append(float(np.sum(np.asarray(c))) / (STEPS * Y.shape[1]))
+    return out
+
+
+def hlo_counts(text: str) -> dict:
+    """Operations of a compiled HLO module outside fused computations (parameters,
+    constants and tuple plumbing left out: what would each be a kernel launch on a GPU),
+    the number of fusions, and all instructions."""
+    comps, cur = {}, None
+    for line in text.splitlines():
+        m = re.match(r"^(?:ENTRY\s+)?%?([\w.\-]+)\s+\(.*\{\s*$", line)
+        if m:
+            cur = m.group(1)
+            comps[cur] = []
+        elif line.strip() == "}":
+            cur = None
+        elif cur is not None and " = " in line:
+            comps[cur].append(line)
+    fused = {c for ls in comps.values() for ln in ls if " fusion(" in ln for c in re.findall(r"calls=%?([\w.\-]+)", ln)}
+    skip = ("parameter(", "constant(", "get-tuple-element(", "tuple(", "bitcast(")
+    return {"ops": sum(1 for c, ls in comps.items() if c not in fused for ln in ls if not any(k in ln for k in skip)),
+            "fusions": sum(1 for ls in comps.values() for ln in ls if " fusion(" in ln),
+            "instructions": sum(len(ls) for ls in comps.values())}
+
+
+def step_hlo_counts(p, Y, kind: str) -> dict:
+    """:func:`hlo_counts` of one pure-JAX step (plain RK4 or kink-aware) of the grid, and its
+    compile time."""
+    import jax
+
+    import jaxgear
+    from jaxgear.integrate._kink import kink_step
+    from jaxgear.integrate._rk4 import rk4_step
+
+    S = jaxgear.REDUCED
+    step = rk4_step if kind == "rk4" else kink_step
+    h = S.period(p) / STEPS
+    t = time.perf_counter()
+    text = jax.jit(lambda Y, tt: step(S, p, tt, Y, h)).lower(Y, 0.3).compile().as_text()
+    return {**hlo_counts(text), "compile_s": time.perf_counter() - t}
+
+
+def _first_call(kind: str) -> dict:
+    """First-call wall time in a fresh process: ``periodic_orbit`` (the paper preset's P-1
+    from a seed, one shooting solve: its compile is mostly the kink step's derivatives) or
+    the compile of a ``jax.jit`` advance of 20,000 lanes with ``native=False``."""
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "first:" + kind]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
+    try:
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+    except (IndexError, json.JSONDecodeError):
+        return {"error": (proc.stderr or proc.stdout)[-500:]}
+
+
+def _first_call_worker(kind: str) -> dict:
+    import jax
+    import jax.numpy as jnp
+
+    import jaxgear
+
+    p = jaxgear.paper_params()
+    t = time.perf_counter()
+    if kind == "periodic_orbit":
+        jaxgear.periodic_orbit(jaxgear.REDUCED, p, np.array([5.4, -0.2, 8.3, -0.8]), period=1)
+    else:
+        integ = jaxgear.KinkAwareRK4(STEPS, native=False)
+        Y = jnp.asarray(paper_centres()[:20_000]).T
+        jax.jit(lambda Y: integ.advance(jaxgear.REDUCED, p, Y, 0.0, 1)).lower(Y).compile()
+    return {"first_s": time.perf_counter() - t}
+
+
+def spur_with_surfaces():
+    """``jaxgear.SPUR_PAIR`` with its backlash surfaces ``x -+ b`` declared (a user system
+    with switching functions and pieces, as a user would write it)."""
+    import jax.numpy as jnp
+
+    import jaxgear
+
+    def pieces(t, x, q, sides):
+        k = 1.0 + q.kappa * jnp.sin(q.Omega * t)
+        d = jnp.where(sides[0] > 0, x[0] - q.b, jnp.where(sides[1] < 0, x[0] + q.b, 0.0))
+        return jnp.stack([x[1], q.f_m + q.e_amp * q.Omega**2 * jnp.sin(q.Omega * t) - 2.0 * q.zeta * x[1] - k * d])
+
+    S = jaxgear.SPUR_PAIR
+    return jaxgear.ForcedSystem(vector_field=S.vector_field, period=S.period, state_names=S.state_names,
+                                section_index=S.section_index, name="spur-pair-surfaces",
+                                switching=lambda t, x, q: jnp.stack([x[0] - q.b, x[0] + q.b]), piece_field=pieces)
+
+
+def user_systems(repeat: int, n: int = 90_000) -> dict:
+    """ns per step and state of the pure-JAX kink-aware and plain RK4 steps on user
+    systems (one period, ``STEPS`` steps, ``n`` random states): the Duffing oscillator and
+    the built-in spur pair declare no switching functions (the kink-aware integrator is
+    plain RK4 for them); the spur pair with its surfaces declared splits its steps."""
+    import jax.numpy as jnp
+
+    import jaxgear
+
+    rng = np.random.default_rng(3)
+    Y = jnp.asarray(np.stack([rng.uniform(-3, 3, n), rng.uniform(-4, 4, n)]))
+    cases = (("duffing", jaxgear.DUFFING, jaxgear.DuffingParams(beta=0.5, gamma=3.0)),
+             ("spur_pair", jaxgear.SPUR_PAIR, jaxgear.SpurPairParams(b=0.5, kappa=0.3, e_amp=0.4, Omega=1.3)),
+             ("spur_pair_surfaces", spur_with_surfaces(), jaxgear.SpurPairParams(b=0.5, kappa=0.3, e_amp=0.4,
+                                                                                 Omega=1.3)))
+    out = {}
+    for name, S, q in cases:
+        row = {"switching": S.switching is not None}
+        for key, integ in (("rk4", jaxgear.RK4(STEPS)), ("kink_jax", jaxgear.KinkAwareRK4(STEPS, native=False))):
+            row[key] = cpu_best(lambda Y, integ=integ, S=S, q=q: integ.advance(S, q, Y, 0.0, 1), Y, repeat)
+        row["ratio"] = row["kink_jax"]["cpu_s"] / row["rk4"]["cpu_s"]
+        out[name] = row
+    return out
 
 
 # =========================================================================== item 2
@@ -778,7 +975,10 @@ def print_table(R) -> list[str]:
     if "kernel_ratio_plain" in K:
         L.append(f"  headline kernel ratio = default / numba blocked plain RK4: {K['kernel_ratio_plain']:.2f} "
                  "(goal <= 1.5)")
+    if "kink_jax_ratio" in K:
+        L.append(f"  pure-JAX ratio = kink-aware / plain RK4, pure JAX (wall): {K['kink_jax_ratio']:.2f} (goal <= 3)")
     L.append("")
+    L += kink_jax_table(R)
 
     S = R.get("styles", {})
     L.append("2. other CPU styles of the same map")
@@ -923,12 +1123,42 @@ def print_table(R) -> list[str]:
     return L
 
 
+def kink_jax_table(R) -> list[str]:
+    J = R.get("kink_jax")
+    if not J:
+        return []
+    L = [f"1b. pure-JAX kink-aware step (GPU and derivative path), paper grid ({J['n_cells']:,d} cells), "
+         f"1 period, {STEPS} steps; CPU time best of the repeats"]
+    for key, label in (("rk4", "RK4(200), plain, pure JAX"), ("kink_jax", "KinkAwareRK4(200, native=False)")):
+        m = J[key]
+        L.append(f"  {label:44s} first call {m['first_s']:6.2f} s  CPU {m['cpu_s']:7.3f} s  "
+                 f"{m['ns_per_step_cell']:8.2f} ns/step/cell")
+    L.append(f"  pure-JAX ratio = kink-aware / plain RK4 (CPU time): {J['ratio']:.2f} (goal <= 3)")
+    L.append("  fraction of steps that cross a switching surface, per period: "
+             + ", ".join(f"{100 * v:.2f} %" for v in J["crossing_fraction"]))
+    for key, H in J["hlo_one_step"].items():
+        c = "" if H.get("compile_s") is None else f", compiled in {H['compile_s']:.2f} s"
+        L.append(f"  compiled HLO of one {key} step: {H['ops']} unfused operations, {H['fusions']} fusions, "
+                 f"{H['instructions']} instructions{c}")
+    for key, m in J.get("first_calls", {}).items():
+        L.append(f"  first call, fresh process, {key}: " + (f"{m['first_s']:.1f} s" if "first_s" in m
+                                                            else m.get("error", "?")[-200:]))
+    for name, row in J.get("user_systems", {}).items():
+        L.append(f"  user system {name:20s} (switching functions: {'yes' if row['switching'] else 'no '}): "
+                 f"plain {row['rk4']['ns_per_step_cell']:.2f}, kink-aware {row['kink_jax']['ns_per_step_cell']:.2f} "
+                 f"ns/step/state (x{row['ratio']:.2f})")
+    L.append("")
+    return L
+
+
 # =========================================================================== main
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="a few minutes' version")
     ap.add_argument("--json", default=None, help="output JSON path (default benchmarks/results[-quick].json)")
     ap.add_argument("--skip-global", action="store_true", help="skip item 5 (the global analysis per method)")
+    ap.add_argument("--kink-jax", action="store_true",
+                    help="only item 1b (the pure-JAX kink-aware step against pure-JAX plain RK4; a few minutes)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--n", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--repeat", type=int, default=3, help=argparse.SUPPRESS)
@@ -936,7 +1166,21 @@ def main(argv=None):
     import jaxgear  # noqa: F401  (enables float64 before any kernel is built)
 
     if a.worker:
-        print(json.dumps(_worker(a.worker, a.n, a.repeat)))
+        if a.worker.startswith("first:"):
+            print(json.dumps(_first_call_worker(a.worker[len("first:"):])))
+        else:
+            print(json.dumps(_worker(a.worker, a.n, a.repeat)))
+        return
+    if a.kink_jax:
+        R = {"load_start": loadavg(), "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+        bench_kink_jax(R, paper_centres(), repeat=5)
+        R["load_end"] = loadavg()
+        print(f"load average at start {_fmt((R['load_start'] or [None])[0], '.2f')}, "
+              f"end {_fmt((R['load_end'] or [None])[0], '.2f')}")
+        print("\n".join(kink_jax_table(R)), flush=True)
+        if a.json:
+            with open(a.json, "w") as fh:
+                json.dump(R, fh, indent=1, default=float)
         return
 
     R = {"quick": bool(a.quick), "date": time.strftime("%Y-%m-%d %H:%M:%S"), "load_start": loadavg()}
@@ -946,6 +1190,8 @@ def main(argv=None):
     repeat = 3 if a.quick else 5
     print("item 1: kernel ...", flush=True)
     bench_kernel(X, repeat, R)
+    print("item 1b: pure-JAX kink-aware step ...", flush=True)
+    bench_kink_jax(R, X, repeat, first_calls=not a.quick)
     print("item 2: other CPU styles ...", flush=True)
     bench_other_styles(X, repeat, R, scipy_sample=50 if a.quick else 200, diffrax_sample=500 if a.quick else 2000)
     print("item 3: whole job ...", flush=True)

@@ -13,14 +13,16 @@ at fourth order, and ``jax.jacfwd`` through the steps converges at fourth order 
 monodromy matrix of the flow, saltation included (identity where the field only kinks;
 model document §8).
 
-The lanes that need a split (a few per cent per step) are gathered into a compact
-buffer in large batches and selected from a whole-batch computation in small ones,
-without leaving ``jit`` and without restarting the integrator; the compiled CPU kernel
+The lanes that need a split (a few per cent per step) are gathered in chunks in large
+batches, and selected from a whole-batch computation in small ones, event by event and
+only for the lanes that still have one, without leaving ``jit`` and without restarting
+the integrator; the compiled CPU kernel
 for the gear models (:mod:`jaxgear.integrate._native`) gathers them per block of lanes.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import ClassVar
 
 import equinox as eqx
@@ -31,6 +33,8 @@ import jax.numpy as jnp
 # through the landing's stop-gradient step lengths need (jax.grad of an orbit scalar
 # through implicit differentiation); import it with the steps, not by accident elsewhere
 import lineax  # noqa: F401
+import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from .._checks import check_bool, check_int
 from ._base import DEFAULT_STEPS_PER_PERIOD, AbstractFixedStep, batch_field, check_steps_per_period
@@ -39,11 +43,19 @@ from ._rk4 import rk4_step
 __all__ = ["KinkAwareRK4", "kink_step", "trial_step", "BREAK_TOL"]
 
 DENSE_MAX = 1024
-"""Batches up to this size split every lane that needs it with one select over the batch
-(reverse-mode differentiable, fused); larger batches gather those lanes first."""
-COMPACT_FRACTION = 8
-"""Large batches gather up to ``n / COMPACT_FRACTION`` lanes that need a split (a few per
-cent do per step); a step with more splits them all with a select."""
+"""Batches up to this size handle each event with one select over the batch (one fused
+computation per stage); larger batches gather the lanes that have one."""
+COMPACT_FRACTION = 256
+"""On a CPU, large batches gather the lanes with an event in chunks of ``n /
+COMPACT_FRACTION`` lanes (at least ``CHUNK_MIN``), as many chunks as there are such lanes
+(a few per cent of the lanes per step): small chunks waste little on a partly filled last
+chunk, and a chunk's fixed cost is small next to its lanes' work (measured: chunks of
+n/32 to n/512 lanes of the paper grid cost 162, 119, 118, 120 ns per step and cell before
+the other savings)."""
+COMPACT_FRACTION_ACCELERATOR = 8
+"""The same on other platforms (GPUs): few wide chunks, each operation being a kernel
+launch there."""
+CHUNK_MIN = 256
 
 SIMULTANEOUS = 1e-12
 """Crossings within this fraction of a step of the first one are the same event (all
@@ -148,7 +160,7 @@ def _hermite_root(s0, s1, d0, d1, differentiable=True):
     ``(1, s1, d1)`` (``d`` scaled by the step), given ``s0 s1 < 0``: safeguarded Newton
     from the secant point, to round-off. Shapes broadcast. ``differentiable``: the root's
     derivative is that of the interpolant's root (one Newton step at the converged point
-    carries it); otherwise none (:func:`_split` says when)."""
+    carries it); otherwise none (:func:`_event` says when)."""
     sg = jax.lax.stop_gradient
     if not differentiable:
         s0, s1, d0, d1 = sg(s0), sg(s1), sg(d0), sg(d1)
@@ -216,7 +228,7 @@ def _first_crossing(system, params, t, Y, Y1, h, k1, S0, S1, sides, th_break):
     return jnp.minimum(theta, 1.0), which, flips
 
 
-def _land(system, params, t, Ym, h1, h, which, flips, sides, window):
+def _land(system, params, t, Ym, h1, h, which, flips, sides, window, lazy=False):
     """Put the end ``Ym`` of the sub-step to a crossing on the crossed surface.
 
     The located crossing (a root of the trial step's interpolant) is off the true one
@@ -255,23 +267,93 @@ def _land(system, params, t, Ym, h1, h, which, flips, sides, window):
         # how the Jacobian's kink moves with the crossing time; the exact flow differs from
         # it by -w dtc^2 / 2, w = d/dt (f- - f+) along the flow at the surface and dtc the
         # crossing-time shift (value and first derivative zero; Hessians and mixed
-        # parameter-state derivatives of the monodromy matrix come out right)
-        tt = jnp.broadcast_to(tm, (Ym.shape[1],))
-
-        def rate_of_jump(ti, y, f, sa, sb):
-            gap = lambda a, b: system.piece_field(a, b, params, sa) - system.piece_field(a, b, params, sb)  # noqa: E731
-            return jax.jvp(gap, (ti, y), (jnp.ones_like(ti), f))[1]
-
-        wj = jax.vmap(rate_of_jump, in_axes=(0, 1, 1, 1, 1), out_axes=1)(sg(tt), sg(Ym), sg(F), sides, other)
-        s_w = pick(_switching(system, params, tm, Ym))
-        shift = jnp.where(ok & (rate != 0), (s_w - sg(s_w)) / sg(jnp.where(rate != 0, rate, 1.0)), 0.0)
-        Ym = Ym - wj * (0.5 * shift * shift)[None]
+        # parameter-state derivatives of the monodromy matrix come out right). ``lazy``:
+        # its value being zero, computed only where the step is differentiated (large
+        # batches; in small ones, the derivative paths, tracing that rule under every
+        # transformation costs more than evaluating the term)
+        inv_rate = jnp.where(ok & (rate != 0), 1.0 / sg(jnp.where(rate != 0, rate, 1.0)), 0.0)
+        if lazy:
+            Ym = _kink_motion(system, Ym, tm, params, which, F, sides, other, inv_rate)
+        else:
+            Ym = Ym - _kink_term(system, params, tm, Ym, F, sides, other, which, inv_rate)
     return Ym, h1 + dt
 
 
-def _split(system, params, t, Y, h, k1, th, which, flips, sides, max_splits):
-    """Lanes whose trial step holds an event: sub-step to it, flip the crossed surface's
-    side, then the rest of the step (split again, up to ``max_splits`` events).
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _kink_motion(system, Ym, tm, params, which, F, sides, other, inv_rate):
+    """``Ym`` plus the crossing-time term of :func:`_land` for a field that kinks,
+    ``-w dtc^2 / 2`` with ``dtc = (s - stop_gradient(s)) / rate`` the crossing-time shift
+    (``s`` the crossed switching function at ``(tm, Ym)``, ``w`` the rate of the jump of
+    the field's pieces along ``F``): value and first derivative zero, so the value is
+    ``Ym`` and the term is evaluated only in the derivative rule, where its derivative
+    (zero, whose own derivative is ``-w dtc dtc'``) gives second derivatives the motion
+    of the kink."""
+    return Ym
+
+
+def _kink_motion_jvp(system, primals, tangents):
+    Ym, tm, params, which, F, sides, other, inv_rate = primals
+    zero = lambda d: isinstance(d, SymbolicZero)  # noqa: E731
+    w = jnp.maximum(which, 0)[None]
+    # the crossed switching function moves only along the inputs that are differentiated
+    # (symbolic zeros: no derivative of the parameters when only states are, and so on)
+    moving = [(i, a, d) for i, (a, d) in enumerate(((Ym, tangents[0]), (tm, tangents[1]))) if not zero(d)]
+    if not all(zero(d) for d in jax.tree.leaves(tangents[2], is_leaf=zero)):
+        dp = jax.tree.map(lambda d, a: _zero_tangent(a) if zero(d) else d, tangents[2], params, is_leaf=zero)
+        moving.append((2, params, dp))
+
+    def crossed(*vals):
+        args = [Ym, tm, params]
+        for (i, _, _), v in zip(moving, vals):
+            args[i] = v
+        return jnp.take_along_axis(_switching(system, args[2], args[1], args[0]), w, axis=0)[0]
+
+    dYm = jnp.zeros_like(Ym) if zero(tangents[0]) else tangents[0]
+    if not moving:
+        return Ym, dYm
+    s_w, ds_w = jax.jvp(crossed, tuple(a for _, a, _ in moving), tuple(d for _, _, d in moving))
+    return Ym, dYm - _rate_of_jump(system, params, tm, Ym, F, sides, other) * (
+        (s_w - jax.lax.stop_gradient(s_w)) * inv_rate * inv_rate * ds_w)[None]
+
+
+def _rate_of_jump(system, params, tm, Ym, F, sides, other):
+    """``w = d/dt (f_sides - f_other)`` along ``F`` at ``(tm, Ym)`` (held fixed)."""
+    sg = jax.lax.stop_gradient
+    tt = jnp.broadcast_to(tm, (Ym.shape[1],))
+
+    def one(ti, y, f, sa, sb):
+        gap = lambda a, b: system.piece_field(a, b, params, sa) - system.piece_field(a, b, params, sb)  # noqa: E731
+        return jax.jvp(gap, (ti, y), (jnp.ones_like(ti), f))[1]
+
+    return jax.vmap(one, in_axes=(0, 1, 1, 1, 1), out_axes=1)(sg(tt), sg(Ym), sg(F), sides, other)
+
+
+def _kink_term(system, params, tm, Ym, F, sides, other, which, inv_rate):
+    """The term ``w dtc^2 / 2`` of :func:`_kink_motion`, evaluated (value zero)."""
+    s_w = jnp.take_along_axis(_switching(system, params, tm, Ym), jnp.maximum(which, 0)[None], axis=0)[0]
+    shift = (s_w - jax.lax.stop_gradient(s_w)) * inv_rate
+    return _rate_of_jump(system, params, tm, Ym, F, sides, other) * (0.5 * shift * shift)[None]
+
+
+_kink_motion.defjvp(_kink_motion_jvp, symbolic_zeros=True)
+
+
+def _zero_tangent(a):
+    a = jnp.asarray(a)
+    if jnp.issubdtype(a.dtype, jnp.inexact):
+        return jnp.zeros_like(a)
+    return np.zeros(a.shape, jax.dtypes.float0)
+
+
+def _event(system, params, state, lazy=False):
+    """One event of the lanes in ``state`` (each holding one): locate the first event of
+    the (sub-)step ``Ys -> Ye`` (from ``tt``, length ``hh``), sub-step to it, land, flip
+    the crossed surface's side, step the rest of the step. Returns the new state and
+    whether its rest step holds another event.
+
+    ``state = (Ys, tt, hh, k1, Ye, sides, S0, S1)``: the sub-step's start and end states,
+    its start time and length, the field at its start, the sides its stages use, and the
+    switching functions at both ends.
 
     With the system's ``piece_field`` every stage of a sub-step is evaluated on that
     sub-step's piece, so each sub-step is an RK4 step of a smooth field (in value and
@@ -280,75 +362,150 @@ def _split(system, params, t, Y, h, k1, th, which, flips, sides, max_splits):
     the identity) and differentiating the sub-steps with respect to their lengths would
     add an error of order ``h^4`` per crossing that depends on where the crossing falls
     in the step; :func:`_land` puts the crossing on the surface and, where the field
-    jumps, supplies the saltation matrix. Without a
-    ``piece_field`` the stages see the field itself and the crossing's place is
-    differentiated (fourth order still, less regular)."""
+    jumps, supplies the saltation matrix. Without a ``piece_field`` the stages see the
+    field itself and the crossing's place is differentiated (fourth order still, less
+    regular)."""
     window = _has_breaks(system, params)
     sided = system.piece_field is not None
     pieces = lambda sd: sd if sided else None  # noqa: E731
+    Ys, tt, hh, k1, Ye, sides, S0, S1 = state
+    th_break = _break_fraction(system, params, tt, hh)
+    th, which, flips = _first_crossing(system, params, tt, Ys, Ye, hh, k1, S0, S1, sides, th_break)
+    h1 = th * hh
+    Ym, _ = _rk4(system, params, tt, Ys, h1, window=window, sides=pieces(sides), k1=None if window else k1)
+    if sided:
+        Ym, h1 = _land(system, params, tt, Ym, h1, hh, which, flips, sides, window, lazy)
+    sides = jnp.where(flips, -sides, sides)
+    tt, hh = tt + h1, hh - h1
+    Ye, k1 = _rk4(system, params, tt, Ym, hh, window=window, sides=pieces(sides))
+    S0, S1 = _switching(system, params, tt, Ym), _switching(system, params, tt + hh, Ye)
+    return (Ym, tt, hh, k1, Ye, sides, S0, S1), _pending(system, params, tt, hh, S0, S1, sides)
 
-    def event(_, c):
-        # sub-step to the event, land, flip, the rest of the step; then the next event
-        Y, tt, hh, k1, th, which, flips, sides, _ = c
-        h1 = th * hh
-        Ym, _ = _rk4(system, params, tt, Y, h1, window=window, sides=pieces(sides), k1=None if window else k1)
-        if sided:
-            Ym, h1 = _land(system, params, tt, Ym, h1, hh, which, flips, sides, window)
-        sides = jnp.where(flips, -sides, sides)
-        tt, hh = tt + h1, hh - h1
-        Y1, k1 = _rk4(system, params, tt, Ym, hh, window=window, sides=pieces(sides))
-        S1 = _switching(system, params, tt + hh, Y1)
-        S0 = _switching(system, params, tt, Ym)
-        th_break = _break_fraction(system, params, tt, hh)
-        th, which, flips = _first_crossing(system, params, tt, Ym, Y1, hh, k1, S0, S1, sides, th_break)
-        # no further event: the next pass steps the remaining hh whole and ends on Y1 again
-        return Ym, tt, hh, k1, jnp.where(th < 1.0, th, 1.0), which, flips, sides, Y1
 
-    tt = jnp.broadcast_to(t, th.shape)
-    hh = jnp.broadcast_to(h, th.shape)
-    c = (Y, tt, hh, k1, th, which, flips, sides, Y)
-    return jax.lax.fori_loop(0, max_splits, event, c)[-1]
+def _pending(system, params, t, h, S0, S1, sides):
+    """Lanes whose step from ``t`` (length ``h``, switching functions ``S0``, ``S1`` at its
+    ends, stages on ``sides``) holds an event: a side changed, or a known break inside."""
+    n = S0.shape[1]
+    if S0.shape[0]:
+        need = jnp.any((_sides(S1) != sides) & jnp.isfinite(S1) & jnp.isfinite(S0), axis=0)
+    else:
+        need = jnp.zeros((n,), bool)
+    if _has_breaks(system, params):
+        need = need | (jnp.broadcast_to(_break_fraction(system, params, t, h), (n,)) < 1.0)
+    return need
+
+
+def _chunk(n: int) -> int:
+    """Lanes of one gathered chunk for a batch of ``n`` (whole SIMD vectors) on the default
+    backend (the platform the step is compiled for)."""
+    fraction = COMPACT_FRACTION if jax.default_backend() == "cpu" else COMPACT_FRACTION_ACCELERATOR
+    per = max(-(-n // fraction), CHUNK_MIN)
+    return -(-per // 8) * 8
 
 
 def kink_step(system, params, t, Y, h, max_splits: int = 2):
     """One kink-aware step of size ``h`` from ``t`` for a batch ``Y (dim, n)`` (see the module).
 
     ``t`` and ``h`` are scalars or ``(n,)``. Lanes without an event inside the step get the
-    plain RK4 step. The split is computed for the whole batch with a select (one fused
-    computation per stage, what accelerators want) and skipped when no lane of the batch
-    needs it.
+    plain RK4 step. Each event (up to ``max_splits``) is handled only on the lanes that
+    still have one: in a batch of up to ``DENSE_MAX`` lanes computed for the whole batch
+    and selected (one fused computation per stage, what accelerators want), in a larger
+    one gathered in chunks (:func:`_chunk`), as many chunks as there are such lanes; an
+    event no lane has is skipped. The event is compiled once per batch shape (no second
+    copy as a fallback). Every loop has a fixed trip count and skips by ``lax.cond``, so
+    the step is differentiable both ways (``jax.jacfwd``, ``jax.grad``).
     """
-    Y1, k1, S0, S1, th_break = trial_step(system, params, t, Y, h)
+    Y1, k1, S0, S1, _ = trial_step(system, params, t, Y, h)
     sides = _sides(S0) if S0.shape[0] else S0
     n = Y.shape[1]
-    if S0.shape[0]:
-        need = jnp.any((_sides(S1) != sides) & jnp.isfinite(S1) & jnp.isfinite(S0), axis=0)
-    else:
-        need = jnp.zeros((n,), bool)
-    need = need | (th_break < 1.0)
-
-    lanes = (Y, k1, jnp.broadcast_to(t, (n,)), jnp.broadcast_to(h, (n,)), S0, S1, Y1, sides,
-             jnp.broadcast_to(th_break, (n,)))
-
-    def split(Ys, ks, ts, hs, S0s, S1s, Y1s, sds, bs):
-        th, which, flips = _first_crossing(system, params, ts, Ys, Y1s, hs, ks, S0s, S1s, sds, bs)
-        return _split(system, params, ts, Ys, hs, ks, th, which, flips, sds, max_splits)
-
-    def dense(_):
-        return jnp.where(need[None], split(*lanes), Y1)
+    need = _pending(system, params, t, h, S0, S1, sides)
 
     if n <= DENSE_MAX:
+        # every lane of the batch through every event (a lane without a further event
+        # steps the rest of its step whole again), selected at the end
+        lane = lambda a: jnp.broadcast_to(a, (n,))  # noqa: E731
+        state = (Y, lane(t), lane(h), k1, Y1, sides, S0, S1)
+
+        def dense(_):
+            ev = lambda _, c: _event(system, params, c[0])  # noqa: E731
+            end = jax.lax.fori_loop(0, max_splits, ev, (state, need))[0][4]
+            return jnp.where(need[None], end, Y1)
+
         return jax.lax.cond(jnp.any(need), dense, lambda _: Y1, None)
-    K = -(-n // COMPACT_FRACTION)
 
-    def compact(_):
-        idx = jnp.nonzero(need, size=K, fill_value=n)[0]  # n: an empty slot, dropped on scatter
-        res = split(*(jnp.take(a, idx, axis=-1, mode="clip") for a in lanes))
-        return Y1.at[:, idx].set(res, mode="drop")
+    # larger batches: the lanes with an event are listed (``idx``, the first ``count``) and
+    # gathered chunk by chunk; nothing but the step's end is kept for the whole batch (a
+    # lane's own stage values would cost more memory traffic than the plain step). A lane
+    # with a further event is listed for the next level, which redoes its earlier events
+    # (a few lanes per step) instead of keeping their states
+    C = _chunk(n)
+    size = -(-n // C) * C
 
-    count = jnp.sum(need)
-    branch = jnp.where(count == 0, 0, jnp.where(count <= K, 1, 2))
-    return jax.lax.switch(branch, [lambda _: Y1, compact, dense], None)
+    def level(lev, c):
+        Yout, idx, count = c
+
+        def one_chunk(s, c):
+            def go(c):
+                Yout, nxt, k = c
+                ids = jax.lax.dynamic_slice_in_dim(idx, s * C, C)
+                take = lambda a: jnp.take(a, ids, axis=-1, mode="clip")  # noqa: E731
+                # (a scalar time stays scalar: the time terms of the trial's ends once per chunk)
+                tt = t if jnp.ndim(t) == 0 else take(t)
+                hh = h if jnp.ndim(h) == 0 else take(h)
+                sub = _start_state(system, params, tt, take(Y), hh, take(Y1))
+                sub = sub[:1] + (jnp.broadcast_to(tt, (C,)), jnp.broadcast_to(hh, (C,))) + sub[3:]
+
+                def ev(i, c):
+                    return jax.lax.cond(i <= lev, lambda c: _event(system, params, c[0], lazy=True),
+                                        lambda c: c, c)
+
+                (_, _, _, _, Ye, *_), more = jax.lax.fori_loop(
+                    0, max_splits, ev, (sub, jnp.zeros((C,), bool)))
+                Yout = Yout.at[:, ids].set(Ye, mode="drop")
+                more = more & (ids < n)
+                at = jnp.where(more, k + jnp.cumsum(more) - 1, size)
+                return Yout, nxt.at[at].set(ids, mode="drop"), k + jnp.sum(more)
+
+            return jax.lax.cond(s * C < count, go, lambda c: c, c)
+
+        def run(c):
+            empty = jnp.full((size,), n, idx.dtype)
+            return jax.lax.fori_loop(0, size // C, one_chunk, (c[0], empty, jnp.zeros_like(count)))
+
+        return jax.lax.cond(count > 0, run, lambda c: c, c)
+
+    idx, count = _listed(need, size)
+    return jax.lax.fori_loop(0, max_splits, level, (Y1, idx, count))[0]
+
+
+def _start_state(system, params, t, Y, h, Y1):
+    """The state of :func:`_event` for lanes at the start of a step whose trial step ended
+    on ``Y1`` (the trial's first stage and switching functions recomputed)."""
+    if _has_breaks(system, params):
+        tol = jnp.minimum(BREAK_TOL * system.period(params), 0.25 * jnp.abs(h))
+        k1 = _field(system, params, t, Y, t + tol, t + h - tol)
+    else:
+        k1 = _field(system, params, t, Y)
+    S0, S1 = _switching(system, params, t, Y), _switching(system, params, t + h, Y1)
+    return (Y, t, h, k1, Y1, _sides(S0) if S0.shape[0] else S0, S0, S1)
+
+
+def _listed(mask, size: int, block: int = 32):
+    """The indices of the true entries of ``mask (n,)`` in order, padded with ``n`` to
+    ``size >= n``, and their number. ``jnp.nonzero``'s prefix sum costs more than the rest
+    of a plain RK4 step on a CPU; ranks within blocks of ``block`` lanes are a product
+    with a triangular matrix of ones (exact in float32: integers <= ``block``), and only
+    the block totals are summed as a prefix."""
+    n = mask.shape[0]
+    nb = -(-n // block)
+    m = jnp.pad(mask, (0, nb * block - n)).reshape(nb, block).astype(jnp.float32)
+    tri = jnp.triu(jnp.ones((block, block), jnp.float32))
+    within = jnp.matmul(m, tri, precision=jax.lax.Precision.HIGHEST).astype(jnp.int32)
+    totals = within[:, -1]
+    rank = (within + (jnp.cumsum(totals) - totals)[:, None]).reshape(-1)[:n] - 1
+    idx = jnp.full((size,), n, jnp.int32).at[jnp.where(mask, rank, size)].set(
+        jnp.arange(n, dtype=jnp.int32), mode="drop")
+    return idx, jnp.sum(totals)
 
 
 _traced_once_step = jax.jit(kink_step, static_argnums=(0, 5))
