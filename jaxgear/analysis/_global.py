@@ -188,6 +188,12 @@ LYAPUNOV_PERIODS = 200
 and the error estimate says how far a chaotic attractor's value is known)."""
 LYAPUNOV_STRETCHES = 4
 """Independent stretches of those periods (the spread of their estimates is the error)."""
+LYAPUNOV_RECHECK = 8
+"""An attractor that the first :data:`LYAPUNOV_PERIODS` periods call quasi-periodic (largest
+exponent zero within its error) is measured again, from where the first measurement
+ended, over this many times as many periods in as many times as many stretches: a weakly
+chaotic attractor (lambda_1 ~ 0.1 per period) can look like a torus over 200 periods,
+a torus stays one (its weighted averages converge faster than any power)."""
 
 
 def attractor_exponents(system, params, attractors, integrator, multipliers, n_exponents: int = 2):
@@ -197,7 +203,8 @@ def attractor_exponents(system, params, attractors, integrator, multipliers, n_e
     multipliers come from autodiff Jacobians, to round-off); an attractor that repeats no point gets
     the exponents of the stroboscopic map from its first cloud point
     (:func:`~jaxgear.lyapunov_spectrum`, :data:`LYAPUNOV_PERIODS` periods in
-    :data:`LYAPUNOV_STRETCHES` stretches, all in one batch) and its
+    :data:`LYAPUNOV_STRETCHES` stretches, all in one batch; those that look quasi-periodic
+    again over :data:`LYAPUNOV_RECHECK` times as long) and its
     :class:`~jaxgear.AttractorType` from them (:func:`~jaxgear.classify_attractor`).
     Returns ``(types (A,), [(exponents, errors, kaplan_yorke)])``."""
     n = min(int(n_exponents), system.dim)
@@ -212,8 +219,17 @@ def attractor_exponents(system, params, attractors, integrator, multipliers, n_e
         x0 = np.stack([np.asarray(attractors[i][0], np.float64)[0] for i in free])
         opts = LyapunovOptions(n_exponents=n, periods=LYAPUNOV_PERIODS, transient=0, stretches=LYAPUNOV_STRETCHES)
         sp = lyapunov_spectrum(system, params, x0, integrator=integrator, options=opts)
-        kinds[free] = classify_attractor(sp, period=np.zeros(len(free), np.int64))
-        exps, errs, ky = (np.asarray(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
+        kind = classify_attractor(sp, period=np.zeros(len(free), np.int64))
+        exps, errs, ky = (np.array(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
+        torus = np.flatnonzero(kind == int(AttractorType.QUASI_PERIODIC))
+        if torus.size:  # a longer look before a zero exponent is believed
+            longer = lyapunov_spectrum(system, params, np.asarray(sp.final_state)[torus], integrator=integrator,
+                                       options=opts, periods=LYAPUNOV_PERIODS * LYAPUNOV_RECHECK,
+                                       stretches=LYAPUNOV_STRETCHES * LYAPUNOV_RECHECK)
+            kind[torus] = classify_attractor(longer, period=np.zeros(torus.size, np.int64))
+            for a, b in zip((exps, errs, ky), (longer.exponents, longer.errors, longer.kaplan_yorke)):
+                a[torus] = np.asarray(b)
+        kinds[free] = kind
         for j, i in enumerate(free):
             out[i] = (exps[j], errs[j], float(ky[j]))
     return kinds, out

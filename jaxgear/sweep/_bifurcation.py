@@ -37,7 +37,7 @@ from .._presets import paper_params
 from .._status import Status
 from .._system import ForcedSystem, check_system
 from .._version import __version__
-from ..analysis._global import LYAPUNOV_PERIODS, LYAPUNOV_STRETCHES
+from ..analysis._global import LYAPUNOV_PERIODS, LYAPUNOV_RECHECK, LYAPUNOV_STRETCHES
 from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import APERIODIC, ESCAPED, classify_sequences, group_starts, label_order, type_label
@@ -467,7 +467,7 @@ def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor
     :func:`~jaxgear.lyapunov_spectrum`; all of the diagram's aperiodic attractors, each at
     its own value, in one batch) and classified (:func:`~jaxgear.classify_attractor`:
     chaotic when the largest exponent is positive beyond its error, quasi-periodic when
-    it is zero within it).
+    it is zero within it, also over :data:`LYAPUNOV_RECHECK` times as many periods).
     """
     kind = np.where(period > 0, int(AttractorType.PERIODIC), int(AttractorType.UNKNOWN)).astype(np.int64)
     lam, err = np.full(period.shape, np.nan), np.full(period.shape, np.nan)
@@ -483,15 +483,26 @@ def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor
                                            chunk_size=run.options.chunk_size)
     spectrum = exponent_spectrum(run, vv, est, final)
     types = np.asarray(classify_attractor(spectrum))
+    lam1, err1 = np.array(spectrum.exponents[:, 0]), np.array(spectrum.errors[:, 0])
+    torus = np.flatnonzero(types == int(AttractorType.QUASI_PERIODIC))
+    if torus.size:  # a longer look before a zero exponent is believed (as the global analysis)
+        est2, final2 = values_exponent_estimates(
+            run.system, run.params, run.names, run.values[vv[torus], None], np.asarray(spectrum.final_state)[torus],
+            n_exponents=k, periods=LYAPUNOV_PERIODS * LYAPUNOV_RECHECK, stretches=LYAPUNOV_STRETCHES * LYAPUNOV_RECHECK,
+            integrator=run.integrator, chunk_size=run.options.chunk_size)
+        longer = exponent_spectrum(run, vv[torus], est2, final2, periods=LYAPUNOV_PERIODS * LYAPUNOV_RECHECK)
+        types[torus] = np.asarray(classify_attractor(longer))
+        lam1[torus], err1[torus] = np.asarray(longer.exponents[:, 0]), np.asarray(longer.errors[:, 0])
     here = (period[dd, vv] == APERIODIC) & (attractor[dd, vv] == attractor[dd, vv, ss][:, None])  # (n, S)
     for i, (d, v) in enumerate(zip(dd, vv)):
         kind[d, v, here[i]] = types[i]
-        lam[d, v, here[i]] = spectrum.exponents[i, 0]
-        err[d, v, here[i]] = spectrum.errors[i, 0]
+        lam[d, v, here[i]] = lam1[i]
+        err[d, v, here[i]] = err1[i]
     return kind, lam, err
 
 
-def exponent_spectrum(run: _Run, vv: np.ndarray, est: np.ndarray, final: np.ndarray) -> LyapunovSpectrum:
+def exponent_spectrum(run: _Run, vv: np.ndarray, est: np.ndarray, final: np.ndarray,
+                      periods: int = LYAPUNOV_PERIODS) -> LyapunovSpectrum:
     """The :class:`~jaxgear.LyapunovSpectrum` of stretch estimates ``est (n, stretches, k)``
     (each lane at the value ``run.values[vv]``) and their final states: the mean of the
     stretches and its standard error, NaN and ``DIVERGED`` where a lane became non-finite
@@ -507,4 +518,4 @@ def exponent_spectrum(run: _Run, vv: np.ndarray, est: np.ndarray, final: np.ndar
         errors_per_time=jnp.asarray(err / T), stretch_exponents=jnp.asarray(est),
         kaplan_yorke=kaplan_yorke(jnp.asarray(lam)), final_state=jnp.asarray(final),
         status=jnp.asarray(np.where(ok, int(Status.CONVERGED), int(Status.DIVERGED)), jnp.int32),
-        periods=LYAPUNOV_PERIODS, transient=0, weighted=True)
+        periods=periods, transient=0, weighted=True)
