@@ -53,6 +53,7 @@ def test_implicit_gradients_of_gear_orbit_scalars_match_finite_differences(paper
     assert rel.max() < 1e-5, rel
 
 
+@pytest.mark.slow
 def test_gradient_does_not_unroll_newton():
     """The gradient is that of the root, not of Newton's path: the same from a far seed
     (many iterations) as from the converged point (none), and available at all in reverse

@@ -229,6 +229,7 @@ KILLS = [pytest.param(1, id="one-kill"), pytest.param(3, marks=pytest.mark.slow,
 """Kills per test: one by default (each a whole command run), three behind the slow marker."""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kills", KILLS)
 def test_analyze_killed_at_random_moments_leaves_a_whole_result(tmp_path, kills):
     def cmd(grid, figures):

@@ -47,6 +47,7 @@ def test_linear_oscillator_matches_closed_form():
     assert bool(r.stable) and int(r.min_period) == 1 and int(r.instability) == STABLE
 
 
+@pytest.mark.slow
 def test_linear_oscillator_with_adaptive_integrator():
     # the same closed form with diffrax (Tsit5): the residual is that of the adaptive map
     p = duffing(beta=0.0, gamma=1.0, omega=1.3)
@@ -306,6 +307,7 @@ def test_plot_orbit_figure():
 
 
 # --------------------------------------------------------------------------- batches, files
+@pytest.mark.slow
 def test_find_periodic_orbits_independent_of_chunk_size():
     p = duffing()
     seeds = np.concatenate([jg.seeds_in_box(7, [-1.5, -1.5], [1.5, 1.5], seed=3), [[40.0, -40.0], [1.0, 1.1]]])
@@ -431,6 +433,7 @@ def test_multiple_shooting_converges_from_more_seeds():
     assert frac[1] <= 8 / 32 and frac[5] >= 10 / 32, frac
 
 
+@pytest.mark.slow
 def test_implicit_gradient_through_optimistix_solvers_and_segments():
     x0 = jnp.array([1.0, 1.1])
 

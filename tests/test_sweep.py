@@ -621,6 +621,7 @@ def test_cli_bad_input_exit_codes(tmp_path, capsys, monkeypatch):
     assert "--from" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_cli_basins(tmp_path, capsys):
     from jaxgear.cli import main
 

@@ -48,6 +48,7 @@ The host side (the pilot, steering, placement on devices) is
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import equinox as eqx
@@ -122,6 +123,12 @@ class PoolOptions(eqx.Module):
     capture_radius: float | None = eqx.field(static=True, default=None)
     lanes: int = eqx.field(static=True, default=DEFAULT_CHUNK_CELLS)
     pilot: int = eqx.field(static=True, default=1024)
+
+    def compiled(self) -> PoolOptions:
+        """These options as the compiled rounds see them: ``lanes`` and ``pilot`` (read by
+        the host only, to size the pools) at their defaults, so pools that differ only in
+        them share one compiled program."""
+        return dataclasses.replace(self, lanes=PoolOptions.lanes, pilot=PoolOptions.pilot)
 
     def __check_init__(self):
         check_int(self.max_period, "max_period", 1)

@@ -58,12 +58,12 @@ def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: Poo
     n = np.array([len(b) for b in X_blocks])
     s, data = placement.start(params, boxes, X_blocks, row_blocks, max(1, min(o.lanes, int(n.max()))),
                               o.max_period, att)
-    done, rounds = 0, 4
+    done, rounds, compiled = 0, 4, o.compiled()
     while True:
         L = s.Y.shape[-1]
         L_min = _next_pool(L)
         t = time.perf_counter()
-        s, info = placement.run(s, data, system, integrator, o, L_min, np.int32(rounds))
+        s, info = placement.run(s, data, system, integrator, compiled, L_min, np.int32(rounds))
         n_done, overflow, n_active, next_cell, n_att = info.T
         # calls of about CALL_SECONDS: few host round trips, a progress bar still moving
         rounds = int(np.clip(rounds * CALL_SECONDS / max(time.perf_counter() - t, 1e-3), 1, 4 * rounds))
