@@ -23,6 +23,9 @@
 #include <vector>
 
 #include <omp.h>
+#ifdef __AVX512F__
+#include <immintrin.h>
+#endif
 
 #include "xla/ffi/api/ffi.h"
 
@@ -437,6 +440,18 @@ inline void split_lane(const Model& m, const Coef& c, const Clock& ck, TermCache
   }
 }
 
+// Eight lanes in one vector register (GCC vector extensions).
+typedef double v8d __attribute__((vector_size(64)));
+typedef long long v8l __attribute__((vector_size(64)));
+
+inline v8d load8(const double* p) {
+  v8d v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+inline void store8(double* p, v8d v) { __builtin_memcpy(p, &v, sizeof v); }
+
 struct Table {  // per parameter row: the time-only terms at every stage time of one period
   int steps;
   std::vector<Terms> stage;  // [steps][3]
@@ -485,49 +500,120 @@ Model make_model(const double* row, int shape) {
   return m;
 }
 
+// The bits of a lane mask (lane i: bit i).
+inline unsigned mask8(v8l m) {
+#ifdef __AVX512F__
+  return _mm512_test_epi64_mask(reinterpret_cast<__m512i>(m), reinterpret_cast<__m512i>(m));
+#else
+  unsigned bits = 0;
+  for (int i = 0; i < 8; ++i) bits |= (m[i] != 0 ? 1u : 0u) << i;
+  return bits;
+#endif
+}
+
+// The dead zone x - b (x >= b), 0 (|x| < b), x + b (x <= -b) on eight lanes, as x minus x
+// clamped to [-b, b]: the same values as backlash() (exact: the clamp is x, b or -b; a NaN
+// stays NaN), three instructions.
+inline v8d dead_zone(v8d x, double b) {
+#ifdef __AVX512F__
+  const __m512d v = reinterpret_cast<__m512d>(x);
+  return reinterpret_cast<v8d>(_mm512_sub_pd(v, _mm512_max_pd(_mm512_min_pd(v, _mm512_set1_pd(b)),
+                                                              _mm512_set1_pd(-b))));
+#else
+  const v8d zero = {}, l = x - b, u = x + b;  // max(x - b, 0) + min(x + b, 0)
+  return (l < 0.0 ? zero : l) + (0.0 < u ? zero : u);
+#endif
+}
+
+#ifndef TRIAL_G
+#define TRIAL_G 4
+#endif
+constexpr int kTrialGroups = TRIAL_G;  // groups of eight lanes advanced together (independent chains overlap)
+
 // The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
-// lanes in one pass (the four stages of a lane in registers): x (4 x L) -> x1, and whether
-// the step holds an event (a switching function changes sign, or a known time break).
-__attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
-                          const double (*x)[kBlock], double (*x1)[kBlock], double E0, double E1, bool brk,
-                          unsigned char* need) {
+// lanes (the four stages of 8 G lanes in registers): x (4 x L) -> x1, and whether the step
+// holds an event (a switching function changes sign, or a known time break) as bits: bit i
+// of need[w] for lane 64 w + i (the bits past L are zero).
+template <int G>
+inline void trial_groups(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, double E0,
+                         double E1, const v8d* y0, const v8d* y1, const v8d* y2, const v8d* y3, v8d* e0, v8d* e1,
+                         v8d* e2, v8d* e3, unsigned* bits) {
   const double h2 = 0.5 * h, h6 = h / 6.0;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
-  auto f = [&](const Terms& q, double z0, double z1, double z2, double z3, double& v1, double& v3) {
-    const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    // the dead zone as max(x - b, 0) + min(x + b, 0): the same value (exact: one term is 0)
-    const double fsp = std::max(z0 - bsp, 0.0) + std::min(z0 + bsp, 0.0);
-    const double frp = std::max(X - brp, 0.0) + std::min(X + brp, 0.0);
-    const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+  auto f = [&](const Terms& q, v8d z0, v8d z1, v8d z2, v8d z3, v8d& v1, v8d& v3) __attribute__((always_inline)) {
+    const v8d X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
+    const v8d fsp = dead_zone(z0, bsp), frp = dead_zone(X, brp);
+    const v8d gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
-#pragma omp simd
-  for (int j = 0; j < L; ++j) {
-    const double y0 = x[0][j], y1 = x[1][j], y2 = x[2][j], y3 = x[3][j];
-    double a1, a3, b1, b3, c1, c3, d1, d3;
-    f(q0, y0, y1, y2, y3, a1, a3);
-    const double u0 = y0 + h2 * y1, u1 = y1 + h2 * a1, u2 = y2 + h2 * y3, u3 = y3 + h2 * a3;
-    f(q1, u0, u1, u2, u3, b1, b3);
-    const double v0 = y0 + h2 * u1, v1 = y1 + h2 * b1, v2 = y2 + h2 * u3, v3 = y3 + h2 * b3;
-    f(q1, v0, v1, v2, v3, c1, c3);
-    const double w0 = y0 + h * v1, w1 = y1 + h * c1, w2 = y2 + h * v3, w3 = y3 + h * c3;
-    f(q2, w0, w1, w2, w3, d1, d3);
-    const double e0 = y0 + h6 * (y1 + 2.0 * (u1 + v1) + w1);
-    const double e1 = y1 + h6 * (a1 + 2.0 * (b1 + c1) + d1);
-    const double e2 = y2 + h6 * (y3 + 2.0 * (u3 + v3) + w3);
-    const double e3 = y3 + h6 * (a3 + 2.0 * (b3 + c3) + d3);
-    x1[0][j] = e0;
-    x1[1][j] = e1;
-    x1[2][j] = e2;
-    x1[3][j] = e3;
+  v8d a1[G], a3[G], b1[G], b3[G], c1[G], c3[G], d1[G], d3[G];
+  v8d u0[G], u1[G], u2[G], u3[G], v0[G], v1[G], v2[G], v3[G], w0[G], w1[G], w2[G], w3[G];
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) f(q0, y0[g], y1[g], y2[g], y3[g], a1[g], a3[g]);
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    u0[g] = y0[g] + h2 * y1[g], u1[g] = y1[g] + h2 * a1[g], u2[g] = y2[g] + h2 * y3[g], u3[g] = y3[g] + h2 * a3[g];
+    f(q1, u0[g], u1[g], u2[g], u3[g], b1[g], b3[g]);
+  }
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    v0[g] = y0[g] + h2 * u1[g], v1[g] = y1[g] + h2 * b1[g], v2[g] = y2[g] + h2 * u3[g], v3[g] = y3[g] + h2 * b3[g];
+    f(q1, v0[g], v1[g], v2[g], v3[g], c1[g], c3[g]);
+  }
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    w0[g] = y0[g] + h * v1[g], w1[g] = y1[g] + h * c1[g], w2[g] = y2[g] + h * v3[g], w3[g] = y3[g] + h * c3[g];
+    f(q2, w0[g], w1[g], w2[g], w3[g], d1[g], d3[g]);
+  }
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    e0[g] = y0[g] + h6 * (y1[g] + 2.0 * (u1[g] + v1[g]) + w1[g]);
+    e1[g] = y1[g] + h6 * (a1[g] + 2.0 * (b1[g] + c1[g]) + d1[g]);
+    e2[g] = y2[g] + h6 * (y3[g] + 2.0 * (u3[g] + v3[g]) + w3[g]);
+    e3[g] = y3[g] + h6 * (a3[g] + 2.0 * (b3[g] + c3[g]) + d3[g]);
     // (lanes that are not finite are told apart in the split: lane_finite)
-    const double X0 = y2 - y0 - E0, X1 = e2 - e0 - E1;
+    const v8d X0 = y2[g] - y0[g] - E0, X1 = e2[g] - e0[g] - E1;
     // (x - b >= 0 is x >= b, x + b >= 0 is x >= -b: the sign of a rounded difference is exact)
-    const bool cr = ((y0 >= bsp) != (e0 >= bsp)) | ((y0 >= -bsp) != (e0 >= -bsp)) | ((X0 >= brp) != (X1 >= brp)) |
-                    ((X0 >= -brp) != (X1 >= -brp));
-    need[j] = cr | brk;
+    bits[g] = mask8(((y0[g] >= bsp) != (e0[g] >= bsp)) | ((y0[g] >= -bsp) != (e0[g] >= -bsp)) |
+                    ((X0 >= brp) != (X1 >= brp)) | ((X0 >= -brp) != (X1 >= -brp)));
+  }
+}
+
+__attribute__((noinline)) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2,
+                                             double h, int L, const double (*x)[kBlock], double (*x1)[kBlock],
+                                             double E0, double E1, bool brk, uint64_t* need) {
+  constexpr int G = kTrialGroups;
+  const unsigned all = brk ? 0xffu : 0u;
+  for (int k = 0; 64 * k < L; ++k) need[k] = 0;
+  int j = 0;
+  for (; j + 8 * G <= L; j += 8 * G) {
+    v8d y[4][G], e[4][G];
+    unsigned bits[G];
+#pragma GCC unroll 8
+    for (int g = 0; g < G; ++g)
+      for (int i = 0; i < 4; ++i) y[i][g] = load8(x[i] + j + 8 * g);
+    trial_groups<G>(c, q0, q1, q2, h, E0, E1, y[0], y[1], y[2], y[3], e[0], e[1], e[2], e[3], bits);
+#pragma GCC unroll 8
+    for (int g = 0; g < G; ++g) {
+      for (int i = 0; i < 4; ++i) store8(x1[i] + j + 8 * g, e[i][g]);
+      need[(j + 8 * g) / 64] |= static_cast<uint64_t>(bits[g] | all) << ((j + 8 * g) % 64);
+    }
+  }
+  for (; j < L; j += 8) {  // the last lanes, eight at a time, through a padded copy (the same instructions)
+    const int r = std::min(8, L - j);
+    alignas(64) double y[4][8] = {}, e[4][8];
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < r; ++k) y[i][k] = x[i][j + k];
+    v8d yv[4], ev[4];
+    unsigned bits;
+    for (int i = 0; i < 4; ++i) yv[i] = load8(y[i]);
+    trial_groups<1>(c, q0, q1, q2, h, E0, E1, yv, yv + 1, yv + 2, yv + 3, ev, ev + 1, ev + 2, ev + 3, &bits);
+    for (int i = 0; i < 4; ++i) store8(e[i], ev[i]);
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < r; ++k) x1[i][j + k] = e[i][k];
+    need[j / 64] |= static_cast<uint64_t>((bits | all) & ((1u << r) - 1u)) << (j % 64);
   }
 }
 
@@ -553,7 +639,7 @@ struct SplitScratch {
   alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
   alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
   alignas(64) long long actl[4 * kBlock];
-  alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock];
+  alignas(64) int cont[kBlock], pair_lane[4 * kBlock + 8], pair_fn[4 * kBlock + 8];
 };
 
 // Roots of the Hermite cubics of `np` crossings at once: hermite_root on eight at a time
@@ -561,14 +647,6 @@ struct SplitScratch {
 // all eight have converged: each root keeps its own iterations). The inputs are padded to
 // a multiple of eight with a harmless cubic, so every root takes the same instructions
 // wherever it stands.
-typedef double v8d __attribute__((vector_size(64)));
-typedef long long v8l __attribute__((vector_size(64)));
-
-inline v8d load8(const double* p) {
-  v8d v;
-  __builtin_memcpy(&v, p, sizeof v);
-  return v;
-}
 
 inline void hermite_roots(SplitScratch& w, int np) {
   const int np8 = (np + 7) / 8 * 8;
@@ -720,6 +798,30 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     D1a[3][g] = r1;
   }
   int np = 0;
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+  {  // the crossed functions of eight lanes at a time, packed to the front of a register
+    const v8d one = v8d{} + 1.0;
+    const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    for (int g0 = 0; g0 < K; g0 += 8) {
+      const unsigned valid = K - g0 >= 8 ? 0xffu : (1u << (K - g0)) - 1u;
+      const unsigned fin = valid & mask8(load8(w.fin + g0) != 0.0);  // not finite: the trial step stands
+      const __m256i lanes = _mm256_add_epi32(iota, _mm256_set1_epi32(g0));
+      for (int i = 0; i < 4; ++i) {
+        const v8d S0 = load8(S0a[i] + g0), S1 = load8(S1a[i] + g0);
+        const __mmask8 k = static_cast<__mmask8>(
+            fin & mask8(((S1 >= 0.0 ? one : -one) != load8(w.sd[i] + g0)) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0)));
+        auto pack = [k](v8d v) { return reinterpret_cast<v8d>(_mm512_maskz_compress_pd(k, reinterpret_cast<__m512d>(v))); };
+        store8(w.s0 + np, pack(S0));
+        store8(w.s1 + np, pack(S1));
+        store8(w.d0 + np, pack(load8(D0a[i] + g0) * h));
+        store8(w.d1 + np, pack(load8(D1a[i] + g0) * h));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(w.pair_lane + np), _mm256_maskz_compress_epi32(k, lanes));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(w.pair_fn + np), _mm256_set1_epi32(i));
+        np += __builtin_popcount(k);
+      }
+    }
+  }
+#else
   for (int g = 0; g < K; ++g) {
     // (written whatever the test, kept when it holds: no branch to mispredict)
     const bool fin = w.fin[g] != 0.0;  // not finite: the trial step stands (lane_finite)
@@ -734,6 +836,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
       np += fin & (side(S1) != w.sd[i][g]) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0);
     }
   }
+#endif
   hermite_roots(w, np);
   for (int k = 0; k < np; ++k) w.thl[w.pair_fn[k]][w.pair_lane[k]] = std::min(std::max(w.root[k], 0.0), 1.0);
   // the first crossing of each lane (as first_crossing), eight lanes at a time
@@ -973,7 +1076,7 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
   for (int j = 0; j < L; ++j)
     if (j == 0 || row[j] != row[j - 1]) run[nrun++] = j;
   run[nrun] = L;
-  alignas(64) unsigned char need[kBlock];
+  uint64_t need[kBlock / 64];
   int idx[kBlock];
   for (int per = 0; per < periods; ++per) {
     for (int s = 0; s < steps; ++s) {
@@ -987,26 +1090,12 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
         const double t = t0 + s * h;
         auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
         trial_uniform(c, tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x), at(x1),
-                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
-        // lanes with an event: split, all at once where the model allows, else one by one
+                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
+        // lanes with an event (the set bits of need): split, all at once where the model
+        // allows, else one by one
         int K = 0;
-        int j = j0;
-        for (; j + 64 <= j1; j += 64) {  // 64 flags (0 or 1) to the bits of a mask, then its set bits
-          uint64_t mask = 0;
-          for (int b8 = 0; b8 < 8; ++b8) {
-            uint64_t word;
-            __builtin_memcpy(&word, need + j + 8 * b8, 8);
-            mask |= (((word & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56) << (8 * b8);
-          }
-          while (mask) {
-            idx[K++] = j + __builtin_ctzll(mask);
-            mask &= mask - 1;
-          }
-        }
-        for (; j < j1; ++j) {
-          idx[K] = j;
-          K += need[j] != 0;
-        }
+        for (int g = 0; 64 * g < j1 - j0; ++g)
+          for (uint64_t mask = need[g]; mask; mask &= mask - 1) idx[K++] = j0 + 64 * g + __builtin_ctzll(mask);
         if (K == 0) continue;
         if (vector_split_ok(m, h)) {
           split_block(m, c, tb, s, t, h, max_splits, idx, K, x, x1, w);
