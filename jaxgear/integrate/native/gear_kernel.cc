@@ -23,7 +23,7 @@
 #include <vector>
 
 #include <omp.h>
-#ifdef __AVX512F__
+#if defined(__AVX__) || defined(__AVX512F__)
 #include <immintrin.h>
 #endif
 
@@ -452,6 +452,17 @@ inline v8d load8(const double* p) {
 
 inline void store8(double* p, v8d v) { __builtin_memcpy(p, &v, sizeof v); }
 
+template <class V>
+inline V loadv(const double* p) {
+  V v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+template <class V>
+inline void storev(double* p, V v) {
+  __builtin_memcpy(p, &v, sizeof v);
+}
+
 struct Table {  // per parameter row: the time-only terms at every stage time of one period
   int steps;
   std::vector<Terms> stage;  // [steps][3]
@@ -500,56 +511,74 @@ Model make_model(const double* row, int shape) {
   return m;
 }
 
-// The bits of a lane mask (lane i: bit i).
-inline unsigned mask8(v8l m) {
+// The trial step's registers: eight lanes with AVX-512, four otherwise (a register of the
+// machine: wider generic vectors would be split into pieces by the compiler).
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4l __attribute__((vector_size(32)));
 #ifdef __AVX512F__
-  return _mm512_test_epi64_mask(reinterpret_cast<__m512i>(m), reinterpret_cast<__m512i>(m));
+typedef v8d vtd;
 #else
+typedef v4d vtd;
+#endif
+constexpr int kTrialLanes = sizeof(vtd) / sizeof(double);
+constexpr int kTrialGroups = 4;  // registers advanced together (independent chains overlap)
+
+// The bits of a lane mask of the trial's registers (lane i: bit i).
+template <class M>
+inline unsigned lane_bits(M m) {
+#ifdef __AVX512F__
+  if constexpr (sizeof(M) == 64)
+    return _mm512_test_epi64_mask(reinterpret_cast<__m512i>(m), reinterpret_cast<__m512i>(m));
+#elif defined(__AVX__)
+  if constexpr (sizeof(M) == 32) return static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(m)));
+#endif
   unsigned bits = 0;
-  for (int i = 0; i < 8; ++i) bits |= (m[i] != 0 ? 1u : 0u) << i;
+  for (int i = 0; i < static_cast<int>(sizeof(M) / 8); ++i) bits |= (m[i] != 0 ? 1u : 0u) << i;
   return bits;
-#endif
 }
 
-// The dead zone x - b (x >= b), 0 (|x| < b), x + b (x <= -b) on eight lanes, as x minus x
-// clamped to [-b, b]: the same values as backlash() (exact: the clamp is x, b or -b; a NaN
-// stays NaN), three instructions.
-inline v8d dead_zone(v8d x, double b) {
+// The dead zone x - b (x >= b), 0 (|x| < b), x + b (x <= -b) on a register of lanes, as x
+// minus x clamped to [-b, b]: the same values as backlash() (exact: the clamp is x, b or -b;
+// a NaN stays NaN), three instructions.
+template <class V>
+inline V dead_zone(V x, double b) {
 #ifdef __AVX512F__
-  const __m512d v = reinterpret_cast<__m512d>(x);
-  return reinterpret_cast<v8d>(_mm512_sub_pd(v, _mm512_max_pd(_mm512_min_pd(v, _mm512_set1_pd(b)),
+  if constexpr (sizeof(V) == 64) {
+    const __m512d v = reinterpret_cast<__m512d>(x);
+    return reinterpret_cast<V>(_mm512_sub_pd(v, _mm512_max_pd(_mm512_min_pd(v, _mm512_set1_pd(b)),
                                                               _mm512_set1_pd(-b))));
-#else
-  const v8d zero = {}, l = x - b, u = x + b;  // max(x - b, 0) + min(x + b, 0)
+  }
+#endif
+#ifdef __AVX__
+  if constexpr (sizeof(V) == 32) {
+    const __m256d v = reinterpret_cast<__m256d>(x);
+    return reinterpret_cast<V>(_mm256_sub_pd(v, _mm256_max_pd(_mm256_min_pd(v, _mm256_set1_pd(b)),
+                                                              _mm256_set1_pd(-b))));
+  }
+#endif
+  const V zero = {}, l = x - b, u = x + b;  // max(x - b, 0) + min(x + b, 0)
   return (l < 0.0 ? zero : l) + (0.0 < u ? zero : u);
-#endif
 }
-
-#ifndef TRIAL_G
-#define TRIAL_G 4
-#endif
-constexpr int kTrialGroups = TRIAL_G;  // groups of eight lanes advanced together (independent chains overlap)
 
 // The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
-// lanes (the four stages of 8 G lanes in registers): x (4 x L) -> x1, and whether the step
-// holds an event (a switching function changes sign, or a known time break) as bits: bit i
-// of need[w] for lane 64 w + i (the bits past L are zero).
-template <int G>
+// lanes (the four stages of G registers of lanes at once): y (4 x G registers) -> e, and
+// whether the step of each lane changes the side of a switching function (bits[g]).
+template <class V, int G>
 inline void trial_groups(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, double E0,
-                         double E1, const v8d* y0, const v8d* y1, const v8d* y2, const v8d* y3, v8d* e0, v8d* e1,
-                         v8d* e2, v8d* e3, unsigned* bits) {
+                         double E1, const V* y0, const V* y1, const V* y2, const V* y3, V* e0, V* e1, V* e2, V* e3,
+                         unsigned* bits) {
   const double h2 = 0.5 * h, h6 = h / 6.0;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
-  auto f = [&](const Terms& q, v8d z0, v8d z1, v8d z2, v8d z3, v8d& v1, v8d& v3) __attribute__((always_inline)) {
-    const v8d X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    const v8d fsp = dead_zone(z0, bsp), frp = dead_zone(X, brp);
-    const v8d gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+  auto f = [&](const Terms& q, V z0, V z1, V z2, V z3, V& v1, V& v3) __attribute__((always_inline)) {
+    const V X = z2 - z0 - q.E, Vr = z3 - z1 - q.dE;
+    const V fsp = dead_zone(z0, bsp), frp = dead_zone(X, brp);
+    const V gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * Vr;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
-  v8d a1[G], a3[G], b1[G], b3[G], c1[G], c3[G], d1[G], d3[G];
-  v8d u0[G], u1[G], u2[G], u3[G], v0[G], v1[G], v2[G], v3[G], w0[G], w1[G], w2[G], w3[G];
+  V a1[G], a3[G], b1[G], b3[G], c1[G], c3[G], d1[G], d3[G];
+  V u0[G], u1[G], u2[G], u3[G], v0[G], v1[G], v2[G], v3[G], w0[G], w1[G], w2[G], w3[G];
 #pragma GCC unroll 8
   for (int g = 0; g < G; ++g) f(q0, y0[g], y1[g], y2[g], y3[g], a1[g], a3[g]);
 #pragma GCC unroll 8
@@ -574,43 +603,47 @@ inline void trial_groups(const Coef& c, const Terms& q0, const Terms& q1, const 
     e2[g] = y2[g] + h6 * (y3[g] + 2.0 * (u3[g] + v3[g]) + w3[g]);
     e3[g] = y3[g] + h6 * (a3[g] + 2.0 * (b3[g] + c3[g]) + d3[g]);
     // (lanes that are not finite are told apart in the split: lane_finite)
-    const v8d X0 = y2[g] - y0[g] - E0, X1 = e2[g] - e0[g] - E1;
+    const V X0 = y2[g] - y0[g] - E0, X1 = e2[g] - e0[g] - E1;
     // (x - b >= 0 is x >= b, x + b >= 0 is x >= -b: the sign of a rounded difference is exact)
-    bits[g] = mask8(((y0[g] >= bsp) != (e0[g] >= bsp)) | ((y0[g] >= -bsp) != (e0[g] >= -bsp)) |
-                    ((X0 >= brp) != (X1 >= brp)) | ((X0 >= -brp) != (X1 >= -brp)));
+    bits[g] = lane_bits(((y0[g] >= bsp) != (e0[g] >= bsp)) | ((y0[g] >= -bsp) != (e0[g] >= -bsp)) |
+                        ((X0 >= brp) != (X1 >= brp)) | ((X0 >= -brp) != (X1 >= -brp)));
   }
 }
 
+// The trial step of the L lanes of x (one parameter row): x (4 x L) -> x1, and whether the
+// step of a lane holds an event (a switching function changes sign, or a known time break
+// `brk`) as bits: bit i of need[k] for lane 64 k + i (the bits past L are zero).
 __attribute__((noinline)) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2,
                                              double h, int L, const double (*x)[kBlock], double (*x1)[kBlock],
                                              double E0, double E1, bool brk, uint64_t* need) {
-  constexpr int G = kTrialGroups;
-  const unsigned all = brk ? 0xffu : 0u;
+  typedef vtd V;
+  constexpr int G = kTrialGroups, W = kTrialLanes;
+  const unsigned all = brk ? (1u << W) - 1u : 0u;
   for (int k = 0; 64 * k < L; ++k) need[k] = 0;
   int j = 0;
-  for (; j + 8 * G <= L; j += 8 * G) {
-    v8d y[4][G], e[4][G];
+  for (; j + W * G <= L; j += W * G) {
+    V y[4][G], e[4][G];
     unsigned bits[G];
 #pragma GCC unroll 8
     for (int g = 0; g < G; ++g)
-      for (int i = 0; i < 4; ++i) y[i][g] = load8(x[i] + j + 8 * g);
-    trial_groups<G>(c, q0, q1, q2, h, E0, E1, y[0], y[1], y[2], y[3], e[0], e[1], e[2], e[3], bits);
+      for (int i = 0; i < 4; ++i) y[i][g] = loadv<V>(x[i] + j + W * g);
+    trial_groups<V, G>(c, q0, q1, q2, h, E0, E1, y[0], y[1], y[2], y[3], e[0], e[1], e[2], e[3], bits);
 #pragma GCC unroll 8
     for (int g = 0; g < G; ++g) {
-      for (int i = 0; i < 4; ++i) store8(x1[i] + j + 8 * g, e[i][g]);
-      need[(j + 8 * g) / 64] |= static_cast<uint64_t>(bits[g] | all) << ((j + 8 * g) % 64);
+      for (int i = 0; i < 4; ++i) storev(x1[i] + j + W * g, e[i][g]);
+      need[(j + W * g) / 64] |= static_cast<uint64_t>(bits[g] | all) << ((j + W * g) % 64);
     }
   }
-  for (; j < L; j += 8) {  // the last lanes, eight at a time, through a padded copy (the same instructions)
-    const int r = std::min(8, L - j);
-    alignas(64) double y[4][8] = {}, e[4][8];
+  for (; j < L; j += W) {  // the last lanes, one register at a time, through a padded copy (the same instructions)
+    const int r = std::min(W, L - j);
+    alignas(64) double y[4][W] = {}, e[4][W];
     for (int i = 0; i < 4; ++i)
       for (int k = 0; k < r; ++k) y[i][k] = x[i][j + k];
-    v8d yv[4], ev[4];
+    V yv[4], ev[4];
     unsigned bits;
-    for (int i = 0; i < 4; ++i) yv[i] = load8(y[i]);
-    trial_groups<1>(c, q0, q1, q2, h, E0, E1, yv, yv + 1, yv + 2, yv + 3, ev, ev + 1, ev + 2, ev + 3, &bits);
-    for (int i = 0; i < 4; ++i) store8(e[i], ev[i]);
+    for (int i = 0; i < 4; ++i) yv[i] = loadv<V>(y[i]);
+    trial_groups<V, 1>(c, q0, q1, q2, h, E0, E1, yv, yv + 1, yv + 2, yv + 3, ev, ev + 1, ev + 2, ev + 3, &bits);
+    for (int i = 0; i < 4; ++i) storev(e[i], ev[i]);
     for (int i = 0; i < 4; ++i)
       for (int k = 0; k < r; ++k) x1[i][j + k] = e[i][k];
     need[j / 64] |= static_cast<uint64_t>((bits | all) & ((1u << r) - 1u)) << (j % 64);
@@ -639,7 +672,8 @@ struct SplitScratch {
   alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
   alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
   alignas(64) long long actl[4 * kBlock];
-  alignas(64) int cont[kBlock], pair_lane[4 * kBlock + 8], pair_fn[4 * kBlock + 8];
+  alignas(64) unsigned cont[kBlock / 8], done[kBlock / 8];
+  alignas(64) int pair_lane[4 * kBlock + 8], pair_fn[4 * kBlock + 8];
 };
 
 // Roots of the Hermite cubics of `np` crossings at once: hermite_root on eight at a time
@@ -658,12 +692,12 @@ inline void hermite_roots(SplitScratch& w, int np) {
   }
   const v8d zero = {}, one = zero + 1.0;
   // the iterations of all groups of eight interleaved (independent chains: they overlap)
-  auto p = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+  auto p = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) __attribute__((always_inline)) {
     const v8d t2 = th * th, t3 = t2 * th;
     return (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + th) * d0 + (-2.0 * t3 + 3.0 * t2) * s1 +
            (t3 - t2) * d1;
   };
-  auto dp = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+  auto dp = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) __attribute__((always_inline)) {
     const v8d t2 = th * th;
     return (6.0 * t2 - 6.0 * th) * s0 + (3.0 * t2 - 4.0 * th + 1.0) * d0 + (-6.0 * t2 + 6.0 * th) * s1 +
            (3.0 * t2 - 2.0 * th) * d1;
@@ -804,12 +838,12 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     for (int g0 = 0; g0 < K; g0 += 8) {
       const unsigned valid = K - g0 >= 8 ? 0xffu : (1u << (K - g0)) - 1u;
-      const unsigned fin = valid & mask8(load8(w.fin + g0) != 0.0);  // not finite: the trial step stands
+      const unsigned fin = valid & lane_bits(load8(w.fin + g0) != 0.0);  // not finite: the trial step stands
       const __m256i lanes = _mm256_add_epi32(iota, _mm256_set1_epi32(g0));
       for (int i = 0; i < 4; ++i) {
         const v8d S0 = load8(S0a[i] + g0), S1 = load8(S1a[i] + g0);
         const __mmask8 k = static_cast<__mmask8>(
-            fin & mask8(((S1 >= 0.0 ? one : -one) != load8(w.sd[i] + g0)) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0)));
+            fin & lane_bits(((S1 >= 0.0 ? one : -one) != load8(w.sd[i] + g0)) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0)));
         auto pack = [k](v8d v) { return reinterpret_cast<v8d>(_mm512_maskz_compress_pd(k, reinterpret_cast<__m512d>(v))); };
         store8(w.s0 + np, pack(S0));
         store8(w.s1 + np, pack(S1));
@@ -878,7 +912,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   const v8d zero = {}, one = zero + 1.0;
   // terms_at (sine shape) at eight times at once, and at the step's own ends the tabulated
   // terms (as the TermCache of the lane-by-lane split holds them)
-  auto terms8 = [&](v8d tau) {
+  auto terms8 = [&](v8d tau) __attribute__((always_inline)) {
     const double W = p[OMEGA];
     const v8d xx = W * (tau - ck.t);
     const v8d x2 = xx * xx;
@@ -902,31 +936,43 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     q.L1 = at1 ? zero + q2.L1 : (at0 ? zero + q0.L1 : L1);
     return q;
   };
+  // the pieces of the field on given sides of the surfaces: the dead zone x - off where
+  // `on`, 0 elsewhere (off = b on the upper side, -b on the lower: x - (-b) is x + b exactly)
+  struct Pc {
+    v8l on_sp, on_rp;
+    v8d off_sp, off_rp;
+  };
+  auto pieces = [&](v8d s0, v8d s1, v8d s2, v8d s3) __attribute__((always_inline)) {
+    Pc pc;  // (sides are +-1: never NaN)
+    pc.on_sp = (s0 > 0.0) | (s1 < 0.0);
+    pc.on_rp = (s2 > 0.0) | (s3 < 0.0);
+    pc.off_sp = s0 > 0.0 ? zero + bsp : zero - bsp;
+    pc.off_rp = s2 > 0.0 ? zero + brp : zero - brp;
+    return pc;
+  };
   // field_piece's velocity components on eight lanes
-  auto piece = [&](const T8& q, v8d z0, v8d z1, v8d z2, v8d z3, v8d s0, v8d s1, v8d s2, v8d s3, v8d& v1,
-                   v8d& v3) {
+  auto piece = [&](const T8& q, v8d z0, v8d z1, v8d z2, v8d z3, const Pc& pc, v8d& v1, v8d& v3)
+      __attribute__((always_inline)) {
     const v8d X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    const v8d zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
-    const v8d fsp = s0 > 0.0 ? zl : (s1 < 0.0 ? zh : zero);  // (sides are +-1: never NaN)
-    const v8d frp = s2 > 0.0 ? Xl : (s3 < 0.0 ? Xh : zero);
+    const v8d fsp = pc.on_sp ? z0 - pc.off_sp : zero, frp = pc.on_rp ? X - pc.off_rp : zero;
     const v8d gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
-  // one RK4 step of length hs from time t0 on the pieces ``s``, eight lanes: y -> o, with k the
+  // one RK4 step of length hs from time t0 on the pieces ``pc``, eight lanes: y -> o, with k the
   // field at (t0, y) (velocity rows k0 = y1, k2 = y3); returns the time terms at t0 + hs
-  auto substep = [&](v8d t0, v8d hs, v8d y0, v8d y1, v8d y2, v8d y3, v8d k0, v8d k1, v8d k2, v8d k3, v8d s0,
-                     v8d s1, v8d s2, v8d s3, v8d& o0, v8d& o1, v8d& o2, v8d& o3) {
+  auto substep = [&](v8d t0, v8d hs, v8d y0, v8d y1, v8d y2, v8d y3, v8d k0, v8d k1, v8d k2, v8d k3, const Pc& pc,
+                     v8d& o0, v8d& o1, v8d& o2, v8d& o3) __attribute__((always_inline)) {
     const v8d hm = 0.5 * hs;
     v8d b1, b3, c1, c3, d1, d3;
     const T8 qm = terms8(t0 + hm);
     const v8d u0 = y0 + hm * k0, u1 = y1 + hm * k1, u2 = y2 + hm * k2, u3 = y3 + hm * k3;
-    piece(qm, u0, u1, u2, u3, s0, s1, s2, s3, b1, b3);
+    piece(qm, u0, u1, u2, u3, pc, b1, b3);
     const v8d v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
-    piece(qm, v0, v1, v2, v3, s0, s1, s2, s3, c1, c3);
+    piece(qm, v0, v1, v2, v3, pc, c1, c3);
     const v8d z0 = y0 + hs * v1, z1 = y1 + hs * c1, z2 = y2 + hs * v3, z3 = y3 + hs * c3;
     const T8 qe = terms8(t0 + hs);
-    piece(qe, z0, z1, z2, z3, s0, s1, s2, s3, d1, d3);
+    piece(qe, z0, z1, z2, z3, pc, d1, d3);
     const v8d h6 = hs / 6.0;
     o0 = y0 + h6 * (k0 + 2.0 * (u1 + v1) + z1);
     o1 = y1 + h6 * (k1 + 2.0 * (b1 + c1) + d1);
@@ -942,12 +988,13 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     const v8d a0 = load8(w.k1[0] + g), a1 = load8(w.k1[1] + g), a2 = load8(w.k1[2] + g), a3 = load8(w.k1[3] + g);
     v8d h1 = load8(w.th + g) * h;
     v8d m0, m1, m2, m3;
-    const T8 qe = substep(t + zero, h1, y0, y1, y2, y3, a0, a1, a2, a3, sd0, sd1, sd2, sd3, m0, m1, m2, m3);
+    const Pc pc1 = pieces(sd0, sd1, sd2, sd3);
+    const T8 qe = substep(t + zero, h1, y0, y1, y2, y3, a0, a1, a2, a3, pc1, m0, m1, m2, m3);
     // land: one Newton correction along the piece being left
     {
       const v8d wh = load8(w.wh + g);
       v8d F1, F3;
-      piece(qe, m0, m1, m2, m3, sd0, sd1, sd2, sd3, F1, F3);
+      piece(qe, m0, m1, m2, m3, pc1, F1, F3);
       const v8d F0 = m1, F2 = m3;
       const v8d Xr = m2 - m0 - qe.E;
       const v8d r2 = F2 - F0 - qe.dE;
@@ -973,10 +1020,11 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     const v8d tt = t + h1, hh = h - h1;
     v8d e1, e3;
     const T8 qa = terms8(tt);
-    piece(qa, m0, m1, m2, m3, sd0, sd1, sd2, sd3, e1, e3);
+    const Pc pc2 = pieces(sd0, sd1, sd2, sd3);
+    piece(qa, m0, m1, m2, m3, pc2, e1, e3);
     const v8d K0 = m1, K1 = e1, K2 = m3, K3 = e3;
     v8d Y0, Y1, Y2, Y3;
-    const T8 qc = substep(tt, hh, m0, m1, m2, m3, K0, K1, K2, K3, sd0, sd1, sd2, sd3, Y0, Y1, Y2, Y3);
+    const T8 qc = substep(tt, hh, m0, m1, m2, m3, K0, K1, K2, K3, pc2, Y0, Y1, Y2, Y3);
     // a further event in the rest of the step? (the sign test of first_crossing)
     const v8d X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
     const v8d T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
@@ -1003,16 +1051,33 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     store(w.sd[3] + g, sd3);
     store(w.tt + g, tt);
     store(w.hh + g, hh);
-    for (int i = 0; i < 8; ++i)  // continues lane by lane
-      w.cont[g + i] = max_splits >= 2 && (more[i] != 0 || max_splits > 2);
-  }
-  for (int g = 0; g < K; ++g) {
-    const int j = idx[g];
-    if (w.fin[g] == 0.0) continue;
-    if (!w.cont[g]) {
-      for (int i = 0; i < 4; ++i) x1[i][j] = w.y1[i][g];
-      continue;
+    // the lanes done (written back to x1 here) and those that continue lane by lane (below);
+    // lanes that are not finite keep their trial step
+    const unsigned valid = (K - g >= 8 ? 0xffu : (1u << (K - g)) - 1u) & lane_bits(load8(w.fin + g) != 0.0);
+    const unsigned cont = max_splits < 2 ? 0u : (max_splits > 2 ? valid : valid & lane_bits(more));
+    w.cont[g / 8] = cont;
+    w.done[g / 8] = valid & ~cont;
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+    {
+      const __mmask8 k = static_cast<__mmask8>(valid & ~cont);
+      const __m256i at = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ix + g));
+      _mm512_mask_i32scatter_pd(x1[0], k, at, reinterpret_cast<__m512d>(Y0), 8);
+      _mm512_mask_i32scatter_pd(x1[1], k, at, reinterpret_cast<__m512d>(Y1), 8);
+      _mm512_mask_i32scatter_pd(x1[2], k, at, reinterpret_cast<__m512d>(Y2), 8);
+      _mm512_mask_i32scatter_pd(x1[3], k, at, reinterpret_cast<__m512d>(Y3), 8);
     }
+#endif
+  }
+  for (int g0 = 0; g0 < K; g0 += 8) {
+#if !(defined(__AVX512F__) && defined(__AVX512VL__))
+    for (unsigned d = w.done[g0 / 8]; d; d &= d - 1) {
+      const int g = g0 + __builtin_ctz(d);
+      for (int i = 0; i < 4; ++i) x1[i][idx[g]] = w.y1[i][g];
+    }
+#endif
+    for (unsigned cm = w.cont[g0 / 8]; cm; cm &= cm - 1) {
+    const int g = g0 + __builtin_ctz(cm);
+    const int j = idx[g];
     // the rest of split_lane from its second event on, lane by lane
     TermCache tc;
     tc.t[0] = t;
@@ -1044,6 +1109,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides, max_splits - 1,
                out4);
     for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+    }
   }
 }
 
