@@ -1016,7 +1016,22 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     sd1 = sd1 * load8(w.fl[1] + g);
     sd2 = sd2 * load8(w.fl[2] + g);
     sd3 = sd3 * load8(w.fl[3] + g);
-    // the rest of the step (rk4_lane from the surface)
+    store(w.ym[0] + g, m0);
+    store(w.ym[1] + g, m1);
+    store(w.ym[2] + g, m2);
+    store(w.ym[3] + g, m3);
+    store(w.sd[0] + g, sd0);
+    store(w.sd[1] + g, sd1);
+    store(w.sd[2] + g, sd2);
+    store(w.sd[3] + g, sd3);
+    store(w.th + g, h1);
+  }
+  // the rest of the step (rk4_lane from the surface), in a second pass (shorter loop bodies:
+  // the processor overlaps consecutive groups of eight)
+  for (int g = 0; g < Kp; g += 8) {
+    const v8d m0 = load8(w.ym[0] + g), m1 = load8(w.ym[1] + g), m2 = load8(w.ym[2] + g), m3 = load8(w.ym[3] + g);
+    const v8d sd0 = load8(w.sd[0] + g), sd1 = load8(w.sd[1] + g), sd2 = load8(w.sd[2] + g), sd3 = load8(w.sd[3] + g);
+    const v8d h1 = load8(w.th + g);
     const v8d tt = t + h1, hh = h - h1;
     v8d e1, e3;
     const T8 qa = terms8(tt);
@@ -1033,10 +1048,6 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     v8l more = zero != zero;
     for (int i = 0; i < 4; ++i)
       more |= ((T1[i] >= 0.0 ? one : -one) != SD[i]) & (T1[i] - T1[i] == 0.0) & (T0[i] - T0[i] == 0.0);
-    store(w.ym[0] + g, m0);
-    store(w.ym[1] + g, m1);
-    store(w.ym[2] + g, m2);
-    store(w.ym[3] + g, m3);
     store(w.y1[0] + g, Y0);
     store(w.y1[1] + g, Y1);
     store(w.y1[2] + g, Y2);
@@ -1045,10 +1056,6 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     store(w.k1[1] + g, K1);
     store(w.k1[2] + g, K2);
     store(w.k1[3] + g, K3);
-    store(w.sd[0] + g, sd0);
-    store(w.sd[1] + g, sd1);
-    store(w.sd[2] + g, sd2);
-    store(w.sd[3] + g, sd3);
     store(w.tt + g, tt);
     store(w.hh + g, hh);
     // the lanes done (written back to x1 here) and those that continue lane by lane (below);
