@@ -537,6 +537,16 @@ inline unsigned lane_bits(M m) {
   return bits;
 }
 
+// The bits of the lanes where x >= b (false for a NaN), as a mask straight from the compare.
+template <class V>
+inline unsigned ge_bits(V x, double b) {
+#ifdef __AVX512F__
+  if constexpr (sizeof(V) == 64)
+    return _mm512_cmp_pd_mask(reinterpret_cast<__m512d>(x), _mm512_set1_pd(b), _CMP_GE_OQ);
+#endif
+  return lane_bits(x >= b);
+}
+
 // The dead zone x - b (x >= b), 0 (|x| < b), x + b (x <= -b) on a register of lanes, as x
 // minus x clamped to [-b, b]: the same values as backlash() (exact: the clamp is x, b or -b;
 // a NaN stays NaN), three instructions.
@@ -605,8 +615,8 @@ inline void trial_groups(const Coef& c, const Terms& q0, const Terms& q1, const 
     // (lanes that are not finite are told apart in the split: lane_finite)
     const V X0 = y2[g] - y0[g] - E0, X1 = e2[g] - e0[g] - E1;
     // (x - b >= 0 is x >= b, x + b >= 0 is x >= -b: the sign of a rounded difference is exact)
-    bits[g] = lane_bits(((y0[g] >= bsp) != (e0[g] >= bsp)) | ((y0[g] >= -bsp) != (e0[g] >= -bsp)) |
-                        ((X0 >= brp) != (X1 >= brp)) | ((X0 >= -brp) != (X1 >= -brp)));
+    bits[g] = (ge_bits(y0[g], bsp) ^ ge_bits(e0[g], bsp)) | (ge_bits(y0[g], -bsp) ^ ge_bits(e0[g], -bsp)) |
+              (ge_bits(X0, brp) ^ ge_bits(X1, brp)) | (ge_bits(X0, -brp) ^ ge_bits(X1, -brp));
   }
 }
 
