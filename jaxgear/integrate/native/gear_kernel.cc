@@ -34,7 +34,10 @@ namespace ffi = xla::ffi;
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr int kBlock = 256;
+constexpr int kBlock = 512;  // lanes per block
+// The row stride of a block's arrays (4 x kBlock): not a multiple of 4 KiB, so that the rows
+// of a block (the same lane in each row) do not alias in the processor's store-to-load checks.
+constexpr int kRow = kBlock + 8;
 constexpr int kMinBlock = 32;  // the shortest block a small pool is cut into
 constexpr int kBlocksPerThread = 4;  // blocks per thread below kBlock lanes each (balance)
 constexpr int kHermiteIters = 12;
@@ -624,7 +627,7 @@ inline void trial_groups(const Coef& c, const Terms& q0, const Terms& q1, const 
 // step of a lane holds an event (a switching function changes sign, or a known time break
 // `brk`) as bits: bit i of need[k] for lane 64 k + i (the bits past L are zero).
 __attribute__((noinline)) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2,
-                                             double h, int L, const double (*x)[kBlock], double (*x1)[kBlock],
+                                             double h, int L, const double (*x)[kRow], double (*x1)[kRow],
                                              double E0, double E1, bool brk, uint64_t* need) {
   typedef vtd V;
   constexpr int G = kTrialGroups, W = kTrialLanes;
@@ -674,13 +677,13 @@ inline bool vector_split_ok(const Model& m, double h) { return m.n_breaks == 0 &
 
 // Scratch of split_block: the lanes of a block that split in one step, struct of arrays.
 struct SplitScratch {
-  alignas(64) double y[4][kBlock], k1[4][kBlock], ym[4][kBlock], y1[4][kBlock], sd[4][kBlock];
+  alignas(64) double y[4][kRow], k1[4][kRow], ym[4][kRow], y1[4][kRow], sd[4][kRow];
   alignas(64) double th[kBlock], tt[kBlock], hh[kBlock];
   alignas(64) double s0[4 * kBlock + 8], s1[4 * kBlock + 8], d0[4 * kBlock + 8], d1[4 * kBlock + 8];
   alignas(64) double root[4 * kBlock + 8];
-  alignas(64) double S0[4][kBlock], S1[4][kBlock], D0[4][kBlock], D1[4][kBlock];
-  alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
-  alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
+  alignas(64) double S0[4][kRow], S1[4][kRow], D0[4][kRow], D1[4][kRow];
+  alignas(64) double thl[4][kRow], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
+  alignas(64) double wh[kBlock], fl[4][kRow], fin[kBlock];
   alignas(64) long long actl[4 * kBlock];
   alignas(64) unsigned cont[kBlock / 8], done[kBlock / 8];
   alignas(64) int pair_lane[4 * kBlock + 8], pair_fn[4 * kBlock + 8];
@@ -776,7 +779,7 @@ inline void hermite_roots(SplitScratch& w, int np) {
 // lane. Lanes that are not finite keep their trial step (lane_finite). x: the states at t,
 // x1: the trial states at t + h, overwritten with the split ones.
 void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t, double h, int max_splits,
-                 const int* idx, int K, const double (*x)[kBlock], double (*x1)[kBlock], SplitScratch& w) {
+                 const int* idx, int K, const double (*x)[kRow], double (*x1)[kRow], SplitScratch& w) {
   const double* p = m.p;
   const Clock& ck = tb.clock[s];
   const Terms q0 = tb.stage[3 * s], q2 = tb.stage[3 * s + 2];
@@ -787,10 +790,10 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   const int Kp = (K + 7) / 8 * 8;
   int ix[kBlock];
   for (int g = 0; g < Kp; ++g) ix[g] = idx[g < K ? g : K - 1];
-  double (*S0a)[kBlock] = w.S0;
-  double (*S1a)[kBlock] = w.S1;
-  double (*D0a)[kBlock] = w.D0;
-  double (*D1a)[kBlock] = w.D1;
+  double (*S0a)[kRow] = w.S0;
+  double (*S1a)[kRow] = w.S1;
+  double (*D0a)[kRow] = w.D0;
+  double (*D1a)[kRow] = w.D1;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
 #pragma omp simd simdlen(8)
@@ -1136,9 +1139,9 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
                double t0, int periods, int steps, int max_splits, SplitScratch& w) {
   const int L = static_cast<int>(b - a);
   const int rows = static_cast<int>(models.size());
-  alignas(64) double xa[4][kBlock], xb[4][kBlock];
-  double (*x)[kBlock] = xa;
-  double (*x1)[kBlock] = xb;
+  alignas(64) double xa[4][kRow], xb[4][kRow];
+  double (*x)[kRow] = xa;
+  double (*x1)[kRow] = xb;
   int row[kBlock], lane[kBlock];  // lane j of the block is lane a + lane[j] of the batch
   for (int j = 0; j < L; ++j) {
     lane[j] = j;
@@ -1171,7 +1174,7 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
         const Table& tb = tables[r];
         const double h = m.T / steps;
         const double t = t0 + s * h;
-        auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
+        auto at = [j0](double (*v)[kRow]) { return reinterpret_cast<double (*)[kRow]>(&v[0][j0]); };
         trial_uniform(c, tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x), at(x1),
                       tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
         // lanes with an event (the set bits of need): split, all at once where the model
