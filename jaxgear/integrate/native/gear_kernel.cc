@@ -4,8 +4,9 @@
 // vector field of jaxgear/_model.py), written for the CPU: lanes in blocks of struct-of-
 // arrays that stay in cache for all steps of a call, the time-only terms of the vector
 // field (mesh stiffness, transmission errors) tabulated once per stage time and shared
-// by every lane with the same parameters, the trial step vectorised over a block in one
-// pass, and the few lanes whose step holds a backlash crossing gathered and split together
+// by every lane with the same parameters, the trial step vectorised over a block (several
+// registers of lanes advanced together, the lanes with an event marked in bit masks), and
+// the few lanes whose step holds a backlash crossing gathered and split together
 // (vectorised over them; lane by lane for a known time break or a further event in the
 // step). Blocks run in parallel (OpenMP).
 //
@@ -857,7 +858,9 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
         const v8d S0 = load8(S0a[i] + g0), S1 = load8(S1a[i] + g0);
         const __mmask8 k = static_cast<__mmask8>(
             fin & lane_bits(((S1 >= 0.0 ? one : -one) != load8(w.sd[i] + g0)) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0)));
-        auto pack = [k](v8d v) { return reinterpret_cast<v8d>(_mm512_maskz_compress_pd(k, reinterpret_cast<__m512d>(v))); };
+        auto pack = [k](v8d v) {
+          return reinterpret_cast<v8d>(_mm512_maskz_compress_pd(k, reinterpret_cast<__m512d>(v)));
+        };
         store8(w.s0 + np, pack(S0));
         store8(w.s1 + np, pack(S1));
         store8(w.d0 + np, pack(load8(D0a[i] + g0) * h));
@@ -1096,39 +1099,39 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     }
 #endif
     for (unsigned cm = w.cont[g0 / 8]; cm; cm &= cm - 1) {
-    const int g = g0 + __builtin_ctz(cm);
-    const int j = idx[g];
-    // the rest of split_lane from its second event on, lane by lane
-    TermCache tc;
-    tc.t[0] = t;
-    tc.q[0] = q0;
-    tc.t[1] = te;
-    tc.q[1] = q2;
-    tc.n = 2;
-    const double tt = w.tt[g], hh = w.hh[g];
-    double Ym[4], Y1[4], K1[4], sides[4], S0[4], S1[4], out4[4];
-    for (int i = 0; i < 4; ++i) {
-      Ym[i] = w.ym[i][g];
-      Y1[i] = w.y1[i][g];
-      K1[i] = w.k1[i][g];
-      sides[i] = w.sd[i][g];
-    }
-    switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
-    switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
-    double th2;
-    int which2;
-    bool flips2[4];
-    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, break_fraction(m, tt, hh), &th2, &which2,
-                   flips2);
-    const bool more = th2 < 1.0;
-    if (!more && max_splits == 2) {
-      for (int i = 0; i < 4; ++i) x1[i][j] = Y1[i];
-      continue;
-    }
-    for (int i = 0; i < 4; ++i) flips2[i] = more && flips2[i];
-    split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides, max_splits - 1,
-               out4);
-    for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
+      const int g = g0 + __builtin_ctz(cm);
+      const int j = idx[g];
+      // the rest of split_lane from its second event on, lane by lane
+      TermCache tc;
+      tc.t[0] = t;
+      tc.q[0] = q0;
+      tc.t[1] = te;
+      tc.q[1] = q2;
+      tc.n = 2;
+      const double tt = w.tt[g], hh = w.hh[g];
+      double Ym[4], Y1[4], K1[4], sides[4], S0[4], S1[4], out4[4];
+      for (int i = 0; i < 4; ++i) {
+        Ym[i] = w.ym[i][g];
+        Y1[i] = w.y1[i][g];
+        K1[i] = w.k1[i][g];
+        sides[i] = w.sd[i][g];
+      }
+      switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
+      switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
+      double th2;
+      int which2;
+      bool flips2[4];
+      first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, break_fraction(m, tt, hh), &th2, &which2,
+                     flips2);
+      const bool more = th2 < 1.0;
+      if (!more && max_splits == 2) {
+        for (int i = 0; i < 4; ++i) x1[i][j] = Y1[i];
+        continue;
+      }
+      for (int i = 0; i < 4; ++i) flips2[i] = more && flips2[i];
+      split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides,
+                 max_splits - 1, out4);
+      for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
     }
   }
 }
