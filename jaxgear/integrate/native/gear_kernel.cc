@@ -4,8 +4,9 @@
 // vector field of jaxgear/_model.py), written for the CPU: lanes in blocks of struct-of-
 // arrays that stay in cache for all steps of a call, the time-only terms of the vector
 // field (mesh stiffness, transmission errors) tabulated once per stage time and shared
-// by every lane with the same parameters, the trial step vectorised over a block in one
-// pass, and the few lanes whose step holds a backlash crossing gathered and split together
+// by every lane with the same parameters, the trial step vectorised over a block (several
+// registers of lanes advanced together, the lanes with an event marked in bit masks), and
+// the few lanes whose step holds a backlash crossing gathered and split together
 // (vectorised over them; lane by lane for a known time break or a further event in the
 // step). Blocks run in parallel (OpenMP).
 //
@@ -23,6 +24,9 @@
 #include <vector>
 
 #include <omp.h>
+#if defined(__AVX__) || defined(__AVX512F__)
+#include <immintrin.h>
+#endif
 
 #include "xla/ffi/api/ffi.h"
 
@@ -31,7 +35,10 @@ namespace ffi = xla::ffi;
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr int kBlock = 256;
+constexpr int kBlock = 512;  // lanes per block
+// The row stride of a block's arrays (4 x kBlock): not a multiple of 4 KiB, so that the rows
+// of a block (the same lane in each row) do not alias in the processor's store-to-load checks.
+constexpr int kRow = kBlock + 8;
 constexpr int kMinBlock = 32;  // the shortest block a small pool is cut into
 constexpr int kBlocksPerThread = 4;  // blocks per thread below kBlock lanes each (balance)
 constexpr int kHermiteIters = 12;
@@ -437,6 +444,29 @@ inline void split_lane(const Model& m, const Coef& c, const Clock& ck, TermCache
   }
 }
 
+// Eight lanes in one vector register (GCC vector extensions).
+typedef double v8d __attribute__((vector_size(64)));
+typedef long long v8l __attribute__((vector_size(64)));
+
+inline v8d load8(const double* p) {
+  v8d v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+
+inline void store8(double* p, v8d v) { __builtin_memcpy(p, &v, sizeof v); }
+
+template <class V>
+inline V loadv(const double* p) {
+  V v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+template <class V>
+inline void storev(double* p, V v) {
+  __builtin_memcpy(p, &v, sizeof v);
+}
+
 struct Table {  // per parameter row: the time-only terms at every stage time of one period
   int steps;
   std::vector<Terms> stage;  // [steps][3]
@@ -485,49 +515,152 @@ Model make_model(const double* row, int shape) {
   return m;
 }
 
+// The trial step's registers: eight lanes with AVX-512, four otherwise (a register of the
+// machine: wider generic vectors would be split into pieces by the compiler).
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4l __attribute__((vector_size(32)));
+#ifdef __AVX512F__
+typedef v8d vtd;
+#else
+typedef v4d vtd;
+#endif
+constexpr int kTrialLanes = sizeof(vtd) / sizeof(double);
+constexpr int kTrialGroups = 4;  // registers advanced together (independent chains overlap)
+
+// The bits of a lane mask of the trial's registers (lane i: bit i).
+template <class M>
+inline unsigned lane_bits(M m) {
+#ifdef __AVX512F__
+  if constexpr (sizeof(M) == 64)
+    return _mm512_test_epi64_mask(reinterpret_cast<__m512i>(m), reinterpret_cast<__m512i>(m));
+#elif defined(__AVX__)
+  if constexpr (sizeof(M) == 32) return static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(m)));
+#endif
+  unsigned bits = 0;
+  for (int i = 0; i < static_cast<int>(sizeof(M) / 8); ++i) bits |= (m[i] != 0 ? 1u : 0u) << i;
+  return bits;
+}
+
+// The bits of the lanes where x >= b (false for a NaN), as a mask straight from the compare.
+template <class V>
+inline unsigned ge_bits(V x, double b) {
+#ifdef __AVX512F__
+  if constexpr (sizeof(V) == 64)
+    return _mm512_cmp_pd_mask(reinterpret_cast<__m512d>(x), _mm512_set1_pd(b), _CMP_GE_OQ);
+#endif
+  return lane_bits(x >= b);
+}
+
+// The dead zone x - b (x >= b), 0 (|x| < b), x + b (x <= -b) on a register of lanes, as x
+// minus x clamped to [-b, b]: the same values as backlash() (exact: the clamp is x, b or -b;
+// a NaN stays NaN), three instructions.
+template <class V>
+inline V dead_zone(V x, double b) {
+#ifdef __AVX512F__
+  if constexpr (sizeof(V) == 64) {
+    const __m512d v = reinterpret_cast<__m512d>(x);
+    return reinterpret_cast<V>(_mm512_sub_pd(v, _mm512_max_pd(_mm512_min_pd(v, _mm512_set1_pd(b)),
+                                                              _mm512_set1_pd(-b))));
+  }
+#endif
+#ifdef __AVX__
+  if constexpr (sizeof(V) == 32) {
+    const __m256d v = reinterpret_cast<__m256d>(x);
+    return reinterpret_cast<V>(_mm256_sub_pd(v, _mm256_max_pd(_mm256_min_pd(v, _mm256_set1_pd(b)),
+                                                              _mm256_set1_pd(-b))));
+  }
+#endif
+  const V zero = {}, l = x - b, u = x + b;  // max(x - b, 0) + min(x + b, 0)
+  return (l < 0.0 ? zero : l) + (0.0 < u ? zero : u);
+}
+
 // The trial RK4 step of a block whose lanes share one parameter row, vectorised over the
-// lanes in one pass (the four stages of a lane in registers): x (4 x L) -> x1, and whether
-// the step holds an event (a switching function changes sign, or a known time break).
-__attribute__((noinline, target("prefer-vector-width=512"))) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, int L,
-                          const double (*x)[kBlock], double (*x1)[kBlock], double E0, double E1, bool brk,
-                          unsigned char* need) {
+// lanes (the four stages of G registers of lanes at once): y (4 x G registers) -> e, and
+// whether the step of each lane changes the side of a switching function (bits[g]).
+template <class V, int G>
+inline void trial_groups(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2, double h, double E0,
+                         double E1, const V* y0, const V* y1, const V* y2, const V* y3, V* e0, V* e1, V* e2, V* e3,
+                         unsigned* bits) {
   const double h2 = 0.5 * h, h6 = h / 6.0;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
-  auto f = [&](const Terms& q, double z0, double z1, double z2, double z3, double& v1, double& v3) {
-    const double X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    // the dead zone as max(x - b, 0) + min(x + b, 0): the same value (exact: one term is 0)
-    const double fsp = std::max(z0 - bsp, 0.0) + std::min(z0 + bsp, 0.0);
-    const double frp = std::max(X - brp, 0.0) + std::min(X + brp, 0.0);
-    const double gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
+  auto f = [&](const Terms& q, V z0, V z1, V z2, V z3, V& v1, V& v3) __attribute__((always_inline)) {
+    const V X = z2 - z0 - q.E, Vr = z3 - z1 - q.dE;
+    const V fsp = dead_zone(z0, bsp), frp = dead_zone(X, brp);
+    const V gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * Vr;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
-#pragma omp simd
-  for (int j = 0; j < L; ++j) {
-    const double y0 = x[0][j], y1 = x[1][j], y2 = x[2][j], y3 = x[3][j];
-    double a1, a3, b1, b3, c1, c3, d1, d3;
-    f(q0, y0, y1, y2, y3, a1, a3);
-    const double u0 = y0 + h2 * y1, u1 = y1 + h2 * a1, u2 = y2 + h2 * y3, u3 = y3 + h2 * a3;
-    f(q1, u0, u1, u2, u3, b1, b3);
-    const double v0 = y0 + h2 * u1, v1 = y1 + h2 * b1, v2 = y2 + h2 * u3, v3 = y3 + h2 * b3;
-    f(q1, v0, v1, v2, v3, c1, c3);
-    const double w0 = y0 + h * v1, w1 = y1 + h * c1, w2 = y2 + h * v3, w3 = y3 + h * c3;
-    f(q2, w0, w1, w2, w3, d1, d3);
-    const double e0 = y0 + h6 * (y1 + 2.0 * (u1 + v1) + w1);
-    const double e1 = y1 + h6 * (a1 + 2.0 * (b1 + c1) + d1);
-    const double e2 = y2 + h6 * (y3 + 2.0 * (u3 + v3) + w3);
-    const double e3 = y3 + h6 * (a3 + 2.0 * (b3 + c3) + d3);
-    x1[0][j] = e0;
-    x1[1][j] = e1;
-    x1[2][j] = e2;
-    x1[3][j] = e3;
+  V a1[G], a3[G], b1[G], b3[G], c1[G], c3[G], d1[G], d3[G];
+  V u0[G], u1[G], u2[G], u3[G], v0[G], v1[G], v2[G], v3[G], w0[G], w1[G], w2[G], w3[G];
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) f(q0, y0[g], y1[g], y2[g], y3[g], a1[g], a3[g]);
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    u0[g] = y0[g] + h2 * y1[g], u1[g] = y1[g] + h2 * a1[g], u2[g] = y2[g] + h2 * y3[g], u3[g] = y3[g] + h2 * a3[g];
+    f(q1, u0[g], u1[g], u2[g], u3[g], b1[g], b3[g]);
+  }
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    v0[g] = y0[g] + h2 * u1[g], v1[g] = y1[g] + h2 * b1[g], v2[g] = y2[g] + h2 * u3[g], v3[g] = y3[g] + h2 * b3[g];
+    f(q1, v0[g], v1[g], v2[g], v3[g], c1[g], c3[g]);
+  }
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    w0[g] = y0[g] + h * v1[g], w1[g] = y1[g] + h * c1[g], w2[g] = y2[g] + h * v3[g], w3[g] = y3[g] + h * c3[g];
+    f(q2, w0[g], w1[g], w2[g], w3[g], d1[g], d3[g]);
+  }
+#pragma GCC unroll 8
+  for (int g = 0; g < G; ++g) {
+    e0[g] = y0[g] + h6 * (y1[g] + 2.0 * (u1[g] + v1[g]) + w1[g]);
+    e1[g] = y1[g] + h6 * (a1[g] + 2.0 * (b1[g] + c1[g]) + d1[g]);
+    e2[g] = y2[g] + h6 * (y3[g] + 2.0 * (u3[g] + v3[g]) + w3[g]);
+    e3[g] = y3[g] + h6 * (a3[g] + 2.0 * (b3[g] + c3[g]) + d3[g]);
     // (lanes that are not finite are told apart in the split: lane_finite)
-    const double X0 = y2 - y0 - E0, X1 = e2 - e0 - E1;
+    const V X0 = y2[g] - y0[g] - E0, X1 = e2[g] - e0[g] - E1;
     // (x - b >= 0 is x >= b, x + b >= 0 is x >= -b: the sign of a rounded difference is exact)
-    const bool cr = ((y0 >= bsp) != (e0 >= bsp)) | ((y0 >= -bsp) != (e0 >= -bsp)) | ((X0 >= brp) != (X1 >= brp)) |
-                    ((X0 >= -brp) != (X1 >= -brp));
-    need[j] = cr | brk;
+    bits[g] = (ge_bits(y0[g], bsp) ^ ge_bits(e0[g], bsp)) | (ge_bits(y0[g], -bsp) ^ ge_bits(e0[g], -bsp)) |
+              (ge_bits(X0, brp) ^ ge_bits(X1, brp)) | (ge_bits(X0, -brp) ^ ge_bits(X1, -brp));
+  }
+}
+
+// The trial step of the L lanes of x (one parameter row): x (4 x L) -> x1, and whether the
+// step of a lane holds an event (a switching function changes sign, or a known time break
+// `brk`) as bits: bit i of need[k] for lane 64 k + i (the bits past L are zero).
+__attribute__((noinline)) void trial_uniform(const Coef& c, const Terms& q0, const Terms& q1, const Terms& q2,
+                                             double h, int L, const double (*x)[kRow], double (*x1)[kRow],
+                                             double E0, double E1, bool brk, uint64_t* need) {
+  typedef vtd V;
+  constexpr int G = kTrialGroups, W = kTrialLanes;
+  const unsigned all = brk ? (1u << W) - 1u : 0u;
+  for (int k = 0; 64 * k < L; ++k) need[k] = 0;
+  int j = 0;
+  for (; j + W * G <= L; j += W * G) {
+    V y[4][G], e[4][G];
+    unsigned bits[G];
+#pragma GCC unroll 8
+    for (int g = 0; g < G; ++g)
+      for (int i = 0; i < 4; ++i) y[i][g] = loadv<V>(x[i] + j + W * g);
+    trial_groups<V, G>(c, q0, q1, q2, h, E0, E1, y[0], y[1], y[2], y[3], e[0], e[1], e[2], e[3], bits);
+#pragma GCC unroll 8
+    for (int g = 0; g < G; ++g) {
+      for (int i = 0; i < 4; ++i) storev(x1[i] + j + W * g, e[i][g]);
+      need[(j + W * g) / 64] |= static_cast<uint64_t>(bits[g] | all) << ((j + W * g) % 64);
+    }
+  }
+  for (; j < L; j += W) {  // the last lanes, one register at a time, through a padded copy (the same instructions)
+    const int r = std::min(W, L - j);
+    alignas(64) double y[4][W] = {}, e[4][W];
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < r; ++k) y[i][k] = x[i][j + k];
+    V yv[4], ev[4];
+    unsigned bits;
+    for (int i = 0; i < 4; ++i) yv[i] = loadv<V>(y[i]);
+    trial_groups<V, 1>(c, q0, q1, q2, h, E0, E1, yv, yv + 1, yv + 2, yv + 3, ev, ev + 1, ev + 2, ev + 3, &bits);
+    for (int i = 0; i < 4; ++i) storev(e[i], ev[i]);
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < r; ++k) x1[i][j + k] = e[i][k];
+    need[j / 64] |= static_cast<uint64_t>((bits | all) & ((1u << r) - 1u)) << (j % 64);
   }
 }
 
@@ -545,15 +678,16 @@ inline bool vector_split_ok(const Model& m, double h) { return m.n_breaks == 0 &
 
 // Scratch of split_block: the lanes of a block that split in one step, struct of arrays.
 struct SplitScratch {
-  alignas(64) double y[4][kBlock], k1[4][kBlock], ym[4][kBlock], y1[4][kBlock], sd[4][kBlock];
+  alignas(64) double y[4][kRow], k1[4][kRow], ym[4][kRow], y1[4][kRow], sd[4][kRow];
   alignas(64) double th[kBlock], tt[kBlock], hh[kBlock];
   alignas(64) double s0[4 * kBlock + 8], s1[4 * kBlock + 8], d0[4 * kBlock + 8], d1[4 * kBlock + 8];
   alignas(64) double root[4 * kBlock + 8];
-  alignas(64) double S0[4][kBlock], S1[4][kBlock], D0[4][kBlock], D1[4][kBlock];
-  alignas(64) double thl[4][kBlock], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
-  alignas(64) double wh[kBlock], fl[4][kBlock], fin[kBlock];
+  alignas(64) double S0[4][kRow], S1[4][kRow], D0[4][kRow], D1[4][kRow];
+  alignas(64) double thl[4][kRow], lo[4 * kBlock], hi[4 * kBlock], sg0[4 * kBlock];
+  alignas(64) double wh[kBlock], fl[4][kRow], fin[kBlock];
   alignas(64) long long actl[4 * kBlock];
-  alignas(64) int cont[kBlock], pair_lane[4 * kBlock], pair_fn[4 * kBlock];
+  alignas(64) unsigned cont[kBlock / 8], done[kBlock / 8];
+  alignas(64) int pair_lane[4 * kBlock + 8], pair_fn[4 * kBlock + 8];
 };
 
 // Roots of the Hermite cubics of `np` crossings at once: hermite_root on eight at a time
@@ -561,14 +695,6 @@ struct SplitScratch {
 // all eight have converged: each root keeps its own iterations). The inputs are padded to
 // a multiple of eight with a harmless cubic, so every root takes the same instructions
 // wherever it stands.
-typedef double v8d __attribute__((vector_size(64)));
-typedef long long v8l __attribute__((vector_size(64)));
-
-inline v8d load8(const double* p) {
-  v8d v;
-  __builtin_memcpy(&v, p, sizeof v);
-  return v;
-}
 
 inline void hermite_roots(SplitScratch& w, int np) {
   const int np8 = (np + 7) / 8 * 8;
@@ -580,12 +706,12 @@ inline void hermite_roots(SplitScratch& w, int np) {
   }
   const v8d zero = {}, one = zero + 1.0;
   // the iterations of all groups of eight interleaved (independent chains: they overlap)
-  auto p = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+  auto p = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) __attribute__((always_inline)) {
     const v8d t2 = th * th, t3 = t2 * th;
     return (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + th) * d0 + (-2.0 * t3 + 3.0 * t2) * s1 +
            (t3 - t2) * d1;
   };
-  auto dp = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) {
+  auto dp = [](v8d th, v8d s0, v8d s1, v8d d0, v8d d1) __attribute__((always_inline)) {
     const v8d t2 = th * th;
     return (6.0 * t2 - 6.0 * th) * s0 + (3.0 * t2 - 4.0 * th + 1.0) * d0 + (-6.0 * t2 + 6.0 * th) * s1 +
            (3.0 * t2 - 2.0 * th) * d1;
@@ -654,7 +780,7 @@ inline void hermite_roots(SplitScratch& w, int np) {
 // lane. Lanes that are not finite keep their trial step (lane_finite). x: the states at t,
 // x1: the trial states at t + h, overwritten with the split ones.
 void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t, double h, int max_splits,
-                 const int* idx, int K, const double (*x)[kBlock], double (*x1)[kBlock], SplitScratch& w) {
+                 const int* idx, int K, const double (*x)[kRow], double (*x1)[kRow], SplitScratch& w) {
   const double* p = m.p;
   const Clock& ck = tb.clock[s];
   const Terms q0 = tb.stage[3 * s], q2 = tb.stage[3 * s + 2];
@@ -665,10 +791,10 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   const int Kp = (K + 7) / 8 * 8;
   int ix[kBlock];
   for (int g = 0; g < Kp; ++g) ix[g] = idx[g < K ? g : K - 1];
-  double (*S0a)[kBlock] = w.S0;
-  double (*S1a)[kBlock] = w.S1;
-  double (*D0a)[kBlock] = w.D0;
-  double (*D1a)[kBlock] = w.D1;
+  double (*S0a)[kRow] = w.S0;
+  double (*S1a)[kRow] = w.S1;
+  double (*D0a)[kRow] = w.D0;
+  double (*D1a)[kRow] = w.D1;
   const double bsp = c.b_sp, brp = c.b_rp, csp = c.c_sp, crp = c.c_rp;
   const double a2sp = c.a2sp, a2rp = c.a2rp, a4sp = c.a4sp, a4rp = c.a4rp, L2 = c.L2;
 #pragma omp simd simdlen(8)
@@ -720,6 +846,32 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     D1a[3][g] = r1;
   }
   int np = 0;
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+  {  // the crossed functions of eight lanes at a time, packed to the front of a register
+    const v8d one = v8d{} + 1.0;
+    const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    for (int g0 = 0; g0 < K; g0 += 8) {
+      const unsigned valid = K - g0 >= 8 ? 0xffu : (1u << (K - g0)) - 1u;
+      const unsigned fin = valid & lane_bits(load8(w.fin + g0) != 0.0);  // not finite: the trial step stands
+      const __m256i lanes = _mm256_add_epi32(iota, _mm256_set1_epi32(g0));
+      for (int i = 0; i < 4; ++i) {
+        const v8d S0 = load8(S0a[i] + g0), S1 = load8(S1a[i] + g0);
+        const __mmask8 k = static_cast<__mmask8>(
+            fin & lane_bits(((S1 >= 0.0 ? one : -one) != load8(w.sd[i] + g0)) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0)));
+        auto pack = [k](v8d v) {
+          return reinterpret_cast<v8d>(_mm512_maskz_compress_pd(k, reinterpret_cast<__m512d>(v)));
+        };
+        store8(w.s0 + np, pack(S0));
+        store8(w.s1 + np, pack(S1));
+        store8(w.d0 + np, pack(load8(D0a[i] + g0) * h));
+        store8(w.d1 + np, pack(load8(D1a[i] + g0) * h));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(w.pair_lane + np), _mm256_maskz_compress_epi32(k, lanes));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(w.pair_fn + np), _mm256_set1_epi32(i));
+        np += __builtin_popcount(k);
+      }
+    }
+  }
+#else
   for (int g = 0; g < K; ++g) {
     // (written whatever the test, kept when it holds: no branch to mispredict)
     const bool fin = w.fin[g] != 0.0;  // not finite: the trial step stands (lane_finite)
@@ -734,6 +886,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
       np += fin & (side(S1) != w.sd[i][g]) & (S1 - S1 == 0.0) & (S0 - S0 == 0.0);
     }
   }
+#endif
   hermite_roots(w, np);
   for (int k = 0; k < np; ++k) w.thl[w.pair_fn[k]][w.pair_lane[k]] = std::min(std::max(w.root[k], 0.0), 1.0);
   // the first crossing of each lane (as first_crossing), eight lanes at a time
@@ -775,7 +928,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
   const v8d zero = {}, one = zero + 1.0;
   // terms_at (sine shape) at eight times at once, and at the step's own ends the tabulated
   // terms (as the TermCache of the lane-by-lane split holds them)
-  auto terms8 = [&](v8d tau) {
+  auto terms8 = [&](v8d tau) __attribute__((always_inline)) {
     const double W = p[OMEGA];
     const v8d xx = W * (tau - ck.t);
     const v8d x2 = xx * xx;
@@ -799,31 +952,43 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     q.L1 = at1 ? zero + q2.L1 : (at0 ? zero + q0.L1 : L1);
     return q;
   };
+  // the pieces of the field on given sides of the surfaces: the dead zone x - off where
+  // `on`, 0 elsewhere (off = b on the upper side, -b on the lower: x - (-b) is x + b exactly)
+  struct Pc {
+    v8l on_sp, on_rp;
+    v8d off_sp, off_rp;
+  };
+  auto pieces = [&](v8d s0, v8d s1, v8d s2, v8d s3) __attribute__((always_inline)) {
+    Pc pc;  // (sides are +-1: never NaN)
+    pc.on_sp = (s0 > 0.0) | (s1 < 0.0);
+    pc.on_rp = (s2 > 0.0) | (s3 < 0.0);
+    pc.off_sp = s0 > 0.0 ? zero + bsp : zero - bsp;
+    pc.off_rp = s2 > 0.0 ? zero + brp : zero - brp;
+    return pc;
+  };
   // field_piece's velocity components on eight lanes
-  auto piece = [&](const T8& q, v8d z0, v8d z1, v8d z2, v8d z3, v8d s0, v8d s1, v8d s2, v8d s3, v8d& v1,
-                   v8d& v3) {
+  auto piece = [&](const T8& q, v8d z0, v8d z1, v8d z2, v8d z3, const Pc& pc, v8d& v1, v8d& v3)
+      __attribute__((always_inline)) {
     const v8d X = z2 - z0 - q.E, V = z3 - z1 - q.dE;
-    const v8d zl = z0 - bsp, zh = z0 + bsp, Xl = X - brp, Xh = X + brp;
-    const v8d fsp = s0 > 0.0 ? zl : (s1 < 0.0 ? zh : zero);  // (sides are +-1: never NaN)
-    const v8d frp = s2 > 0.0 ? Xl : (s3 < 0.0 ? Xh : zero);
+    const v8d fsp = pc.on_sp ? z0 - pc.off_sp : zero, frp = pc.on_rp ? X - pc.off_rp : zero;
     const v8d gsp = q.ksp * fsp + csp * z1, grp = q.krp * frp + crp * V;
     v1 = a2sp * gsp + a2rp * grp + q.L1;
     v3 = a4sp * gsp + a4rp * grp + L2;
   };
-  // one RK4 step of length hs from time t0 on the pieces ``s``, eight lanes: y -> o, with k the
+  // one RK4 step of length hs from time t0 on the pieces ``pc``, eight lanes: y -> o, with k the
   // field at (t0, y) (velocity rows k0 = y1, k2 = y3); returns the time terms at t0 + hs
-  auto substep = [&](v8d t0, v8d hs, v8d y0, v8d y1, v8d y2, v8d y3, v8d k0, v8d k1, v8d k2, v8d k3, v8d s0,
-                     v8d s1, v8d s2, v8d s3, v8d& o0, v8d& o1, v8d& o2, v8d& o3) {
+  auto substep = [&](v8d t0, v8d hs, v8d y0, v8d y1, v8d y2, v8d y3, v8d k0, v8d k1, v8d k2, v8d k3, const Pc& pc,
+                     v8d& o0, v8d& o1, v8d& o2, v8d& o3) __attribute__((always_inline)) {
     const v8d hm = 0.5 * hs;
     v8d b1, b3, c1, c3, d1, d3;
     const T8 qm = terms8(t0 + hm);
     const v8d u0 = y0 + hm * k0, u1 = y1 + hm * k1, u2 = y2 + hm * k2, u3 = y3 + hm * k3;
-    piece(qm, u0, u1, u2, u3, s0, s1, s2, s3, b1, b3);
+    piece(qm, u0, u1, u2, u3, pc, b1, b3);
     const v8d v0 = y0 + hm * u1, v1 = y1 + hm * b1, v2 = y2 + hm * u3, v3 = y3 + hm * b3;
-    piece(qm, v0, v1, v2, v3, s0, s1, s2, s3, c1, c3);
+    piece(qm, v0, v1, v2, v3, pc, c1, c3);
     const v8d z0 = y0 + hs * v1, z1 = y1 + hs * c1, z2 = y2 + hs * v3, z3 = y3 + hs * c3;
     const T8 qe = terms8(t0 + hs);
-    piece(qe, z0, z1, z2, z3, s0, s1, s2, s3, d1, d3);
+    piece(qe, z0, z1, z2, z3, pc, d1, d3);
     const v8d h6 = hs / 6.0;
     o0 = y0 + h6 * (k0 + 2.0 * (u1 + v1) + z1);
     o1 = y1 + h6 * (k1 + 2.0 * (b1 + c1) + d1);
@@ -839,12 +1004,13 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     const v8d a0 = load8(w.k1[0] + g), a1 = load8(w.k1[1] + g), a2 = load8(w.k1[2] + g), a3 = load8(w.k1[3] + g);
     v8d h1 = load8(w.th + g) * h;
     v8d m0, m1, m2, m3;
-    const T8 qe = substep(t + zero, h1, y0, y1, y2, y3, a0, a1, a2, a3, sd0, sd1, sd2, sd3, m0, m1, m2, m3);
+    const Pc pc1 = pieces(sd0, sd1, sd2, sd3);
+    const T8 qe = substep(t + zero, h1, y0, y1, y2, y3, a0, a1, a2, a3, pc1, m0, m1, m2, m3);
     // land: one Newton correction along the piece being left
     {
       const v8d wh = load8(w.wh + g);
       v8d F1, F3;
-      piece(qe, m0, m1, m2, m3, sd0, sd1, sd2, sd3, F1, F3);
+      piece(qe, m0, m1, m2, m3, pc1, F1, F3);
       const v8d F0 = m1, F2 = m3;
       const v8d Xr = m2 - m0 - qe.E;
       const v8d r2 = F2 - F0 - qe.dE;
@@ -866,14 +1032,30 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     sd1 = sd1 * load8(w.fl[1] + g);
     sd2 = sd2 * load8(w.fl[2] + g);
     sd3 = sd3 * load8(w.fl[3] + g);
-    // the rest of the step (rk4_lane from the surface)
+    store(w.ym[0] + g, m0);
+    store(w.ym[1] + g, m1);
+    store(w.ym[2] + g, m2);
+    store(w.ym[3] + g, m3);
+    store(w.sd[0] + g, sd0);
+    store(w.sd[1] + g, sd1);
+    store(w.sd[2] + g, sd2);
+    store(w.sd[3] + g, sd3);
+    store(w.th + g, h1);
+  }
+  // the rest of the step (rk4_lane from the surface), in a second pass (shorter loop bodies:
+  // the processor overlaps consecutive groups of eight)
+  for (int g = 0; g < Kp; g += 8) {
+    const v8d m0 = load8(w.ym[0] + g), m1 = load8(w.ym[1] + g), m2 = load8(w.ym[2] + g), m3 = load8(w.ym[3] + g);
+    const v8d sd0 = load8(w.sd[0] + g), sd1 = load8(w.sd[1] + g), sd2 = load8(w.sd[2] + g), sd3 = load8(w.sd[3] + g);
+    const v8d h1 = load8(w.th + g);
     const v8d tt = t + h1, hh = h - h1;
     v8d e1, e3;
     const T8 qa = terms8(tt);
-    piece(qa, m0, m1, m2, m3, sd0, sd1, sd2, sd3, e1, e3);
+    const Pc pc2 = pieces(sd0, sd1, sd2, sd3);
+    piece(qa, m0, m1, m2, m3, pc2, e1, e3);
     const v8d K0 = m1, K1 = e1, K2 = m3, K3 = e3;
     v8d Y0, Y1, Y2, Y3;
-    const T8 qc = substep(tt, hh, m0, m1, m2, m3, K0, K1, K2, K3, sd0, sd1, sd2, sd3, Y0, Y1, Y2, Y3);
+    const T8 qc = substep(tt, hh, m0, m1, m2, m3, K0, K1, K2, K3, pc2, Y0, Y1, Y2, Y3);
     // a further event in the rest of the step? (the sign test of first_crossing)
     const v8d X1 = Y2 - Y0 - qc.E, X0 = m2 - m0 - qa.E;
     const v8d T1[4] = {Y0 - bsp, Y0 + bsp, X1 - brp, X1 + brp};
@@ -882,10 +1064,6 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     v8l more = zero != zero;
     for (int i = 0; i < 4; ++i)
       more |= ((T1[i] >= 0.0 ? one : -one) != SD[i]) & (T1[i] - T1[i] == 0.0) & (T0[i] - T0[i] == 0.0);
-    store(w.ym[0] + g, m0);
-    store(w.ym[1] + g, m1);
-    store(w.ym[2] + g, m2);
-    store(w.ym[3] + g, m3);
     store(w.y1[0] + g, Y0);
     store(w.y1[1] + g, Y1);
     store(w.y1[2] + g, Y2);
@@ -894,53 +1072,67 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
     store(w.k1[1] + g, K1);
     store(w.k1[2] + g, K2);
     store(w.k1[3] + g, K3);
-    store(w.sd[0] + g, sd0);
-    store(w.sd[1] + g, sd1);
-    store(w.sd[2] + g, sd2);
-    store(w.sd[3] + g, sd3);
     store(w.tt + g, tt);
     store(w.hh + g, hh);
-    for (int i = 0; i < 8; ++i)  // continues lane by lane
-      w.cont[g + i] = max_splits >= 2 && (more[i] != 0 || max_splits > 2);
+    // the lanes done (written back to x1 here) and those that continue lane by lane (below);
+    // lanes that are not finite keep their trial step
+    const unsigned valid = (K - g >= 8 ? 0xffu : (1u << (K - g)) - 1u) & lane_bits(load8(w.fin + g) != 0.0);
+    const unsigned cont = max_splits < 2 ? 0u : (max_splits > 2 ? valid : valid & lane_bits(more));
+    w.cont[g / 8] = cont;
+    w.done[g / 8] = valid & ~cont;
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+    {
+      const __mmask8 k = static_cast<__mmask8>(valid & ~cont);
+      const __m256i at = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ix + g));
+      _mm512_mask_i32scatter_pd(x1[0], k, at, reinterpret_cast<__m512d>(Y0), 8);
+      _mm512_mask_i32scatter_pd(x1[1], k, at, reinterpret_cast<__m512d>(Y1), 8);
+      _mm512_mask_i32scatter_pd(x1[2], k, at, reinterpret_cast<__m512d>(Y2), 8);
+      _mm512_mask_i32scatter_pd(x1[3], k, at, reinterpret_cast<__m512d>(Y3), 8);
+    }
+#endif
   }
-  for (int g = 0; g < K; ++g) {
-    const int j = idx[g];
-    if (w.fin[g] == 0.0) continue;
-    if (!w.cont[g]) {
-      for (int i = 0; i < 4; ++i) x1[i][j] = w.y1[i][g];
-      continue;
+  for (int g0 = 0; g0 < K; g0 += 8) {
+#if !(defined(__AVX512F__) && defined(__AVX512VL__))
+    for (unsigned d = w.done[g0 / 8]; d; d &= d - 1) {
+      const int g = g0 + __builtin_ctz(d);
+      for (int i = 0; i < 4; ++i) x1[i][idx[g]] = w.y1[i][g];
     }
-    // the rest of split_lane from its second event on, lane by lane
-    TermCache tc;
-    tc.t[0] = t;
-    tc.q[0] = q0;
-    tc.t[1] = te;
-    tc.q[1] = q2;
-    tc.n = 2;
-    const double tt = w.tt[g], hh = w.hh[g];
-    double Ym[4], Y1[4], K1[4], sides[4], S0[4], S1[4], out4[4];
-    for (int i = 0; i < 4; ++i) {
-      Ym[i] = w.ym[i][g];
-      Y1[i] = w.y1[i][g];
-      K1[i] = w.k1[i][g];
-      sides[i] = w.sd[i][g];
+#endif
+    for (unsigned cm = w.cont[g0 / 8]; cm; cm &= cm - 1) {
+      const int g = g0 + __builtin_ctz(cm);
+      const int j = idx[g];
+      // the rest of split_lane from its second event on, lane by lane
+      TermCache tc;
+      tc.t[0] = t;
+      tc.q[0] = q0;
+      tc.t[1] = te;
+      tc.q[1] = q2;
+      tc.n = 2;
+      const double tt = w.tt[g], hh = w.hh[g];
+      double Ym[4], Y1[4], K1[4], sides[4], S0[4], S1[4], out4[4];
+      for (int i = 0; i < 4; ++i) {
+        Ym[i] = w.ym[i][g];
+        Y1[i] = w.y1[i][g];
+        K1[i] = w.k1[i][g];
+        sides[i] = w.sd[i][g];
+      }
+      switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
+      switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
+      double th2;
+      int which2;
+      bool flips2[4];
+      first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, break_fraction(m, tt, hh), &th2, &which2,
+                     flips2);
+      const bool more = th2 < 1.0;
+      if (!more && max_splits == 2) {
+        for (int i = 0; i < 4; ++i) x1[i][j] = Y1[i];
+        continue;
+      }
+      for (int i = 0; i < 4; ++i) flips2[i] = more && flips2[i];
+      split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides,
+                 max_splits - 1, out4);
+      for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
     }
-    switching(c, terms_cached(m, ck, tc, tt + hh).E, Y1, S1);
-    switching(c, terms_cached(m, ck, tc, tt).E, Ym, S0);
-    double th2;
-    int which2;
-    bool flips2[4];
-    first_crossing(m, c, ck, tc, tt, hh, Ym, Y1, K1, S0, S1, sides, break_fraction(m, tt, hh), &th2, &which2,
-                   flips2);
-    const bool more = th2 < 1.0;
-    if (!more && max_splits == 2) {
-      for (int i = 0; i < 4; ++i) x1[i][j] = Y1[i];
-      continue;
-    }
-    for (int i = 0; i < 4; ++i) flips2[i] = more && flips2[i];
-    split_lane(m, c, ck, tc, tt, hh, Ym, K1, more ? th2 : 1.0, more ? which2 : -1, flips2, sides, max_splits - 1,
-               out4);
-    for (int i = 0; i < 4; ++i) x1[i][j] = out4[i];
   }
 }
 
@@ -950,9 +1142,9 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
                double t0, int periods, int steps, int max_splits, SplitScratch& w) {
   const int L = static_cast<int>(b - a);
   const int rows = static_cast<int>(models.size());
-  alignas(64) double xa[4][kBlock], xb[4][kBlock];
-  double (*x)[kBlock] = xa;
-  double (*x1)[kBlock] = xb;
+  alignas(64) double xa[4][kRow], xb[4][kRow];
+  double (*x)[kRow] = xa;
+  double (*x1)[kRow] = xb;
   int row[kBlock], lane[kBlock];  // lane j of the block is lane a + lane[j] of the batch
   for (int j = 0; j < L; ++j) {
     lane[j] = j;
@@ -973,7 +1165,7 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
   for (int j = 0; j < L; ++j)
     if (j == 0 || row[j] != row[j - 1]) run[nrun++] = j;
   run[nrun] = L;
-  alignas(64) unsigned char need[kBlock];
+  uint64_t need[kBlock / 64];
   int idx[kBlock];
   for (int per = 0; per < periods; ++per) {
     for (int s = 0; s < steps; ++s) {
@@ -985,28 +1177,14 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
         const Table& tb = tables[r];
         const double h = m.T / steps;
         const double t = t0 + s * h;
-        auto at = [j0](double (*v)[kBlock]) { return reinterpret_cast<double (*)[kBlock]>(&v[0][j0]); };
+        auto at = [j0](double (*v)[kRow]) { return reinterpret_cast<double (*)[kRow]>(&v[0][j0]); };
         trial_uniform(c, tb.stage[3 * s], tb.stage[3 * s + 1], tb.stage[3 * s + 2], h, j1 - j0, at(x), at(x1),
-                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need + j0);
-        // lanes with an event: split, all at once where the model allows, else one by one
+                      tb.E0[s], tb.E1[s], tb.thb[s] < 1.0, need);
+        // lanes with an event (the set bits of need): split, all at once where the model
+        // allows, else one by one
         int K = 0;
-        int j = j0;
-        for (; j + 64 <= j1; j += 64) {  // 64 flags (0 or 1) to the bits of a mask, then its set bits
-          uint64_t mask = 0;
-          for (int b8 = 0; b8 < 8; ++b8) {
-            uint64_t word;
-            __builtin_memcpy(&word, need + j + 8 * b8, 8);
-            mask |= (((word & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56) << (8 * b8);
-          }
-          while (mask) {
-            idx[K++] = j + __builtin_ctzll(mask);
-            mask &= mask - 1;
-          }
-        }
-        for (; j < j1; ++j) {
-          idx[K] = j;
-          K += need[j] != 0;
-        }
+        for (int g = 0; 64 * g < j1 - j0; ++g)
+          for (uint64_t mask = need[g]; mask; mask &= mask - 1) idx[K++] = j0 + 64 * g + __builtin_ctzll(mask);
         if (K == 0) continue;
         if (vector_split_ok(m, h)) {
           split_block(m, c, tb, s, t, h, max_splits, idx, K, x, x1, w);
