@@ -134,6 +134,7 @@ def test_spur_pair_with_backlash_end_to_end():
     assert d.keys() == s.keys() and max(abs(d[x] - s[x]) for x in d) <= 0.03, (d, s)
 
 
+@pytest.mark.slow
 def test_three_dimensional_user_system():
     # a Duffing oscillator driving a first-order filter z' = -a z + x (dimension 3, section on v)
     class P3(NamedTuple):

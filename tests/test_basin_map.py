@@ -55,6 +55,7 @@ def _assert_point_is(m, iy, ix, r):
     assert m.uncertainty_start[iy, ix] == r.uncertainty.start
 
 
+@pytest.mark.slow
 def test_every_point_is_the_analysis_there_alone(duffing_map):
     m = duffing_map
     assert m.shares.shape[:2] == (2, 3) and m.labels.shape == (2, 3, 10, 10)
@@ -154,6 +155,7 @@ def test_ids_come_from_the_left_and_the_lower_neighbour():
     assert match_on_grid([res[2], res[3]], ny=1, nx=2, match_tol=0.5)[1].tolist() == [1, 2, 0]
 
 
+@pytest.mark.slow
 def test_kill_and_resume(tmp_path, monkeypatch):
     class Kill(BaseException):
         pass
@@ -259,6 +261,7 @@ def test_where_the_sink_or_unresolved_cells_hold_most(duffing_map):
     assert ax.texts[0].get_text() == "100" and ax.texts[1].get_text() == "40"  # their shares, in their boxes
 
 
+@pytest.mark.slow
 def test_cli(tmp_path, capsys):
     from jaxgear.cli import main
 

@@ -365,6 +365,7 @@ def _numbers(obj):
             yield from _numbers(v)
 
 
+@pytest.mark.slow
 @settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.floats(0.75, 1.0), st.floats(2.0, 6.0))
 def test_property_analysis_inside_range_has_no_nan_and_strict_json(tmp_path_factory, capsys, omega, b):

@@ -78,6 +78,7 @@ def test_attractor_on_the_edge_says_enlarge_the_region(well_posed):
     assert not _has(well_posed[1], "edge")
 
 
+@pytest.mark.slow
 def test_unresolved_cells_say_raise_max_periods():
     # a = 0.02: transients ~ 1/(2a) = 25 periods; 10 periods are not enough to see a recurrence
     grid = CellGrid.box([(-0.4, 0.4)], (8,), names=("x",))

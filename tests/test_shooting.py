@@ -360,6 +360,7 @@ def test_find_periodic_orbits_stores_settings_and_trajectories():
     np.testing.assert_allclose(o.trajectory, np.asarray(xs), rtol=0, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_search_settings_are_typed_and_load_as_saved(tmp_path):
     """The settings of a search are its options object (a solver and a search integrator
     of the user's included), the periods, t0 and the integrator; the file gives them back

@@ -353,6 +353,7 @@ def _assert_sweep_is_separate_analyses(s, system, p, param, values, grid, method
         assert s.uncertainty_step[i] == r.uncertainty.step and s.uncertainty_start[i] == r.uncertainty.start
 
 
+@pytest.mark.slow
 def test_basin_sweep_in_one_pool_is_each_value_alone():
     """The basin sweep runs all values of the gear model in one lane pool (each lane with
     its value's parameters, in the compiled kernel); every value's labels and shares are
@@ -365,6 +366,7 @@ def test_basin_sweep_in_one_pool_is_each_value_alone():
     _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct(), uncertainty=64)
 
 
+@pytest.mark.slow
 def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
     """``uncertainty=0`` skips the label uncertainty (NaN) and changes nothing else; a file
     written before the sweep recorded it loads with NaN and every other field as saved."""
@@ -593,6 +595,7 @@ def test_plots_draw_from_loaded_results(small_results):
 
 
 # ----------------------------------------------------------------- command line
+@pytest.mark.slow
 def test_cli_sweep_writes_files(tmp_path):
     out = tmp_path / "sw"
     cmd = [sys.executable, "-m", "jaxgear", "sweep", "--param", "b", "--values", "4:6:3", "--starts", "2",
