@@ -196,6 +196,26 @@ chaotic attractor (lambda_1 ~ 0.1 per period) can look like a torus over 200 per
 a torus stays one (its weighted averages converge faster than any power)."""
 
 
+def with_longer_look(spectrum, measure):
+    """Types and leading exponents ``(kinds, exponents, errors, kaplan_yorke)`` (numpy,
+    leading axis: the attractors) of the :class:`~jaxgear.LyapunovSpectrum` ``spectrum``
+    (measured over :data:`LYAPUNOV_PERIODS` periods, no period known), where those that
+    come out quasi-periodic are measured again by ``measure(index, x0, periods,
+    stretches) -> LyapunovSpectrum`` from the spectrum's final states, over
+    :data:`LYAPUNOV_RECHECK` times as many periods and stretches, and typed by that."""
+    n = spectrum.exponents.shape[0]
+    kinds = np.asarray(classify_attractor(spectrum, period=np.zeros(n, np.int64)))
+    exps, errs, ky = (np.array(a) for a in (spectrum.exponents, spectrum.errors, spectrum.kaplan_yorke))
+    torus = np.flatnonzero(kinds == int(AttractorType.QUASI_PERIODIC))
+    if torus.size:  # a longer look before a zero exponent is believed
+        longer = measure(torus, np.asarray(spectrum.final_state)[torus], LYAPUNOV_PERIODS * LYAPUNOV_RECHECK,
+                         LYAPUNOV_STRETCHES * LYAPUNOV_RECHECK)
+        kinds[torus] = classify_attractor(longer, period=np.zeros(torus.size, np.int64))
+        for a, b in zip((exps, errs, ky), (longer.exponents, longer.errors, longer.kaplan_yorke)):
+            a[torus] = np.asarray(b)
+    return kinds, exps, errs, ky
+
+
 def attractor_exponents(system, params, attractors, integrator, multipliers, n_exponents: int = 2):
     """Type and Lyapunov exponents of each attractor ``(points, period)`` (a cycle's points,
     or the cloud of an attractor of boxes). A P-k cycle's exponents are ``ln |mu_i| / k``
@@ -219,17 +239,8 @@ def attractor_exponents(system, params, attractors, integrator, multipliers, n_e
         x0 = np.stack([np.asarray(attractors[i][0], np.float64)[0] for i in free])
         opts = LyapunovOptions(n_exponents=n, periods=LYAPUNOV_PERIODS, transient=0, stretches=LYAPUNOV_STRETCHES)
         sp = lyapunov_spectrum(system, params, x0, integrator=integrator, options=opts)
-        kind = classify_attractor(sp, period=np.zeros(len(free), np.int64))
-        exps, errs, ky = (np.array(a) for a in (sp.exponents, sp.errors, sp.kaplan_yorke))
-        torus = np.flatnonzero(kind == int(AttractorType.QUASI_PERIODIC))
-        if torus.size:  # a longer look before a zero exponent is believed
-            longer = lyapunov_spectrum(system, params, np.asarray(sp.final_state)[torus], integrator=integrator,
-                                       options=opts, periods=LYAPUNOV_PERIODS * LYAPUNOV_RECHECK,
-                                       stretches=LYAPUNOV_STRETCHES * LYAPUNOV_RECHECK)
-            kind[torus] = classify_attractor(longer, period=np.zeros(torus.size, np.int64))
-            for a, b in zip((exps, errs, ky), (longer.exponents, longer.errors, longer.kaplan_yorke)):
-                a[torus] = np.asarray(b)
-        kinds[free] = kind
+        kinds[free], exps, errs, ky = with_longer_look(sp, lambda _, x, periods, stretches: lyapunov_spectrum(
+            system, params, x, integrator=integrator, options=opts, periods=periods, stretches=stretches))
         for j, i in enumerate(free):
             out[i] = (exps[j], errs[j], float(ky[j]))
     return kinds, out

@@ -97,7 +97,8 @@ MOVE_CHUNK = 1024
 
 
 class PoolOptions(eqx.Module):
-    """Every option of the lane pool (static: they shape the compiled program).
+    """Every option of the lane pool (static: they shape the compiled program, except
+    ``lanes`` and ``pilot``, which only the host reads: :meth:`compiled`).
 
     Attributes:
         max_period: largest period ``M`` recognised (P-1 ... P-M).

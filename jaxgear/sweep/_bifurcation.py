@@ -30,14 +30,14 @@ from .._codec import array_field, custom_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
 from .._io import save_result
-from .._lyapunov import AttractorType, LyapunovSpectrum, classify_attractor, kaplan_yorke
+from .._lyapunov import AttractorType, LyapunovSpectrum, kaplan_yorke
 from .._model import REDUCED
 from .._params import param_targets, params_to_dict, with_param
 from .._presets import paper_params
 from .._status import Status
 from .._system import ForcedSystem, check_system
 from .._version import __version__
-from ..analysis._global import LYAPUNOV_PERIODS, LYAPUNOV_RECHECK, LYAPUNOV_STRETCHES
+from ..analysis._global import LYAPUNOV_PERIODS, LYAPUNOV_STRETCHES, with_longer_look
 from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
 from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import APERIODIC, ESCAPED, classify_sequences, group_starts, label_order, type_label
@@ -477,22 +477,16 @@ def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor
         return kind, lam, err
     ss = first[dd, vv]
     k = min(2, run.system.dim)
-    est, final = values_exponent_estimates(run.system, run.params, run.names, run.values[vv, None],
-                                           points[dd, vv, ss, -1], n_exponents=k, periods=LYAPUNOV_PERIODS,
-                                           stretches=LYAPUNOV_STRETCHES, integrator=run.integrator,
-                                           chunk_size=run.options.chunk_size)
-    spectrum = exponent_spectrum(run, vv, est, final)
-    types = np.asarray(classify_attractor(spectrum))
-    lam1, err1 = np.array(spectrum.exponents[:, 0]), np.array(spectrum.errors[:, 0])
-    torus = np.flatnonzero(types == int(AttractorType.QUASI_PERIODIC))
-    if torus.size:  # a longer look before a zero exponent is believed (as the global analysis)
-        est2, final2 = values_exponent_estimates(
-            run.system, run.params, run.names, run.values[vv[torus], None], np.asarray(spectrum.final_state)[torus],
-            n_exponents=k, periods=LYAPUNOV_PERIODS * LYAPUNOV_RECHECK, stretches=LYAPUNOV_STRETCHES * LYAPUNOV_RECHECK,
-            integrator=run.integrator, chunk_size=run.options.chunk_size)
-        longer = exponent_spectrum(run, vv[torus], est2, final2, periods=LYAPUNOV_PERIODS * LYAPUNOV_RECHECK)
-        types[torus] = np.asarray(classify_attractor(longer))
-        lam1[torus], err1[torus] = np.asarray(longer.exponents[:, 0]), np.asarray(longer.errors[:, 0])
+
+    def measure(i, x, periods, stretches):  # each lane at its own value
+        est, final = values_exponent_estimates(run.system, run.params, run.names, run.values[vv[i], None], x,
+                                               n_exponents=k, periods=periods, stretches=stretches,
+                                               integrator=run.integrator, chunk_size=run.options.chunk_size)
+        return exponent_spectrum(run, vv[i], est, final, periods=periods)
+
+    first_look = measure(np.arange(len(vv)), points[dd, vv, ss, -1], LYAPUNOV_PERIODS, LYAPUNOV_STRETCHES)
+    types, exps, errs, _ = with_longer_look(first_look, measure)
+    lam1, err1 = exps[:, 0], errs[:, 0]
     here = (period[dd, vv] == APERIODIC) & (attractor[dd, vv] == attractor[dd, vv, ss][:, None])  # (n, S)
     for i, (d, v) in enumerate(zip(dd, vv)):
         kind[d, v, here[i]] = types[i]
