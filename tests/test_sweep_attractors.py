@@ -272,6 +272,32 @@ def test_bifurcation_diagram_labels_chaos_and_cycles():
     assert sorted(t.get_text() for t in ax.get_legend().get_texts()) == ["P-4", "chaotic"]
 
 
+@pytest.mark.slow
+def test_bifurcation_diagram_never_calls_the_weakly_chaotic_gear_attractor_a_torus():
+    """At b = 16/11 the gear's chaotic attractor has lambda_1 of only about 0.14 per
+    period, and 200 periods in 4 stretches from some of its points read zero within three
+    errors (the trap of tests/test_lyapunov.py). The diagram measures such a zero again
+    over ``LYAPUNOV_RECHECK`` times as many periods: 24 values within 1e-9 of 16/11 (one
+    attractor; the chaotic motion puts each value's measured point elsewhere on it), every
+    one chaotic, although the short look alone calls some of the same points
+    quasi-periodic."""
+    from jaxgear._lyapunov import classify_attractor
+
+    values = 16 / 11 + 1e-9 * np.linspace(-1, 1, 24)
+    start = np.array([[16 / 11 + 0.3, 0.0, 0.0, 0.0]])
+    d = jg.bifurcation_diagram(jg.REDUCED, jg.paper_params(), "b", values, start, transient=300, record=17,
+                               max_period=8, progress=False)
+    assert np.all(d.period[0, :, 0] == 0), d.period[0, :, 0]
+    last = d.points[0, :, 0, -1]
+    assert np.ptp(last, axis=0).max() > 0.1  # the values' points lie apart on the attractor
+    short = [classify_attractor(lyapunov_spectrum(jg.REDUCED, jg.with_param(jg.paper_params(), "b", b), x,
+                                                  periods=200, stretches=4, transient=0))
+             for b, x in zip(values, last)]
+    assert int(AttractorType.QUASI_PERIODIC) in np.asarray(short).tolist()  # the trap is real here
+    assert np.all(d.attractor_type[0, :, 0] == int(AttractorType.CHAOTIC)), d.attractor_type[0, :, 0]
+    assert np.all(d.largest_exponent[0, :, 0] > 3 * d.exponent_error[0, :, 0])
+
+
 def test_exponents_of_many_values_in_one_batch_are_each_values_own():
     """The batched exponents of a diagram (each lane at its own parameter value, chunks
     padded) equal :func:`lyapunov_spectrum` run at each value alone."""

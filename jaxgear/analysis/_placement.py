@@ -34,21 +34,42 @@ from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devic
 from .._matching import same_attractor
 from ._lanes import PoolOptions, init_pool, resize, run_rounds, table_slots
 
-__all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS"]
+__all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS", "queue_length"]
 
 MIN_BLOCK_CELLS = 16
 """Fewest cells a device's block holds (smaller queues run on the first device alone)."""
 
+QUEUE_STEP = 1024
+"""Queues are padded to the next power of two (at least :data:`QUEUE_MIN`) up to this
+length, to a multiple of it above."""
+
+QUEUE_MIN = 64
+"""Shortest padded queue: an analysis of a few cells and its label uncertainty share a pool."""
+
+
+def queue_length(n: int) -> int:
+    """The length a queue of ``n`` cells is padded to (the padding never enters a lane;
+    the real length is a traced operand): queues of nearby lengths, such as an analysis and
+    its label uncertainty, share one compiled pool."""
+    if n <= QUEUE_STEP:
+        return max(QUEUE_MIN, 1 << max(0, int(n) - 1).bit_length())
+    return -(-int(n) // QUEUE_STEP) * QUEUE_STEP
+
+
+def _pad_rows(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` padded to ``n`` rows with copies of its last row."""
+    return np.concatenate([a, np.repeat(a[-1:], n - len(a), axis=0)])
+
 
 # ----------------------------------------------------------------------------- one device
 @functools.partial(jax.jit, static_argnums=(0, 1))
-def _init_one(L: int, M: int, X, Xrow, boxes, att_pts, att_k, n_att, att_cloud):
-    return init_pool(L, M, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes)
+def _init_one(L: int, M: int, X, Xrow, n_real, boxes, att_pts, att_k, n_att, att_cloud):
+    return init_pool(L, M, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes, n_real=n_real)
 
 
 @functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "L_min"), donate_argnums=(0,))
-def _run_one(s, system, params, integrator, o: PoolOptions, boxes, X, Xrow, L_min: int, rounds):
-    return run_rounds(s, system, params, integrator, o, boxes, X, Xrow, X.shape[0], L_min, rounds)
+def _run_one(s, system, params, integrator, o: PoolOptions, boxes, X, Xrow, n_real, L_min: int, rounds):
+    return run_rounds(s, system, params, integrator, o, boxes, X, Xrow, n_real, L_min, rounds)
 
 
 _resize_one = jax.jit(resize, static_argnames=("L", "A"))
@@ -61,14 +82,17 @@ class OneDevice:
         self.device = device
 
     def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
-        """The pool over the one queue block ``X (n, dim)`` (rows ``(n,)``) and the arrays it reads."""
+        """The pool over the one queue block ``X (n, dim)`` (rows ``(n,)``), padded to
+        :func:`queue_length`, and the arrays it reads."""
         (X,), (Xrow,) = X_blocks, row_blocks
-        data = put((params, boxes, X, Xrow), self.device)
-        return _init_one(L, M, data[2], data[3], data[1], *put(att, self.device)), data
+        self.n_real = len(X)
+        n = queue_length(len(X))
+        data = put((params, boxes, _pad_rows(X, n), _pad_rows(Xrow, n), np.int32(len(X))), self.device)
+        return _init_one(L, M, data[2], data[3], data[4], data[1], *put(att, self.device)), data
 
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
-        params, boxes, X, Xrow = data
-        s, info = _run_one(s, system, params, integrator, o, boxes, X, Xrow, L_min, rounds)
+        params, boxes, X, Xrow, n_real = data
+        s, info = _run_one(s, system, params, integrator, o, boxes, X, Xrow, n_real, L_min, rounds)
         return s, np.asarray(info).reshape(1, -1)
 
     def resize(self, s, L=None, A=None):
@@ -76,8 +100,9 @@ class OneDevice:
 
     def collect(self, s) -> list[tuple]:
         """``[(labels, used, points, periods, counts, clouds)]`` of the one block (numpy)."""
-        return [tuple(np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att,
-                                                             s.att_cloud)))]
+        lab, use, *tables = (np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att,
+                                                                   s.att_cloud)))
+        return [(lab[:self.n_real], use[:self.n_real], *tables)]
 
 
 # ----------------------------------------------------------------------------- a mesh of devices
@@ -134,15 +159,14 @@ class DeviceMesh:
 
     def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
         """The pools over the blocks ``[X (n_d, dim)]`` (rows ``[(n_d,)]``), padded to one
-        shape with copies of each block's last entry (never taken into a lane)."""
+        shape (:func:`queue_length` of the longest) with copies of each block's last entry (never taken into a lane)."""
         D = len(X_blocks)
         n_real = np.array([len(b) for b in X_blocks], np.int32)
-        n = int(n_real.max())
+        n = queue_length(int(n_real.max()))
         split, rep = NamedSharding(self.mesh, P(BATCH)), NamedSharding(self.mesh, P())
 
         def padded(blocks):
-            return jax.device_put(np.stack([np.concatenate([b, np.repeat(b[-1:], n - len(b), axis=0)])
-                                            for b in blocks]), split)
+            return jax.device_put(np.stack([_pad_rows(b, n) for b in blocks]), split)
 
         data = (jax.device_put(params, rep), jax.device_put(boxes, rep), padded(X_blocks), padded(row_blocks),
                 jax.device_put(n_real, split))

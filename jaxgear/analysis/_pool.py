@@ -27,7 +27,7 @@ import numpy as np
 from .._batching import progress_bar
 from ..integrate import stack_params
 from ._lanes import Boxes, PoolOptions, aperiodic_mark, saddle_mark, seed_tables
-from ._placement import OneDevice, run_blocks
+from ._placement import OneDevice, queue_length, run_blocks
 
 __all__ = ["PoolOptions", "Boxes", "run_pool", "run_pools", "drive"]
 
@@ -56,7 +56,7 @@ def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: Poo
     value rows ``row_blocks``) from the attractor tables ``att`` until every state is
     decided: ``[(labels, used, points, periods, counts, clouds)]`` per block (numpy)."""
     n = np.array([len(b) for b in X_blocks])
-    s, data = placement.start(params, boxes, X_blocks, row_blocks, max(1, min(o.lanes, int(n.max()))),
+    s, data = placement.start(params, boxes, X_blocks, row_blocks, min(o.lanes, queue_length(int(n.max()))),
                               o.max_period, att)
     done, rounds, compiled = 0, 4, o.compiled()
     while True:
@@ -135,7 +135,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         Xp = np.concatenate([X[p] for X, p in zip(Xs, parts)])
         rows = np.concatenate([np.full(len(p), v, np.int32) for v, p in enumerate(parts)])
         # the pool of one value, refilled from the next
-        o_phase = dataclasses.replace(o, lanes=max(1, min(o.lanes, max(len(p) for p in parts))))
+        o_phase = dataclasses.replace(o, lanes=min(o.lanes, queue_length(max(len(p) for p in parts))))
         run = functools.partial(drive, system=system, params=params, integrator=integrator, o=o_phase, boxes=boxes,
                                 att=att, bar=bar)
         if phase == 0:  # the pilot, on the first device

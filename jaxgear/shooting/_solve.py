@@ -160,7 +160,7 @@ def deflation(x, known, power: float, shift: float):
         return jnp.asarray(1.0)
     ok = jnp.all(jnp.isfinite(known), axis=1)
     d2 = jnp.sum((x[None] - jnp.where(ok[:, None], known, 0.0)) ** 2, axis=1)
-    fac = 1.0 / d2 ** (0.5 * power) + shift
+    fac = 1.0 / jnp.where(ok, d2, 1.0) ** (0.5 * power) + shift  # rows left out: finite, zero derivative
     return jnp.prod(jnp.where(ok, fac, 1.0))
 
 
