@@ -127,13 +127,23 @@ def _sharded_call(kernel, mesh, batch, axis, out_axes, args):
                          check_vma=False)(dyn[batch], rest)
 
 
+@eqx.filter_jit
+def _partitioned_call(kernel, mesh, batch, axis, out_axes, args):
+    """``kernel(*args)`` partitioned by XLA (no ``shard_map``): ``args[batch]`` arrives
+    split along ``axis`` and the outputs leave split along ``out_axes``."""
+    out = kernel(*args)
+    return jax.tree.map(lambda ax, sub: jax.tree.map(
+        lambda a: jax.lax.with_sharding_constraint(a, NamedSharding(mesh, _spec(ax))), sub), out_axes, out)
+
+
 def _pad_axis(X: np.ndarray, size: int, axis: int) -> np.ndarray:
     """``X`` padded along ``axis`` to ``size`` by repeating its first entry there."""
     k = size - X.shape[axis]
     return X if k == 0 else np.concatenate([X, np.repeat(np.take(X, [0], axis=axis), k, axis=axis)], axis=axis)
 
 
-def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=0, per_device: int | None = None):
+def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=0, per_device: int | None = None,
+               partitioned_by_xla: bool = False):
     """``kernel(*args)`` with the batch ``args[batch]`` split over the local devices: the
     outputs as numpy arrays (a pytree like ``kernel``'s).
 
@@ -152,6 +162,12 @@ def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=
     kernel's round-off does not depend on its batch shape (true of the integrators,
     checked in ``tests/test_devices.py``; not of the shooting kernel). With one block
     this is the plain call ``kernel(*args)``.
+
+    ``partitioned_by_xla``: one ``jax.jit`` whose batch XLA partitions over the devices
+    instead of a ``shard_map``, for kernels that hold lineax solves (the shooting kernel:
+    lineax 0.1 refuses its own operators inside ``shard_map``, whose values carry the
+    manual mesh in their shapes). The results are still those of one device bit for bit
+    (``tests/test_devices.py``).
     """
     X = args[batch]
     n = int(X.shape[axis])
@@ -168,7 +184,8 @@ def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=
     args = tuple(jax.device_put(Xp, NamedSharding(mesh, _spec(axis))) if i == batch
                  else jax.tree.map(lambda a: jax.device_put(a, rep) if eqx.is_array(a) else a, a)
                  for i, a in enumerate(args))
-    out = _sharded_call(kernel, mesh, int(batch), int(axis), out_axes, args)
+    call = _partitioned_call if partitioned_by_xla else _sharded_call
+    out = call(kernel, mesh, int(batch), int(axis), out_axes, args)
     strip = lambda ax, sub: jax.tree.map(lambda a: np.asarray(a)[(slice(None),) * ax + (slice(0, n),)], sub)
     return jax.tree.map(strip, out_axes, out)
 

@@ -59,14 +59,15 @@ def pooled():
     assert len(n) == 1, n
     return np.array(n.pop())
 
-shards = []  # devices spanned by the output of each shard_map call
-real_call = _devices._sharded_call
+shards = []  # devices spanned by the output of each sharded call (shard_map or partitioned by XLA)
 
 
-def shard_spy(*a):
-    out = real_call(*a)
-    shards.extend(len(x.sharding.device_set) for x in jax.tree.leaves(out))
-    return out
+def shard_spy(real_call):
+    def spy(*a):
+        out = real_call(*a)
+        shards.extend(len(x.sharding.device_set) for x in jax.tree.leaves(out))
+        return out
+    return spy
 
 
 def spanned():
@@ -77,7 +78,8 @@ def spanned():
     return np.array(n.pop())
 
 
-_devices._sharded_call = shard_spy
+_devices._sharded_call = shard_spy(_devices._sharded_call)
+_devices._partitioned_call = shard_spy(_devices._partitioned_call)
 what = sys.argv[2].split(",")
 out = {}
 p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)

@@ -315,7 +315,7 @@ def _run_kernel(ctx: _Search, X, k: int, known, options: ShootOptions, chunk_siz
     for a, b in chunks(len(X), D * size):
         rows = -(-(b - a) // size) * size  # whole chunks
         res = shard_rows(shoot_kernel, shoot, ctx.params, pad_rows(X[a:b], rows), ctx.t0, known, opts, batch=2,
-                         per_device=size)
+                         per_device=size, partitioned_by_xla=True)
         parts.append(ShootResult(*[f[: b - a] for f in res]))
         if ctx.bar is not None:
             ctx.bar.update(b - a)
