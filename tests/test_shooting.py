@@ -506,6 +506,32 @@ steps per period): the transient brings the seeds near the attractor, the solver
 from there reaches the unstable orbits."""
 
 
+def test_cli_period_and_periods_make_one_and_the_same_search_call(monkeypatch):
+    # --period K and --periods K-K reach find_periodic_orbits with the same seeds, periods,
+    # integrator and options (one search path); the search itself runs in the slow test below
+    import jaxgear.shooting as shooting
+    from jaxgear.cli import main
+
+    calls = []
+
+    class Stop(Exception):
+        pass
+
+    def spy(system, params, seeds, *, period, integrator, options, progress):
+        calls.append((system, params, np.asarray(seeds), list(period), integrator, options))
+        raise Stop
+
+    monkeypatch.setattr(shooting, "find_periodic_orbits", spy)
+    for form in (["--period", "3"], ["--periods", "3-3"]):
+        with pytest.raises(Stop):
+            main(["shoot", *form, *SHOOT_ARGV])
+    (sys1, p1, x1, k1, i1, o1), (sys2, p2, x2, k2, i2, o2) = calls
+    assert sys1 is sys2 and p1 == p2 and k1 == k2 == [3] and i1 == i2 and o1 == o2
+    np.testing.assert_array_equal(x1, x2)
+    assert o1.transient > 0 and x1.shape == (8, 4)  # random seeds get the transient (--period once ran without)
+
+
+@pytest.mark.slow
 def test_cli_shoot_one_period_is_the_periods_search_of_that_period():
     # one search: --period 1 and --periods 1-1 from the same seeds converge from the same seeds
     # to the same P-1, the unstable (flip) orbit of region D (--period once ran without the

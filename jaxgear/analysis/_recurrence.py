@@ -669,20 +669,35 @@ def _sqn(a):
     return sum(a[i] ** 2 for i in range(a.shape[0]))
 
 
-def _period(system, params, integrator, opt, part, tol, s: _State) -> _State:
+class _Run(NamedTuple):
+    """What every round of one classification reads: the flow, the options, the fine
+    partition and the traced tolerances."""
+
+    system: Any
+    params: Any
+    integrator: Any
+    opt: RecurrenceOptions
+    part: FinePartition
+    tol: Any
+    merge_tol: Any
+    bound: Any
+    max_periods: Any
+
+
+def _period(run: _Run, s: _State) -> _State:
     """One forcing period of every lane: the point, the periodic streaks and the hit runs."""
     M = s.streak.shape[0]
     busy = s.cell >= 0
-    Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1)
+    Y = run.integrator.advance(run.system, run.params, s.Y, jnp.asarray(0.0), 1)
     age = jnp.where(busy, s.age + 1, s.age)
-    thr = (tol * (1.0 + jnp.sqrt(_sqn(Y)))) ** 2
+    thr = (run.tol * (1.0 + jnp.sqrt(_sqn(Y)))) ** 2
     ks = jnp.arange(1, M + 1, dtype=jnp.int32)
     d = jax.vmap(lambda r: _sqn(Y - r))(s.ring[:M])  # (M, L)
     ok = (d <= thr[None]) & (age[None] > ks[:, None])
     streak = jnp.where(ok, s.streak + 1, 0)
     ring = jnp.concatenate([Y[None], s.ring[:-1]], axis=0)
-    lab = lookup(s.table, cell_keys(part, Y))
-    att, hits, misses = track_hits(lab, s.att, s.hits, s.misses, opt.max_misses)
+    lab = lookup(s.table, cell_keys(run.part, Y))
+    att, hits, misses = track_hits(lab, s.att, s.hits, s.misses, run.opt.max_misses)
     return s._replace(Y=Y, ring=ring, streak=streak, age=age, att=att, hits=hits, misses=misses)
 
 
@@ -699,32 +714,27 @@ def _register(s: _State, pts, kind):
     return s, jnp.where(room, a, -1).astype(jnp.int32)
 
 
-def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_periods, X, s: _State) -> _State:
+def _on_known_cycles(run: _Run, s: _State, per, rec):
+    """The label of each recurring lane whose period and newest point are a known cycle's
+    (point level), ``-1`` for the others."""
     M = s.streak.shape[0]
-    _, dim, L = s.ring.shape
-    A, Q, _ = s.points.shape
-    n = X.shape[0]
-    busy = s.cell >= 0
-    norms = jnp.sqrt(_sqn(s.Y))
-    esc = busy & ~(norms <= bound)
-    live = busy & ~esc
-    ks = jnp.arange(1, M + 1, dtype=jnp.int32)
-    per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0).astype(jnp.int32)
-    rec = live & (per <= M)
-
-    # periodic recurrence onto a known cycle (point level: same period, newest point on it)
     cyc = s.points[:, :M]  # (A, M, dim)
     dist = jax.vmap(lambda P: jax.vmap(lambda p: _sqn(s.Y - p[:, None]))(P))(cyc)  # (A, M, L)
     valid = jnp.arange(M, dtype=jnp.int32)[None, :] < s.kind[:, None]  # (A, M)
     dmin = jnp.min(jnp.where(valid[..., None], dist, jnp.inf), axis=1)  # (A, L)
     scale = 1.0 + jnp.nanmax(jnp.where(valid[..., None], jnp.abs(cyc), 0.0), axis=(1, 2))  # (A,)
-    on = (s.kind[:, None] == per[None]) & (dmin <= (merge_tol * scale[:, None]) ** 2)
-    label = jnp.where(rec & jnp.any(on, axis=0), jnp.argmax(on, axis=0), -1).astype(jnp.int32)
+    on = (s.kind[:, None] == per[None]) & (dmin <= (run.merge_tol * scale[:, None]) ** 2)
+    return jnp.where(rec & jnp.any(on, axis=0), jnp.argmax(on, axis=0), -1).astype(jnp.int32)
 
-    # a new cycle: the first recurring lane on none registers it (one per round)
-    new = rec & (label < 0)
 
-    def new_cycle(c):
+def _new_cycle(run: _Run, s: _State, label, new, per):
+    """The first recurring lane on no known cycle (``new``) registers its cycle; the lanes
+    of ``new`` on that cycle take its label. Returns ``(state, label, the cycle's box keys
+    (M,), its slot)`` (keys -1 and slot -1 when ``new`` is empty or the table is full)."""
+    M = s.streak.shape[0]
+    Q = s.points.shape[1]
+
+    def register(c):
         s, label = c
         l0 = jnp.argmax(new)
         k0 = per[l0]
@@ -732,86 +742,74 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
         back = s.ring[:M, :, l0]  # (M, dim) newest first
         pts = jnp.where((i < k0)[:, None], back[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)
         s, a = _register(s, pts, k0)
-        ckeys = jnp.where((jnp.arange(M, dtype=jnp.int32) < k0) & (a >= 0), cell_keys(part, back.T), -1)
+        ckeys = jnp.where((jnp.arange(M, dtype=jnp.int32) < k0) & (a >= 0), cell_keys(run.part, back.T), -1)
         d0 = jax.vmap(lambda p: _sqn(s.Y - p[:, None]))(pts[:M])  # (M, L)
         sc = 1.0 + jnp.max(jnp.where((i[:M] < k0)[:, None], jnp.abs(pts[:M]), 0.0))
         joins = new & (per == k0) & (jnp.nanmin(jnp.where((i[:M] < k0)[:, None], d0, jnp.inf), axis=0)
-                                     <= (merge_tol * sc) ** 2)
+                                     <= (run.merge_tol * sc) ** 2)
         return s, jnp.where(joins & (a >= 0), a, label).astype(jnp.int32), ckeys, a
 
-    s, label, ckeys, clabel = jax.lax.cond(jnp.any(new), new_cycle, lambda c: (*c, jnp.full(M, -1, jnp.int64),
-                                                                                 jnp.asarray(-1, jnp.int32)),
-                                           (s, label))
+    def none(c):
+        return (*c, jnp.full(M, -1, jnp.int64), jnp.asarray(-1, jnp.int32))
 
-    # consecutive hits on a known attractor's boxes
-    label = jnp.where(live & (label < 0) & (s.att >= 0) & (s.hits >= opt.hits), s.att, label).astype(jnp.int32)
+    return jax.lax.cond(jnp.any(new), register, none, (s, label))
 
-    # one candidate per round: the oldest undecided lane past the transient, not in a run of hits
-    eligible = live & (label < 0) & (per > M) & (s.age >= opt.transient) & (s.age - s.tried >= opt.transient) \
-        & (s.hits == 0)
-    l0, found = oldest_off_cycle(eligible, s.age, lambda i: s.ring[:, :, i], part.width, M)
 
-    def characterise(c):
-        s, label = c
-        P = opt.cloud_periods
+def _characterise(run: _Run, s: _State, label, l0):
+    """The cloud of lane ``l0`` (:func:`attractor_cloud`): when it recurs, is no cycle and
+    (with ``opt.verify_periods``) is no chaotic saddle, it joins the attractor of boxes it
+    overlaps or registers a new one, and the lane takes that label. Returns ``(state,
+    label, the cloud's box keys, its slot)`` (keys and slot -1 when it is rejected)."""
+    opt, part, bound = run.opt, run.part, run.bound
+    M = s.streak.shape[0]
+    A, Q, dim = s.points.shape
+    P = opt.cloud_periods
 
-        def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
-            return near_periodic(part, pts, M) | ~jnp.all(jnp.sqrt(_sqn(_flat(pts))) <= bound)
+    def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
+        return near_periodic(part, pts, M) | ~jnp.all(jnp.sqrt(_sqn(_flat(pts))) <= bound)
 
-        cloud, ran = attractor_cloud(system, params, integrator, s.Y[:, l0], periods=P, lanes=opt.cloud_lanes,
-                                     key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds),
-                                     stages=CLOUD_STAGES, stop=stop)
-        flat = _flat(cloud)
-        share = recurrence_share(part, cloud)
-        ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share >= opt.accept_share)
-        second = _flat(cloud[P // 2:])
-        over = overlap_shares(s.table, part, second, A)
-        over = jnp.where(s.kind > 0, 0.0, over)  # only attractors of boxes absorb clouds
-        best = jnp.argmax(over)
-        joins = over[best] >= opt.overlap_share
-        if opt.verify_periods:  # a new set is continued first: a chaotic saddle is no attractor
-            def leaves(_):
-                return leaving_share(system, params, integrator, part, verification_starts(second, opt.verify_lanes),
-                                     periods=verify_length(opt, M), max_period=M, bound=bound,
-                                     elsewhere=lambda pts: jnp.all(
-                                         lookup(s.table, cell_keys(part, _flat(pts))).reshape(
-                                             pts.shape[0], -1) >= 0, axis=0))
-            share = jax.lax.cond(ok & ~joins, leaves, lambda _: jnp.asarray(0.0), None)
-            ok = ok & (joins | (share < opt.leave_share))
-        keys = cell_keys(part, flat)
-        step = max(second.shape[1] // Q, 1)
-        pts = jnp.full((Q, dim), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
+    cloud, ran = attractor_cloud(run.system, run.params, run.integrator, s.Y[:, l0], periods=P,
+                                 lanes=opt.cloud_lanes, key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds),
+                                 stages=CLOUD_STAGES, stop=stop)
+    share = recurrence_share(part, cloud)
+    ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share >= opt.accept_share)
+    second = _flat(cloud[P // 2:])
+    over = overlap_shares(s.table, part, second, A)
+    over = jnp.where(s.kind > 0, 0.0, over)  # only attractors of boxes absorb clouds
+    best = jnp.argmax(over)
+    joins = over[best] >= opt.overlap_share
+    if opt.verify_periods:  # a new set is continued first: a chaotic saddle is no attractor
+        def leaves(_):
+            return leaving_share(run.system, run.params, run.integrator, part,
+                                 verification_starts(second, opt.verify_lanes), periods=verify_length(opt, M),
+                                 max_period=M, bound=bound,
+                                 elsewhere=lambda pts: jnp.all(lookup(s.table, cell_keys(part, _flat(pts))).reshape(
+                                     pts.shape[0], -1) >= 0, axis=0))
+        share = jax.lax.cond(ok & ~joins, leaves, lambda _: jnp.asarray(0.0), None)
+        ok = ok & (joins | (share < opt.leave_share))
+    keys = cell_keys(part, _flat(cloud))
+    step = max(second.shape[1] // Q, 1)
+    pts = jnp.full((Q, dim), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
 
-        def accept(s):
-            return jax.lax.cond(joins, lambda s: (s, best.astype(jnp.int32)),
-                                lambda s: _register(s, pts, jnp.asarray(APERIODIC, jnp.int32)), s)
+    def accept(s):
+        return jax.lax.cond(joins, lambda s: (s, best.astype(jnp.int32)),
+                            lambda s: _register(s, pts, jnp.asarray(APERIODIC, jnp.int32)), s)
 
-        s, a = jax.lax.cond(ok, accept, lambda s: (s, jnp.asarray(-1, jnp.int32)), s)
-        s = s._replace(tried=s.tried.at[l0].set(s.age[l0]), cloud_work=s.cloud_work + (ran * opt.cloud_lanes).astype(jnp.int64),
-                       age=s.age.at[l0].add(jnp.where(a >= 0, P, 0)))
-        return s, label.at[l0].set(jnp.where(a >= 0, a, label[l0])), jnp.where(a >= 0, keys, -1), a
+    s, a = jax.lax.cond(ok, accept, lambda s: (s, jnp.asarray(-1, jnp.int32)), s)
+    s = s._replace(tried=s.tried.at[l0].set(s.age[l0]),
+                   cloud_work=s.cloud_work + (ran * opt.cloud_lanes).astype(jnp.int64),
+                   age=s.age.at[l0].add(jnp.where(a >= 0, P, 0)))
+    return s, label.at[l0].set(jnp.where(a >= 0, a, label[l0])), jnp.where(a >= 0, keys, -1), a
 
-    KP = opt.cloud_periods * opt.cloud_lanes
-    s, label, vkeys, vlabel = jax.lax.cond(found, characterise,
-                                           lambda c: (*c, jnp.full(KP, -1, jnp.int64), jnp.asarray(-1, jnp.int32)),
-                                           (s, label))
-    # the boxes of this round's new cycle and cloud enter the table (one insertion per round)
-    keys = jnp.concatenate([ckeys, vkeys])
-    klab = jnp.concatenate([jnp.full(M, clabel), jnp.full(KP, vlabel)])
 
-    def enter(s):
-        table, dropped = insert(s.table, keys, klab)
-        return s._replace(table=table, dropped=s.dropped + dropped)
-
-    s = jax.lax.cond(jnp.any(keys >= 0), enter, lambda s: s, s)
-
-    unres = live & (label < 0) & (s.age >= max_periods)
-    decided = esc | (label >= 0) | unres
-    value = jnp.where(esc, _SINK, jnp.where(unres, _UNRESOLVED, label)).astype(jnp.int32)
+def _refill(run: _Run, X, s: _State, decided, value) -> _State:
+    """Write the ``decided`` lanes' labels ``value`` and periods, and refill every free
+    lane from the queue ``X`` (a fresh ring, streaks and hit runs)."""
+    n = X.shape[0]
+    busy = s.cell >= 0
     target = jnp.where(decided, s.cell, n)
     labels = s.labels.at[target].set(value, mode="drop")
     used = s.used.at[target].set(s.age, mode="drop")
-
     free = ~busy | decided
     rank = jnp.cumsum(free, dtype=jnp.int32) - 1
     nc = s.next_cell + rank
@@ -826,9 +824,48 @@ def _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_pe
     return s._replace(
         Y=Y, ring=jnp.where(free[None, None], jnp.nan, s.ring), streak=jnp.where(free[None], 0, s.streak),
         age=reset(s.age, 0), cell=cell, att=reset(s.att, -1), hits=reset(s.hits, 0), misses=reset(s.misses, 0),
-        tried=reset(s.tried, -opt.transient), labels=labels, used=used,
+        tried=reset(s.tried, -run.opt.transient), labels=labels, used=used,
         next_cell=jnp.minimum(s.next_cell + jnp.sum(take, dtype=jnp.int32), n).astype(jnp.int32),
         n_done=s.n_done + jnp.sum(decided, dtype=jnp.int32), rounds=s.rounds + 1)
+
+
+def _decide(run: _Run, X, s: _State) -> _State:
+    """After a round: decide the lanes that escaped, recur onto a cycle (known or new),
+    completed a run of hits on an attractor's boxes, or whose cloud is an attractor (one
+    candidate per round); the undecided past ``max_periods`` are unresolved; then refill."""
+    M = s.streak.shape[0]
+    busy = s.cell >= 0
+    esc = busy & ~(jnp.sqrt(_sqn(s.Y)) <= run.bound)
+    live = busy & ~esc
+    ks = jnp.arange(1, M + 1, dtype=jnp.int32)
+    per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0).astype(jnp.int32)
+    rec = live & (per <= M)
+    label = _on_known_cycles(run, s, per, rec)
+    s, label, ckeys, clabel = _new_cycle(run, s, label, rec & (label < 0), per)
+    # consecutive hits on a known attractor's boxes
+    label = jnp.where(live & (label < 0) & (s.att >= 0) & (s.hits >= run.opt.hits), s.att, label).astype(jnp.int32)
+    # one candidate per round: the oldest undecided lane past the transient, not in a run of hits
+    opt = run.opt
+    eligible = live & (label < 0) & (per > M) & (s.age >= opt.transient) & (s.age - s.tried >= opt.transient) \
+        & (s.hits == 0)
+    l0, found = oldest_off_cycle(eligible, s.age, lambda i: s.ring[:, :, i], run.part.width, M)
+    KP = opt.cloud_periods * opt.cloud_lanes
+    s, label, vkeys, vlabel = jax.lax.cond(
+        found, lambda c: _characterise(run, *c, l0),
+        lambda c: (*c, jnp.full(KP, -1, jnp.int64), jnp.asarray(-1, jnp.int32)), (s, label))
+    # the boxes of this round's new cycle and cloud enter the table (one insertion per round)
+    keys = jnp.concatenate([ckeys, vkeys])
+    klab = jnp.concatenate([jnp.full(M, clabel), jnp.full(KP, vlabel)])
+
+    def enter(s):
+        table, dropped = insert(s.table, keys, klab)
+        return s._replace(table=table, dropped=s.dropped + dropped)
+
+    s = jax.lax.cond(jnp.any(keys >= 0), enter, lambda s: s, s)
+    unres = live & (label < 0) & (s.age >= run.max_periods)
+    decided = esc | (label >= 0) | unres
+    value = jnp.where(esc, _SINK, jnp.where(unres, _UNRESOLVED, label)).astype(jnp.int32)
+    return _refill(run, X, s, decided, value)
 
 
 @eqx.filter_jit
@@ -849,9 +886,11 @@ def _classify_kernel(system, params, integrator, opt: RecurrenceOptions, part: F
         n_att=jnp.asarray(0, jnp.int32), dropped=jnp.asarray(0, jnp.int32), overflow=jnp.asarray(False),
         cloud_work=jnp.asarray(0, jnp.int64), rounds=jnp.asarray(0, jnp.int32))
 
+    run = _Run(system, params, integrator, opt, part, tol, merge_tol, bound, max_periods)
+
     def body(s):
-        s = jax.lax.fori_loop(0, R, lambda _, s: _period(system, params, integrator, opt, part, tol, s), s)
-        return _decide(system, params, integrator, opt, part, tol, merge_tol, bound, max_periods, X, s)
+        s = jax.lax.fori_loop(0, R, lambda _, s: _period(run, s), s)
+        return _decide(run, X, s)
 
     return jax.lax.while_loop(lambda s: s.n_done < n, body, s)
 

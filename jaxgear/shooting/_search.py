@@ -375,8 +375,7 @@ def _shoot_rounds(ctx: _Search, X, k: int, found: list[PeriodicOrbit]):
     opts = ctx.options
     rounds = []
     for r in range(1 + opts.deflation_rounds):
-        # the plain round deflates nothing: all its rows NaN, one compiled shape for every round
-        known = _known_points(found if r > 0 else [], k, 16, ctx.system.dim)
+        known = _known_points(found, k, 16, ctx.system.dim) if r > 0 else None
         if r > 0 and not np.any(np.isfinite(np.asarray(known))):
             break
         res = _run_kernel(ctx, X, k, known, opts, opts.chunk_size)
