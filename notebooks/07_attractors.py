@@ -33,10 +33,7 @@ import numpy as np
 from IPython.display import display
 
 import jaxgear as jg
-from jaxgear import plotting
-from jaxgear._lyapunov import AttractorType, classify_attractor, lyapunov_spectrum
-from jaxgear._model import REDUCED
-from jaxgear.analysis._fractal import basin_entropy
+from jaxgear import REDUCED, AttractorType, basin_entropy, classify_attractor, lyapunov_spectrum, plotting
 
 grid = jg.CellGrid.paper((25, 15, 30) if FULL else (5, 3, 6))  # region D on the section x4 = 0
 backlash = np.linspace(1.0, 3.5, 12) if FULL else np.array([2.0, 3.0])
