@@ -131,30 +131,29 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
     assert np.all((hist >= lo) & (hist <= hi))
     assert rb.params.psi == lo and rb.status == "converged"
     # history, table, saved result
-    r2 = rb
-    assert set(r2.history) >= {"objective", "psi", "max_multiplier", "grad_norm"}
-    assert all(len(v) == r2.n_steps + 1 for v in r2.history.values())
-    text = r2.table()
+    assert set(rb.history) >= {"objective", "psi", "max_multiplier", "grad_norm"}
+    assert all(len(v) == rb.n_steps + 1 for v in rb.history.values())
+    text = rb.table()
     assert "psi" in text and "(at bound)" in text
-    path = r2.save(tmp_path / "design.nc")
+    path = rb.save(tmp_path / "design.nc")
     back = jg.load(path)
-    assert back.params == r2.params and isinstance(back.params, TwoSource)
-    for key in r2.history:
-        np.testing.assert_array_equal(back.history[key], r2.history[key])
-    np.testing.assert_array_equal(back.orbit.points, r2.orbit.points)
-    np.testing.assert_array_equal(back.orbit.multipliers, r2.orbit.multipliers)
-    assert (back.free, back.status, back.settings, back.initial_params) == (r2.free, r2.status, r2.settings,
-                                                                             r2.initial_params)
+    assert back.params == rb.params and isinstance(back.params, TwoSource)
+    for key in rb.history:
+        np.testing.assert_array_equal(back.history[key], rb.history[key])
+    np.testing.assert_array_equal(back.orbit.points, rb.orbit.points)
+    np.testing.assert_array_equal(back.orbit.multipliers, rb.orbit.multipliers)
+    assert (back.free, back.status, back.settings, back.initial_params) == (rb.free, rb.status, rb.settings,
+                                                                             rb.initial_params)
     # the settings are the options object and typed fields; the start is the parameter pytree
     assert back.settings.options == jg.DesignOptions(steps=100) and back.settings.period == 1
-    assert back.settings.optimizer == "adam, lr 0.05 cosine decay" and back.settings.integrator == r2.settings.integrator
+    assert back.settings.optimizer == "adam, lr 0.05 cosine decay" and back.settings.integrator == rb.settings.integrator
     assert isinstance(back.initial_params, TwoSource) and back.initial_params == p._replace(psi=psi_star + 1.0)
     import xarray as xr
 
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         assert ds.attrs["jaxgear_type"] == "DesignResult" and ds.attrs["system"] == "two-source"
-        assert json.loads(ds.attrs["free"]) == {"psi": list(r2.free["psi"])}
-        np.testing.assert_array_equal(ds["history__psi"].values, r2.history["psi"])
+        assert json.loads(ds.attrs["free"]) == {"psi": list(rb.free["psi"])}
+        np.testing.assert_array_equal(ds["history__psi"].values, rb.history["psi"])
         assert list(ds["state"].values) == ["x1", "v1", "x2", "v2"]
 
 

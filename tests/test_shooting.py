@@ -399,6 +399,20 @@ def test_cli_shoot_out_writes_orbits_json_and_figures(tmp_path):
 
 
 # --------------------------------------------------------------------------- optimistix solvers, deflation, segments
+def test_deflation_ignores_padding_rows_and_their_derivative():
+    """The deflation table is padded with NaN rows: they leave the factor 1 / ||x - r||^p +
+    shift of the real rows alone and add no derivative, also at x = 0 (where a padding row
+    once gave 1 / 0 inside the unused branch and a NaN gradient)."""
+    from jaxgear.shooting._solve import deflation
+
+    r = jnp.array([[1.0, 2.0], [jnp.nan, jnp.nan]])
+    for x in (jnp.zeros(2), jnp.array([0.5, -1.0])):
+        d = float(np.linalg.norm(np.asarray(x) - [1.0, 2.0]))
+        assert float(deflation(x, r, 2.0, 1.0)) == pytest.approx(1.0 / d**2 + 1.0, rel=1e-14)
+        g = np.asarray(jax.grad(lambda y: deflation(y, r, 2.0, 1.0))(x))
+        np.testing.assert_allclose(g, -2.0 * (np.asarray(x) - [1.0, 2.0]) / d**4, rtol=1e-12)
+
+
 def test_deflation_finds_the_saddle_plain_newton_misses():
     # random seeds around the small stable orbit: plain Newton returns it from every seed;
     # the deflated round pushes the same seeds off it, onto the saddle (and the large orbit)

@@ -30,6 +30,7 @@ import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from .._batching import pad_rows
 from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
 from .._matching import same_attractor
 from ._lanes import PoolOptions, init_pool, resize, run_rounds, table_slots
@@ -54,11 +55,6 @@ def queue_length(n: int) -> int:
     if n <= QUEUE_STEP:
         return max(QUEUE_MIN, 1 << max(0, int(n) - 1).bit_length())
     return -(-int(n) // QUEUE_STEP) * QUEUE_STEP
-
-
-def _pad_rows(a: np.ndarray, n: int) -> np.ndarray:
-    """``a`` padded to ``n`` rows with copies of its last row."""
-    return np.concatenate([a, np.repeat(a[-1:], n - len(a), axis=0)])
 
 
 # ----------------------------------------------------------------------------- one device
@@ -87,7 +83,7 @@ class OneDevice:
         (X,), (Xrow,) = X_blocks, row_blocks
         self.n_real = len(X)
         n = queue_length(len(X))
-        data = put((params, boxes, _pad_rows(X, n), _pad_rows(Xrow, n), np.int32(len(X))), self.device)
+        data = put((params, boxes, pad_rows(X, n), pad_rows(Xrow, n), np.int32(len(X))), self.device)
         return _init_one(L, M, data[2], data[3], data[4], data[1], *put(att, self.device)), data
 
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
@@ -159,14 +155,14 @@ class DeviceMesh:
 
     def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
         """The pools over the blocks ``[X (n_d, dim)]`` (rows ``[(n_d,)]``), padded to one
-        shape (:func:`queue_length` of the longest) with copies of each block's last entry (never taken into a lane)."""
+        shape (:func:`queue_length` of the longest) with copies of each block's first entry (never taken into a lane)."""
         D = len(X_blocks)
         n_real = np.array([len(b) for b in X_blocks], np.int32)
         n = queue_length(int(n_real.max()))
         split, rep = NamedSharding(self.mesh, P(BATCH)), NamedSharding(self.mesh, P())
 
         def padded(blocks):
-            return jax.device_put(np.stack([_pad_rows(b, n) for b in blocks]), split)
+            return jax.device_put(np.stack([pad_rows(b, n) for b in blocks]), split)
 
         data = (jax.device_put(params, rep), jax.device_put(boxes, rep), padded(X_blocks), padded(row_blocks),
                 jax.device_put(n_real, split))

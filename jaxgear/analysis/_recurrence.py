@@ -833,7 +833,7 @@ def _decide(run: _Run, X, s: _State) -> _State:
     """After a round: decide the lanes that escaped, recur onto a cycle (known or new),
     completed a run of hits on an attractor's boxes, or whose cloud is an attractor (one
     candidate per round); the undecided past ``max_periods`` are unresolved; then refill."""
-    M = s.streak.shape[0]
+    M, opt = s.streak.shape[0], run.opt
     busy = s.cell >= 0
     esc = busy & ~(jnp.sqrt(_sqn(s.Y)) <= run.bound)
     live = busy & ~esc
@@ -843,9 +843,8 @@ def _decide(run: _Run, X, s: _State) -> _State:
     label = _on_known_cycles(run, s, per, rec)
     s, label, ckeys, clabel = _new_cycle(run, s, label, rec & (label < 0), per)
     # consecutive hits on a known attractor's boxes
-    label = jnp.where(live & (label < 0) & (s.att >= 0) & (s.hits >= run.opt.hits), s.att, label).astype(jnp.int32)
+    label = jnp.where(live & (label < 0) & (s.att >= 0) & (s.hits >= opt.hits), s.att, label).astype(jnp.int32)
     # one candidate per round: the oldest undecided lane past the transient, not in a run of hits
-    opt = run.opt
     eligible = live & (label < 0) & (per > M) & (s.age >= opt.transient) & (s.age - s.tried >= opt.transient) \
         & (s.hits == 0)
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: s.ring[:, :, i], run.part.width, M)
