@@ -7,7 +7,7 @@
 
 Labels the cell centres of the paper region D (x4 = 0, ``--grid`` cells) of the reduced
 gear model, paper preset with half backlash ``b_sp = b_rp = --b``, with
-:func:`jaxgear.analysis._recurrence.classify_by_recurrence` (default options) on JAX's
+:func:`jaxgear.analysis.classify_by_recurrence` (default options) on JAX's
 default device, twice (the second run is warm). Prints the attractors (period, 0 for an
 attractor of boxes; boxes; share), the mean / median / max periods per cell, the
 candidate clouds' lane-periods per cell, and the warm wall time. The direct method
@@ -25,7 +25,7 @@ import numpy as np
 
 import jaxgear as jg
 from jaxgear._model import REDUCED
-from jaxgear.analysis._recurrence import classify_by_recurrence
+from jaxgear.analysis import PoolOptions, classify_by_recurrence
 
 
 def measure(b: float = 2.0, counts=(10, 6, 12), chunk: int = 1024, say=print) -> dict:
@@ -34,7 +34,7 @@ def measure(b: float = 2.0, counts=(10, 6, 12), chunk: int = 1024, say=print) ->
     out = {}
     for run in ("cold", "warm"):
         t = time.perf_counter()
-        r = classify_by_recurrence(REDUCED, params, X, chunk=chunk)
+        r = classify_by_recurrence(REDUCED, params, X, pool=PoolOptions(lanes=chunk))
         jax.block_until_ready(r.labels)
         out[run] = time.perf_counter() - t
     labels, used = np.asarray(r.labels), np.asarray(r.periods_used)

@@ -1,11 +1,13 @@
 import contextlib
 import functools
 import logging
+import os
 
 import jax
 import pytest
 
 import jaxgear  # noqa: F401  (enables float64 before any test builds arrays)
+from jaxgear._cache import enable_compilation_cache
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -26,18 +28,31 @@ def _strict_dtype_promotion():
             jax.config.update("jax_numpy_dtype_promotion", old)
 
 
+_CACHE_SETTINGS = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+                   "jax_persistent_cache_min_entry_size_bytes")
+
+
 @pytest.fixture(scope="session", autouse=True)
 def jaxgear_cache_dir(tmp_path_factory):
-    """One ``JAXGEAR_CACHE_DIR`` for the whole test session (per xdist worker), apart from
-    the user's own cache: the commands the tests run, in-process or as subprocesses, keep
-    their compiled computations there (an in-process command switches JAX's persistent
-    cache on for the rest of its worker), never in the user's folder, which other
-    programs on the machine may be writing at the same time. (The compiled C++ kernel
-    lives in the user's private kernel folder, built once per machine.)"""
-    path = tmp_path_factory.mktemp("jaxgear-cache")
+    """One ``JAXGEAR_CACHE_DIR`` for the whole test session, shared by the xdist workers and
+    apart from the user's own cache, with JAX's persistent compilation cache in it switched
+    on in every worker (:func:`jaxgear._cache.enable_compilation_cache`, as the command
+    line does): a computation that one worker, or a command a test runs, has compiled is
+    loaded by the others instead of compiled again. The user's folder is never touched,
+    as other programs on the machine may be writing it. (The compiled C++ kernel lives in
+    the user's private kernel folder, built once per machine.)"""
+    base = tmp_path_factory.getbasetemp()
+    path = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "jaxgear-cache"
+    path.mkdir(exist_ok=True)
+    old = {name: getattr(jax.config, name) for name in _CACHE_SETTINGS}
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("JAXGEAR_CACHE_DIR", str(path))
-        yield path
+        enable_compilation_cache()
+        try:
+            yield path
+        finally:
+            for name, value in old.items():
+                jax.config.update(name, value)
 
 
 @contextlib.contextmanager

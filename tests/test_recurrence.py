@@ -14,6 +14,7 @@ import pytest
 
 import jaxgear  # noqa: F401  (float64)
 from jaxgear._examples import DUFFING, DuffingParams
+from jaxgear.analysis import PoolOptions
 from jaxgear.analysis import _recurrence as rec
 from jaxgear.integrate import RK4
 
@@ -288,7 +289,8 @@ def test_chaotic_and_periodic_attractors_coexist():
     n = 200
     X = rng.uniform(-2, 2, (n, 2))
     opt = rec.RecurrenceOptions(resolution=100, cloud_periods=400)
-    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), X, options=opt, integrator=RK4(64), chunk=n)
+    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), X, options=opt, integrator=RK4(64),
+                                   pool=PoolOptions(lanes=n))
     labels = np.asarray(r.labels)
     periods = np.asarray(r.periods).tolist()
     assert sorted(periods) == [rec.APERIODIC, 1]
@@ -373,8 +375,8 @@ def test_chaotic_saddle_is_no_attractor():
     rng = np.random.default_rng(3)
     n = 64
     X = rng.uniform(-2, 2, (n, 2))
-    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**SADDLE), X, integrator=RK4(64), chunk=n,
-                                   max_periods=3000, max_period=8)
+    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**SADDLE), X, integrator=RK4(64),
+                                   pool=PoolOptions(lanes=n), max_periods=3000, max_period=8)
     periods = np.asarray(r.periods)
     assert len(periods) and np.all(periods > 0), periods.tolist()
     labels = np.asarray(r.labels)
@@ -387,6 +389,8 @@ def test_bad_options_are_refused():
         rec.RecurrenceOptions(accept_share=1.5)
     with pytest.raises(ValueError, match="X must be"):
         rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="unknown option 'chunk'"):
+        rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 2)), chunk=3)
     with pytest.raises(ValueError, match="resolution"):
         rec.partition_from_box([0, 0], [1, 1], 0)
 
@@ -425,7 +429,7 @@ def test_gear_chaotic_band_every_state_decided():
     rng = np.random.default_rng(3)
     n = 64
     X = np.column_stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n), np.zeros(n)])
-    r = rec.classify_by_recurrence(REDUCED, params, X, chunk=n)
+    r = rec.classify_by_recurrence(REDUCED, params, X, pool=PoolOptions(lanes=n))
     labels = np.asarray(r.labels)
     used = np.asarray(r.periods_used)
     print(f"mean periods per state {used.mean():.1f} (median {np.median(used):.0f}, max {used.max()}), "
@@ -454,7 +458,7 @@ def test_three_planet_model_uses_hashed_boxes():
     n = 16
     X = np.column_stack([rng.uniform(-25, 25, n), rng.uniform(-10, 20, n), rng.uniform(-10, 50, n), np.zeros(n)])
     r = rec.classify_by_recurrence(nplanet_system(3), paper_params(b_sp=2, b_rp=2),
-                                   np.asarray(reduced_to_nplanet(X, 3)), chunk=n)
+                                   np.asarray(reduced_to_nplanet(X, 3)), pool=PoolOptions(lanes=n))
     assert np.asarray(r.periods).tolist() == [rec.APERIODIC]
     assert np.all(np.asarray(r.labels) == 0)
     assert int(r.dropped_cells) == 0 and int(np.asarray(r.cells)[0]) > 20

@@ -1,4 +1,5 @@
-"""The direct method's lane pool on the device: its options, its state, and one round.
+"""The direct method's lane pool on the device: its state and one round (its options,
+:class:`PoolOptions`, live in :mod:`jaxgear.analysis._pool_options`).
 
 ``L`` lanes integrate cell centres on the stroboscopic map, one forcing period at a time
 (the integrator's ``advance``; on CPUs the compiled kernel). Everything the method
@@ -48,7 +49,6 @@ The host side (the pilot, steering, placement on devices) is
 
 from __future__ import annotations
 
-import dataclasses
 from typing import NamedTuple
 
 import equinox as eqx
@@ -56,8 +56,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import DEFAULT_CHUNK_CELLS
-from .._checks import check_int, check_number
+from ._pool_options import PoolOptions
 from ._recurrence import (
     CLOUD_STAGES,
     CellTable,
@@ -77,7 +76,7 @@ from ._recurrence import (
     verify_length,
 )
 
-__all__ = ["PoolOptions", "PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
+__all__ = ["PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
            "table_slots", "NOT_DONE", "aperiodic_mark", "saddle_mark"]
 
 NOT_DONE = -3
@@ -94,54 +93,6 @@ more often loses more to its cost than it saves)."""
 
 MOVE_CHUNK = 1024
 """Lanes moved per step of a compaction (:func:`compact`)."""
-
-
-class PoolOptions(eqx.Module):
-    """Every option of the lane pool (static: they shape the compiled program, except
-    ``lanes`` and ``pilot``, which only the host reads: :meth:`compiled`).
-
-    Attributes:
-        max_period: largest period ``M`` recognised (P-1 ... P-M).
-        round_periods: periods ``R`` per round between decisions.
-        period_tol: relative recurrence tolerance ``|x_t - x_(t-k)| <= tol (1 + |x_t|)``.
-        merge_tol: relative distance under which a recurring lane lies on a known cycle.
-        max_periods: periods per cell before it is unresolved.
-        escape_bound: norm beyond which a state has escaped (state units).
-        capture_radius: radius around a known cycle's points within which a lane that
-            follows the whole cycle is captured (state units), or ``None``: a quarter of
-            the smallest distance between two known attractors' points, at most 1 % of
-            their scale.
-        lanes: lanes of the pool (memory is bounded by it).
-        pilot: states of the pilot pool that runs first (0: none).
-    """
-
-    max_period: int = eqx.field(static=True, default=16)
-    round_periods: int = eqx.field(static=True, default=5)
-    period_tol: float = eqx.field(static=True, default=1e-6)
-    merge_tol: float = eqx.field(static=True, default=1e-4)
-    max_periods: int = eqx.field(static=True, default=2000)
-    escape_bound: float = eqx.field(static=True, default=1e6)
-    capture_radius: float | None = eqx.field(static=True, default=None)
-    lanes: int = eqx.field(static=True, default=DEFAULT_CHUNK_CELLS)
-    pilot: int = eqx.field(static=True, default=1024)
-
-    def compiled(self) -> PoolOptions:
-        """These options as the compiled rounds see them: ``lanes`` and ``pilot`` (read by
-        the host only, to size the pools) at their defaults, so pools that differ only in
-        them share one compiled program."""
-        return dataclasses.replace(self, lanes=PoolOptions.lanes, pilot=PoolOptions.pilot)
-
-    def __check_init__(self):
-        check_int(self.max_period, "max_period", 1)
-        check_int(self.round_periods, "round_periods", 1)
-        check_int(self.max_periods, "max_periods", 1)
-        check_int(self.lanes, "lanes", 1)
-        check_int(self.pilot, "pilot", 0)
-        check_number(self.period_tol, "period_tol", 0, strict_min=True)
-        check_number(self.merge_tol, "merge_tol", 0, strict_min=True)
-        check_number(self.escape_bound, "escape_bound", 0, strict_min=True)
-        if self.capture_radius is not None:
-            check_number(self.capture_radius, "capture_radius", 0)
 
 
 class Boxes(eqx.Module):

@@ -33,7 +33,8 @@ from jax.sharding import PartitionSpec as P
 from .._batching import pad_rows
 from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
 from .._matching import same_attractor
-from ._lanes import PoolOptions, init_pool, resize, run_rounds, table_slots
+from ._lanes import init_pool, resize, run_rounds, table_slots
+from ._pool_options import PoolOptions
 
 __all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS", "queue_length"]
 

@@ -26,8 +26,9 @@ import numpy as np
 
 from .._batching import progress_bar
 from ..integrate import stack_params
-from ._lanes import Boxes, PoolOptions, aperiodic_mark, saddle_mark, seed_tables
+from ._lanes import Boxes, aperiodic_mark, saddle_mark, seed_tables
 from ._placement import OneDevice, queue_length, run_blocks
+from ._pool_options import PoolOptions
 
 __all__ = ["PoolOptions", "Boxes", "run_pool", "run_pools", "drive"]
 

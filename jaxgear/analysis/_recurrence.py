@@ -78,8 +78,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_int, check_number
+from .._checks import check_int, check_number, split_changes, with_changes
 from ..integrate import resolve_integrator
+from ._pool_options import PoolOptions
 
 __all__ = ["FinePartition", "partition_from_box", "cell_keys", "row_keys", "CellTable", "empty_table", "lookup", "insert",
            "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "oldest_off_cycle",
@@ -868,8 +869,10 @@ def _decide(run: _Run, X, s: _State) -> _State:
 
 
 @eqx.filter_jit
-def _classify_kernel(system, params, integrator, opt: RecurrenceOptions, part: FinePartition, X, L: int, M: int,
-                     R: int, tol, merge_tol, bound, max_periods):
+def _classify_kernel(run: _Run, X, L: int, M: int, R: int):
+    """The classification of ``X (n, dim)`` by ``L`` lanes (one ``lax.while_loop`` of rounds
+    of ``R`` periods; ``M`` the largest period recognised)."""
+    opt = run.opt
     n, dim = X.shape
     A, Q = opt.max_attractors, opt.max_points
     take = min(L, n)
@@ -885,8 +888,6 @@ def _classify_kernel(system, params, integrator, opt: RecurrenceOptions, part: F
         n_att=jnp.asarray(0, jnp.int32), dropped=jnp.asarray(0, jnp.int32), overflow=jnp.asarray(False),
         cloud_work=jnp.asarray(0, jnp.int64), rounds=jnp.asarray(0, jnp.int32))
 
-    run = _Run(system, params, integrator, opt, part, tol, merge_tol, bound, max_periods)
-
     def body(s):
         s = jax.lax.fori_loop(0, R, lambda _, s: _period(run, s), s)
         return _decide(run, X, s)
@@ -894,26 +895,31 @@ def _classify_kernel(system, params, integrator, opt: RecurrenceOptions, part: F
     return jax.lax.while_loop(lambda s: s.n_done < n, body, s)
 
 
-def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | None = None, integrator=None,
-                           partition: FinePartition | None = None, max_periods: int = 2000,
-                           escape_bound: float = 1e6, max_period: int = 16, period_tol: float = 1e-6,
-                           merge_tol: float = 1e-4, round_periods: int = 5, chunk: int = 1024) -> RecurrenceResult:
+def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | None = None,
+                           pool: PoolOptions | None = None, integrator=None,
+                           partition: FinePartition | None = None, **changes) -> RecurrenceResult:
     """Label the states ``X (n, dim)`` (at forcing phase 0) by the attractor of their
     stroboscopic-map trajectories, attractors of every type included.
 
-    ``chunk`` lanes integrate the states, refilled from a queue, inside one
-    ``lax.while_loop`` of rounds of ``round_periods`` periods (one ``jit``). Every period
-    each lane's point updates its periodic streaks (P-k when ``|x_t - x_(t-k)| <=
+    ``pool.lanes`` lanes integrate the states, refilled from a queue, inside one
+    ``lax.while_loop`` of rounds of ``pool.round_periods`` periods (one ``jit``). Every
+    period each lane's point updates its periodic streaks (P-k when ``|x_t - x_(t-k)| <=
     period_tol (1 + |x_t|)`` holds ``k + 1`` periods in a row, ``k <= max_period``, as the
     direct method) and its run of hits on known attractors' boxes (:func:`track_hits`).
-    After each round a lane is decided when it escaped (norm above ``escape_bound`` or not
-    finite: ``-1``), recurs onto a known cycle or registers a new one (one per round, its
+    After each round a lane is decided when it escaped (norm above ``pool.escape_bound``
+    or not finite: ``-1``), recurs onto a known cycle or registers a new one (one per round, its
     boxes entered in the table), completed ``options.hits`` consecutive hits on an
     attractor's boxes, or was the round's candidate (undecided for ``options.transient``
     periods) whose cloud (:func:`attractor_cloud`) recurs (:func:`recurrence_share`) and is
     no cycle (:func:`near_periodic`): the cloud then joins the known attractor of boxes it
     overlaps (:func:`overlap_shares`) or registers a new aperiodic one (Datseris &
-    Wagemakers 2022). After ``max_periods`` periods a lane is unresolved (``-2``).
+    Wagemakers 2022). After ``pool.max_periods`` periods a lane is unresolved (``-2``).
+
+    ``pool``: the :class:`~jaxgear.analysis.PoolOptions` the direct method's lane pool
+    reads too (default ``PoolOptions(lanes=1024)``; ``capture_radius`` and ``pilot`` are
+    the pool's own and not read here). Keyword arguments (``**changes``) replace fields of
+    ``options`` or ``pool`` by name (``max_periods=3000``); an unknown name raises
+    ``ValueError``.
 
     ``partition``: default :func:`partition_from_box` over the bounding box of ``X`` with
     ``options.resolution`` boxes per axis (an axis on which ``X`` does not vary gets the
@@ -921,25 +927,19 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
     :func:`~jaxgear.integrate.default_integrator`. Returns a :class:`RecurrenceResult`
     (attractor arrays cut to the attractors found).
     """
-    options = RecurrenceOptions() if options is None else options
-    if not isinstance(options, RecurrenceOptions):
-        raise ValueError(f"options={options!r} must be a RecurrenceOptions or None.")
+    rec_changes, pool_changes = split_changes(changes, RecurrenceOptions, PoolOptions)
+    options = with_changes(options, RecurrenceOptions, rec_changes)
+    pool = with_changes(PoolOptions(lanes=1024) if pool is None else pool, PoolOptions, pool_changes)
     integrator = resolve_integrator(integrator)
     X = np.asarray(X, dtype=np.float64)
     if X.ndim != 2 or X.shape[1] != system.dim or X.shape[0] < 1 or not np.all(np.isfinite(X)):
         raise ValueError(f"X must be a finite (n, {system.dim}) array of states, got shape {X.shape}.")
-    max_periods = check_int(max_periods, "max_periods", 1)
-    M = check_int(max_period, "max_period", 1)
+    M = pool.max_period
     if options.max_points < M:
         raise ValueError(f"options.max_points={options.max_points} must be >= max_period={M}.")
     if options.cloud_periods // CLOUD_STAGES < 2 * M + 1:
         raise ValueError(f"options.cloud_periods={options.cloud_periods} must be at least {CLOUD_STAGES * (2 * M + 1)} "
                          f"({CLOUD_STAGES} stages of 2 max_period + 1 periods) for max_period={M}.")
-    R = check_int(round_periods, "round_periods", 1)
-    L = check_int(chunk, "chunk", 1)
-    check_number(escape_bound, "escape_bound", 0, strict_min=True)
-    check_number(period_tol, "period_tol", 0, strict_min=True)
-    check_number(merge_tol, "merge_tol", 0, strict_min=True)
     if partition is None:
         lo, hi = X.min(axis=0), X.max(axis=0)
         ext = hi - lo
@@ -949,9 +949,9 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
         partition = partition_from_box(c - ext / 2, c + ext / 2, float(options.resolution))
     elif not isinstance(partition, FinePartition) or partition.lo.shape != (system.dim,):
         raise ValueError(f"partition must be a FinePartition of dimension {system.dim} or None.")
-    s = _classify_kernel(system, params, integrator, options, partition, jnp.asarray(X), min(L, X.shape[0]), M, R,
-                         jnp.asarray(period_tol), jnp.asarray(merge_tol), jnp.asarray(escape_bound),
-                         jnp.asarray(max_periods, jnp.int32))
+    run = _Run(system, params, integrator, options, partition, jnp.asarray(pool.period_tol),
+               jnp.asarray(pool.merge_tol), jnp.asarray(pool.escape_bound), jnp.asarray(pool.max_periods, jnp.int32))
+    s = _classify_kernel(run, jnp.asarray(X), min(pool.lanes, X.shape[0]), M, pool.round_periods)
     A = int(s.n_att)
     labels = s.labels
     cells = jnp.sum(s.table.labels[None] == jnp.arange(A, dtype=jnp.int32)[:, None], axis=1, dtype=jnp.int32)
