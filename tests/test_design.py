@@ -262,3 +262,23 @@ def test_design_upper_bound_is_exact_and_can_be_left():
     r = jg.design(TWO_SOURCE, TwoSource(psi=psi_star, a2=0.7, c=0.05), np.zeros(4), obj,
                   free={"c": (0.05, 0.3)}, steps=5, progress=False)
     assert np.all(np.diff(r.history["c"]) > 0)
+
+
+def test_mesh_forces_of_identical_planets_are_those_of_the_reduced_model():
+    """On the symmetric subspace (every planet moving as the reduced model's one) each
+    planet's mesh forces and transmission errors are the reduced model's (model document
+    §4); a state of another dimension is refused."""
+    p = jg.paper_params(N=3)
+    rng = np.random.default_rng(3)
+    ts = jnp.asarray(rng.uniform(0, 2 * np.pi / p.Omega, 7))
+    xs = jnp.asarray(rng.normal(0, 3, (7, 4)))
+    xn = jnp.asarray(jg.reduced_to_nplanet(xs, 3))
+    red, npl = jg.mesh_forces(p, (ts, xs)), jg.mesh_forces(p, (ts, xn))
+    for a, b in ((red.sp, npl.sp), (red.rp, npl.rp)):
+        assert np.shape(b) == (7, 3) and np.ptp(np.abs(a)) > 0
+        np.testing.assert_allclose(np.asarray(b), np.repeat(np.asarray(a)[:, None], 3, axis=1), rtol=1e-13, atol=1e-13)
+    for mesh in ("sp", "rp"):
+        a, b = jg.transmission_error(p, (ts, xs), mesh), jg.transmission_error(p, (ts, xn), mesh)
+        np.testing.assert_allclose(np.asarray(b), np.repeat(np.asarray(a)[:, None], 3, axis=1), rtol=1e-13, atol=1e-13)
+    with pytest.raises(ValueError, match="neither the reduced"):
+        jg.mesh_forces(p, (ts, jnp.zeros((7, 6))))

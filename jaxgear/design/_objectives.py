@@ -90,14 +90,16 @@ class MeshForces(NamedTuple):
     rp: jax.Array
 
 
-def _gear_layout(params, dim: int) -> str:
+def _is_reduced(params, dim: int) -> bool:
+    """Whether states of dimension ``dim`` are the reduced gear model's (``True``) or the
+    ``params.N``-planet model's (``False``); anything else is refused."""
     if not isinstance(params, GearParams):
         raise ValueError("mesh forces are defined for the gear models (GearParams); for your own system "
                          "compute the force from orbit.states in the objective.")
     if dim == 4:
-        return "reduced"
+        return True
     if dim == 2 * params.N + 2:
-        return "nplanet"
+        return False
     raise ValueError(f"a state of dimension {dim} is neither the reduced gear model (4) nor the "
                      f"{params.N}-planet model ({2 * params.N + 2}).")
 
@@ -115,11 +117,11 @@ def mesh_forces(params, orbit) -> MeshForces:
             ``(times (m,), states (m, dim))``.
     """
     ts, xs = _times_states(orbit)
-    layout = _gear_layout(params, xs.shape[-1])
+    reduced = _is_reduced(params, xs.shape[-1])
 
     def one(t, x):
         k_sp, k_rp, e_sp, de_sp, _, e_rp, de_rp = mesh_excitation(t, params)
-        if layout == "reduced":
+        if reduced:
             X, V, Xsc, Vsc = x[0], x[1], x[2], x[3]
         else:
             N = params.N
@@ -142,16 +144,16 @@ def transmission_error(params, orbit, mesh: str = "sp"):
     ``mesh="sp"``, ``X_rp = x3 - x1 - e_sp - e_rp`` for ``mesh="rp"`` (model document §4).
     """
     ts, xs = _times_states(orbit)
-    layout = _gear_layout(params, xs.shape[-1])
+    reduced = _is_reduced(params, xs.shape[-1])
     if mesh not in ("sp", "rp"):
         raise ValueError(f"mesh must be 'sp' or 'rp', got {mesh!r}.")
     N = params.N
-    X = xs[:, 0] if layout == "reduced" else xs[:, 0:2 * N:2]
+    X = xs[:, 0] if reduced else xs[:, 0:2 * N:2]
     if mesh == "sp":
         return X
-    Xsc = xs[:, 2] if layout == "reduced" else xs[:, 2 * N][:, None]
+    Xsc = xs[:, 2] if reduced else xs[:, 2 * N][:, None]
     _, _, e_sp, _, _, e_rp, _ = jax.vmap(lambda t: mesh_excitation(t, params))(ts)
-    if layout == "nplanet":
+    if not reduced:
         e_sp = jnp.broadcast_to(jnp.reshape(e_sp, (len(ts), -1)), X.shape)
         e_rp = jnp.broadcast_to(jnp.reshape(e_rp, (len(ts), -1)), X.shape)
     return Xsc - X - e_sp - e_rp
