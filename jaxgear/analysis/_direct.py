@@ -36,7 +36,7 @@ from ._lanes import Boxes
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import largest_multipliers, refine_orbits
 from ._pool import PoolOptions, run_pool, run_pools
-from ._recurrence import RecurrenceOptions, partition_from_box
+from ._recurrence import RecurrenceOptions, partition_of_states
 from ._result import UNRESOLVED
 
 __all__ = ["Direct", "STABLE_BELOW"]
@@ -119,11 +119,7 @@ class Direct(AbstractGlobalMethod):
         others), or ``None`` when it is off."""
         if self.recurrence is None:
             return None
-        lo, hi = np.min(X, axis=0), np.max(X, axis=0)
-        ext = hi - lo
-        ext = np.where(ext > 0, ext, ext[ext > 0].mean() if np.any(ext > 0) else 1.0)
-        mid = 0.5 * (lo + hi)
-        return Boxes(self.recurrence, partition_from_box(mid - ext / 2, mid + ext / 2, float(self.recurrence.resolution)))
+        return Boxes(self.recurrence, partition_of_states(X, float(self.recurrence.resolution)))
 
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
         labels, atts, mean = self.label_states(system, params, grid.centres(), progress)

@@ -82,7 +82,8 @@ from .._checks import check_int, check_number, split_changes, with_changes
 from ..integrate import resolve_integrator
 from ._pool_options import PoolOptions
 
-__all__ = ["FinePartition", "partition_from_box", "cell_keys", "row_keys", "CellTable", "empty_table", "lookup", "insert",
+__all__ = ["FinePartition", "partition_from_box", "partition_of_states", "cell_keys", "row_keys", "CellTable",
+           "empty_table", "lookup", "insert",
            "track_hits", "attractor_cloud", "recurrence_share", "near_periodic", "near_cycle_lanes", "oldest_off_cycle",
            "overlap_shares",
            "continue_states", "settled_lanes", "verification_starts", "leaving_share", "SETTLED",
@@ -162,6 +163,18 @@ def partition_from_box(lower, upper, resolution) -> FinePartition:
     width = (upper - lower) / res
     lo = 0.5 * (lower + upper) - 2 ** (INDEX_BITS - 1) * width
     return FinePartition(lo=jnp.asarray(lo), width=jnp.asarray(width))
+
+
+def partition_of_states(X, resolution) -> FinePartition:
+    """The partition over the bounding box of the states ``X (n, dim)`` with ``resolution``
+    boxes per axis (:func:`partition_from_box`); an axis on which the states do not vary
+    (a section coordinate, say) gets the mean width of the others, so boxes stay boxes."""
+    X = np.asarray(X, dtype=np.float64)
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    ext = hi - lo
+    ext = np.where(ext > 0, ext, ext[ext > 0].mean() if np.any(ext > 0) else 1.0)
+    mid = 0.5 * (lo + hi)
+    return partition_from_box(mid - ext / 2, mid + ext / 2, resolution)
 
 
 @jax.jit
@@ -921,9 +934,8 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
     ``options`` or ``pool`` by name (``max_periods=3000``); an unknown name raises
     ``ValueError``.
 
-    ``partition``: default :func:`partition_from_box` over the bounding box of ``X`` with
-    ``options.resolution`` boxes per axis (an axis on which ``X`` does not vary gets the
-    mean width of the others). ``integrator``: default
+    ``partition``: default :func:`partition_of_states` of ``X`` with
+    ``options.resolution`` boxes per axis. ``integrator``: default
     :func:`~jaxgear.integrate.default_integrator`. Returns a :class:`RecurrenceResult`
     (attractor arrays cut to the attractors found).
     """
@@ -941,12 +953,7 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
         raise ValueError(f"options.cloud_periods={options.cloud_periods} must be at least {CLOUD_STAGES * (2 * M + 1)} "
                          f"({CLOUD_STAGES} stages of 2 max_period + 1 periods) for max_period={M}.")
     if partition is None:
-        lo, hi = X.min(axis=0), X.max(axis=0)
-        ext = hi - lo
-        fill = ext[ext > 0].mean() if np.any(ext > 0) else 1.0
-        ext = np.where(ext > 0, ext, fill)
-        c = 0.5 * (lo + hi)
-        partition = partition_from_box(c - ext / 2, c + ext / 2, float(options.resolution))
+        partition = partition_of_states(X, float(options.resolution))
     elif not isinstance(partition, FinePartition) or partition.lo.shape != (system.dim,):
         raise ValueError(f"partition must be a FinePartition of dimension {system.dim} or None.")
     run = _Run(system, params, integrator, options, partition, jnp.asarray(pool.period_tol),
