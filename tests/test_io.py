@@ -168,7 +168,7 @@ def test_a_file_written_before_a_field_existed_loads_with_its_default(duffing_re
     assert [a.share for a in q.attractors] == [a.share for a in r.attractors]
     np.testing.assert_array_equal(q.labels, r.labels)
     broken.to_netcdf(tmp_path / "broken.nc", engine="h5netcdf")
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="missing 'mean_periods'"):
         jg.load(tmp_path / "broken.nc")
 
 

@@ -187,7 +187,7 @@ def test_minimal_period_and_dedup_via_seeds_from_result():
     big = max(search.orbits, key=lambda o: np.linalg.norm(o.points[0]))
     np.testing.assert_allclose(big.points[0], b, atol=1e-8)
     assert big.n_seeds == 2
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="needs an object with .attractors"):
         jg.seeds_from_result(object())
 
 
@@ -267,13 +267,13 @@ def test_bad_input_rejected():
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), period=0)
     with pytest.raises(ValueError, match="period"):
         jg.periodic_orbit(jg.DUFFING, p, jnp.zeros(2), period=1.5)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="NaN or infinite"):
         jg.periodic_orbit(jg.DUFFING, p, jnp.array([np.nan, 0.0]))
     with pytest.raises(ValueError, match="shape"):
         jg.find_periodic_orbits(jg.DUFFING, p, np.zeros((3, 4)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="high > low"):
         jg.seeds_in_box(5, [0, 0], [1, -1])
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 2\)"):
         jg.verify_orbit(jg.DUFFING, p, np.zeros((1, 3)))
 
 
@@ -302,7 +302,7 @@ def test_plot_orbit_figure():
     fig3 = plot_orbit(jg.REDUCED, jg.paper_params(), np.array([[5.4, -0.2, 8.3, -0.8]]), coords=(0, 1, 2),
                       samples_per_period=20)
     assert fig3.axes[0].name == "3d"
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="coords must be 2 or 3 indices"):
         plot_orbit(jg.DUFFING, p, o, coords=(0, 5))
 
 
@@ -340,7 +340,7 @@ def test_find_periodic_orbits_checks_input_on_entry():
         jg.find_periodic_orbits(jg.DUFFING, duffing(), np.zeros((2, 2)), chunk_size=0, progress=False)
     with pytest.raises(ValueError, match="shape"):
         jg.find_periodic_orbits(jg.DUFFING, duffing(), np.zeros((0, 2)), progress=False)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="NaN or infinite"):
         jg.find_periodic_orbits(jg.DUFFING, duffing(), np.array([[np.inf, 0.0]]), progress=False)
 
 
