@@ -35,6 +35,12 @@ def equal_chunk_size(n: int, size: int) -> int:
     return -(-n // -(-n // size))
 
 
+def power_of_two_at_least(n: int, minimum: int = 1) -> int:
+    """The smallest power of two that is at least ``n`` and at least ``minimum`` (sizes
+    padded to it take few distinct values: few compiled shapes)."""
+    return max(int(minimum), 1 << max(0, int(n) - 1).bit_length())
+
+
 def pad_rows(X: np.ndarray, size: int) -> np.ndarray:
     """Pad ``X`` along axis 0 to ``size`` rows by repeating its first row (one compiled shape)."""
     if len(X) == size:

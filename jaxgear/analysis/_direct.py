@@ -192,14 +192,10 @@ class Direct(AbstractGlobalMethod):
             if not len(cells):  # (a cycle no cell ended on: nothing to label again)
                 continue
             seeds = [(p, k) for p, k, _ in res] + repellers
-            # the queue padded to a power of two with copies of its last state, so that the
-            # pools of such passes share a few compiled shapes (across the values of a sweep)
-            size = max(64, 1 << (len(cells) - 1).bit_length())
-            queue = np.concatenate([cells, np.repeat(cells[-1:], size - len(cells))])
-            lab, atts, use = run_pool(system, params, X[queue], self.integrator, self.pool_options(pilot=0),
+            # (the pool pads its queue to a few compiled lengths itself: queue_length)
+            lab, atts, use = run_pool(system, params, X[cells], self.integrator, self.pool_options(pilot=0),
                                       boxes=boxes, attractors=seeds, progress=progress,
                                       label="direct (off repellers)")
-            lab, use = lab[: len(cells)], use[: len(cells)]
             found = atts[len(seeds):]  # slots after the seeds: cycles met on the way
             labels[cells] = np.where(lab >= len(seeds), lab - len(seeds) + len(res), lab)
             used = used.copy()

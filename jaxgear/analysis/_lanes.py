@@ -56,6 +56,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import power_of_two_at_least
 from ._pool_options import PoolOptions
 from ._recurrence import (
     CLOUD_STAGES,
@@ -157,7 +158,7 @@ class PoolState(NamedTuple):
 # ----------------------------------------------------------------------------- attractor tables
 def table_slots(count: int) -> int:
     """Slots of an attractor table that holds ``count`` attractors: 8, or the next power of two."""
-    return max(8, 1 << max(0, int(count) - 1).bit_length())
+    return power_of_two_at_least(count, 8)
 
 
 def seed_tables(attractors, M: int, dim: int, Q: int = 1):

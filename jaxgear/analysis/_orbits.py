@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import pad_rows, power_of_two_at_least
 from .._poincare import stroboscopic_orbit
 from ..integrate import batch_field
 
@@ -70,11 +71,9 @@ def follow(system, params, X: np.ndarray, integrator, settle: int, max_period: i
 
 
 def _pad_rows(X: np.ndarray, minimum: int = 8) -> np.ndarray:
-    """``X (n, dim)`` padded with copies of its last row to a power of two (at least
-    ``minimum``) rows, so that batches of a few states share one compiled shape."""
-    n = len(X)
-    size = max(minimum, 1 << max(0, n - 1).bit_length())
-    return np.concatenate([X, np.repeat(X[-1:], size - n, axis=0)]) if size > n else X
+    """``X (n, dim)`` padded with copies of a row to a power of two (at least ``minimum``)
+    rows, so that batches of a few states share one compiled shape."""
+    return pad_rows(X, power_of_two_at_least(len(X), minimum))
 
 
 def refine_orbits(system, params, cycles, integrator, settle: int = 0, max_period: int | None = None):

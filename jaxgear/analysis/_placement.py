@@ -30,7 +30,7 @@ import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from .._batching import pad_rows
+from .._batching import pad_rows, power_of_two_at_least
 from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
 from .._matching import same_attractor
 from ._lanes import init_pool, resize, run_rounds, table_slots
@@ -54,7 +54,7 @@ def queue_length(n: int) -> int:
     the real length is a traced operand): queues of nearby lengths, such as an analysis and
     its label uncertainty, share one compiled pool."""
     if n <= QUEUE_STEP:
-        return max(QUEUE_MIN, 1 << max(0, int(n) - 1).bit_length())
+        return power_of_two_at_least(n, QUEUE_MIN)
     return -(-int(n) // QUEUE_STEP) * QUEUE_STEP
 
 
