@@ -41,11 +41,11 @@ def power_of_two_at_least(n: int, minimum: int = 1) -> int:
     return max(int(minimum), 1 << max(0, int(n) - 1).bit_length())
 
 
-def pad_rows(X: np.ndarray, size: int) -> np.ndarray:
-    """Pad ``X`` along axis 0 to ``size`` rows by repeating its first row (one compiled shape)."""
-    if len(X) == size:
-        return X
-    return np.concatenate([X, np.repeat(X[:1], size - len(X), axis=0)], axis=0)
+def pad_rows(X: np.ndarray, size: int, axis: int = 0) -> np.ndarray:
+    """Pad ``X`` along ``axis`` to ``size`` entries by repeating its first entry there (one
+    compiled shape)."""
+    k = size - X.shape[axis]
+    return X if k == 0 else np.concatenate([X, np.repeat(np.take(X, [0], axis=axis), k, axis=axis)], axis=axis)
 
 
 @functools.cache

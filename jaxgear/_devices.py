@@ -48,6 +48,8 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from ._batching import pad_rows
+
 __all__ = ["local_devices", "put", "placement", "split_rows", "shard_rows", "batch_mesh",
            "initialize", "process_index", "process_count", "wait_for_parts", "cell_processes",
            "values_over_processes", "allgather", "rows_over_processes"]
@@ -136,12 +138,6 @@ def _partitioned_call(kernel, mesh, batch, axis, out_axes, args):
         lambda a: jax.lax.with_sharding_constraint(a, NamedSharding(mesh, _spec(ax))), sub), out_axes, out)
 
 
-def _pad_axis(X: np.ndarray, size: int, axis: int) -> np.ndarray:
-    """``X`` padded along ``axis`` to ``size`` by repeating its first entry there."""
-    k = size - X.shape[axis]
-    return X if k == 0 else np.concatenate([X, np.repeat(np.take(X, [0], axis=axis), k, axis=axis)], axis=axis)
-
-
 def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=0, per_device: int | None = None,
                partitioned_by_xla: bool = False):
     """``kernel(*args)`` with the batch ``args[batch]`` split over the local devices: the
@@ -179,7 +175,7 @@ def shard_rows(kernel: Callable, *args, batch: int = 0, axis: int = 0, out_axes=
     if D == 1:
         return jax.tree.map(np.asarray, kernel(*args))
     mesh = batch_mesh(tuple(local[:D]))
-    Xp = _pad_axis(np.asarray(X), D * per, axis)
+    Xp = pad_rows(np.asarray(X), D * per, axis)
     rep = NamedSharding(mesh, P())
     args = tuple(jax.device_put(Xp, NamedSharding(mesh, _spec(axis))) if i == batch
                  else jax.tree.map(lambda a: jax.device_put(a, rep) if eqx.is_array(a) else a, a)

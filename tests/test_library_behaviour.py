@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import os
 import pickle
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -89,16 +88,12 @@ class _Planted:
         return (Path(self.marker).write_text, ("executed",))
 
 
-def test_an_analysis_executes_no_planted_pickle_and_starts_no_threads_or_processes(tmp_path, jaxgear_cache_dir):
+def test_an_analysis_executes_no_planted_pickle_and_starts_no_threads_or_processes(tmp_path):
     """Every file name a cache could hold computations under (the old ``kept/*.bin``,
     JAX's ``xla/`` entries, anything else) holds a pickle that writes a marker when
     loaded; a command run with that folder as its cache leaves no marker, and when it has
-    finished the interpreter runs no thread but its main one and no child process. (The
-    folder starts as a copy of the session's compilation cache, so the command loads what
-    the other tests compiled; the planted files are the subject here.)"""
+    finished the interpreter runs no thread but its main one and no child process."""
     cache, marker = tmp_path / "cache", tmp_path / "marker"
-    if (jaxgear_cache_dir / "xla").is_dir():
-        shutil.copytree(jaxgear_cache_dir / "xla", cache / "xla")
     payload = pickle.dumps(_Planted(marker))
     for rel in ("kept/a.bin", "kept/index.pkl", "xla/jit_run-0123456789abcdef", "analysis.pkl", "pool.bin"):
         (cache / rel).parent.mkdir(parents=True, exist_ok=True)
