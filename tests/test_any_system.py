@@ -96,7 +96,7 @@ def test_duffing_small_forcing_matches_linear_closed_form():
     d, w, g = 0.1, 1.4, 1e-3
     p = MyDuffing(delta=d, beta=1.0, gamma=g, omega=w)
     grid = jg.CellGrid.box([(-1.0, 1.0), (-1.0, 1.0)], (6, 6))
-    r = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(), progress=False, uncertainty=0)
+    r = jg.analyze_global(MY_DUFFING, p, grid, method=jg.Direct(integrator=RK), progress=False, uncertainty=0)
     assert len(r.attractors) == 1 and r.attractors[0].period == 1  # no more bistability
     shot = jg.periodic_orbit(MY_DUFFING, p, r.attractors[0].points[0])
     H = 1.0 / (1.0 - w * w + 1j * d * w)

@@ -31,10 +31,15 @@ OMEGA = [1.0, 1.3, 1.4]  # one attractor at 1.0, two (the hysteresis interval) a
 GAMMA = [0.25, 0.3]
 
 
+def _duffing_map(uncertainty: int):
+    return basin_map(jg.DUFFING, jg.DuffingParams(**DUFF, omega=1.3), "omega", OMEGA, "gamma", GAMMA, GRID,
+                     method=METHOD, progress=False, uncertainty=uncertainty)
+
+
 @pytest.fixture(scope="module")
 def duffing_map():
-    return basin_map(jg.DUFFING, jg.DuffingParams(**DUFF, omega=1.3), "omega", OMEGA, "gamma", GAMMA, GRID,
-                     method=METHOD, progress=False)
+    """The map without label uncertainties (the checks below read labels, shares and ids)."""
+    return _duffing_map(uncertainty=0)
 
 
 def _assert_point_is(m, iy, ix, r):
@@ -56,15 +61,16 @@ def _assert_point_is(m, iy, ix, r):
 
 
 @pytest.mark.slow
-def test_every_point_is_the_analysis_there_alone(duffing_map):
-    m = duffing_map
+def test_every_point_is_the_analysis_there_alone():
+    """Each point of the map, label uncertainties included, is the analysis there alone."""
+    m = _duffing_map(uncertainty=100)
     assert m.shares.shape[:2] == (2, 3) and m.labels.shape == (2, 3, 10, 10)
     np.testing.assert_allclose(m.shares.sum(-1) + m.sink_share + m.unresolved_share, 1.0)
     assert m.coexisting.tolist() != [[m.coexisting[0, 0]] * 3] * 2  # the number of attractors varies
     for iy, gamma in enumerate(GAMMA):
         for ix, omega in enumerate(OMEGA):
             r = jg.analyze_global(jg.DUFFING, jg.DuffingParams(**dict(DUFF, gamma=gamma), omega=omega), GRID,
-                                  METHOD, progress=False)
+                                  METHOD, progress=False, uncertainty=100)
             _assert_point_is(m, iy, ix, r)
 
 

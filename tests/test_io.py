@@ -16,6 +16,7 @@ import xarray as xr
 import jaxgear as jg
 from jaxgear import CellGrid
 from jaxgear._codec import FORMAT, RESULT_TYPES, array_field, custom_field, from_dataset, to_dataset
+from jaxgear.analysis import LabelUncertainty
 from jaxgear.integrate import integrator_from_dict
 
 DOUBLE_WELL = jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
@@ -68,14 +69,21 @@ def _quiet(fn, *args, **kw):
 @pytest.fixture(scope="module")
 def duffing_results():
     """Double-well Duffing, one result per method (2 x P-1 each); the stroboscopic one carries
-    a label uncertainty (its fields round-trip too), the others skip that work."""
+    a label uncertainty (its fields round-trip too: values of the kind a measurement gives,
+    set here, since the codec and not the measurement is checked; tests/test_attractors.py,
+    test_cli_analyze.py and test_sweep.py measure it)."""
     g2 = CellGrid.box([(-2, 2), (-2, 2)], (6, 5), names=("x", "v"))
     g1 = CellGrid.box([(-2, 2)], (8,), axes=(0,), base=(0.0, 0.0), names=("x", "v"))
+    strobe = _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.StroboscopicCellMap(settle_periods=50),
+                    progress=False, uncertainty=0)
+    u = LabelUncertainty(samples=30, step=1 / 30, start=2 / 30, perturbation=1e-3,
+                         refined_integrator=strobe.method.integrator.refined(), perturbations=(1e-3, 1e-2, 0.1, 1.0),
+                         start_fractions=(2 / 30, 4 / 30, 7 / 30, 0.6), alpha=0.3141592653589793,
+                         alpha_error=0.02718281828459045)
     return {
         "direct": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.Direct(), progress=False,
                          uncertainty=0),
-        "stroboscopic": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.StroboscopicCellMap(settle_periods=50),
-                               progress=False),
+        "stroboscopic": dataclasses.replace(strobe, uncertainty=u),
         "poincare-like": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g1, method=jg.PoincareCellMap(mapping_steps=3, settle_periods=50),
                                 progress=False, uncertainty=0),
     }
@@ -83,9 +91,12 @@ def duffing_results():
 
 @pytest.fixture(scope="module")
 def paper_result():
-    """The paper preset's P-4 by the paper's method on a 3 x 2 x 3 grid of region D."""
+    """The paper preset's P-4 by the paper's method on a 3 x 2 x 3 grid of region D. Plain
+    RK4: the file format, not the accuracy at the kinks, is checked here (a third of the
+    kink-aware section's time)."""
+    method = jg.PoincareCellMap(mapping_steps=20, settle_periods=300, integrator=jg.RK4(200))
     return _quiet(jg.analyze_global, jg.REDUCED, jg.paper_params(), CellGrid.paper(counts=(3, 2, 3)),
-                  method=jg.PoincareCellMap(mapping_steps=20, settle_periods=300), progress=False, uncertainty=0)
+                  method=method, progress=False, uncertainty=0)
 
 
 @pytest.fixture(scope="module")
@@ -138,12 +149,13 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
 def test_attractor_multipliers_are_those_of_shooting(duffing_results, paper_result):
     """Each attractor's recorded multiplier (central differences of the k-fold map) is the
     largest |multiplier| that jax.jacfwd gives through the shooting module, whatever the
-    method; the attractors found are stable."""
+    method (both through the integrator of the analysis); the attractors found are stable."""
     cases = [(r, jg.DUFFING, DOUBLE_WELL) for r in duffing_results.values()]
     cases.append((paper_result, jg.REDUCED, jg.paper_params()))
     for r, system, params in cases:
         for a in r.attractors:
-            mu = np.asarray(jg.floquet_multipliers(system, params, np.asarray(a.points)[0], period=a.period))
+            mu = np.asarray(jg.floquet_multipliers(system, params, np.asarray(a.points)[0], period=a.period,
+                                                   integrator=r.method.integrator))
             assert a.multiplier == pytest.approx(np.abs(mu).max(), abs=1e-4), (r.method.name, a.id)
             assert a.multiplier < 1
     assert "max |mu|" in paper_result.table()

@@ -88,24 +88,43 @@ class _Planted:
         return (Path(self.marker).write_text, ("executed",))
 
 
+LINEAR_MODEL = """
+import jax.numpy as jnp
+import jaxgear as jg
+
+def field(t, x, p):
+    return jnp.stack([x[1], p["gamma"] * jnp.cos(p["omega"] * t) - p["delta"] * x[1] - x[0]])
+
+SYSTEM = jg.ForcedSystem(field, period=lambda p: 2 * jnp.pi / p["omega"], state_names=("x", "v"), name="linear")
+PARAMS = {"delta": 0.2, "gamma": 1.0, "omega": 1.3}
+REGION = ((-3.0, 3.0), (-3.0, 3.0))
+GRID = (4, 4)
+"""
+
+
 def test_an_analysis_executes_no_planted_pickle_and_starts_no_threads_or_processes(tmp_path):
     """Every file name a cache could hold computations under (the old ``kept/*.bin``,
     JAX's ``xla/`` entries, anything else) holds a pickle that writes a marker when
     loaded; a command run with that folder as its cache leaves no marker, and when it has
-    finished the interpreter runs no thread but its main one and no child process."""
-    cache, marker = tmp_path / "cache", tmp_path / "marker"
+    finished the interpreter runs no thread but its main one and no child process. (The
+    analysis is of a forced linear oscillator given as a model file: the cache is read
+    the same way for any system, and a small system compiles in a fraction of the gear
+    model's time.)"""
+    cache, marker, model = tmp_path / "cache", tmp_path / "marker", tmp_path / "linear_model.py"
     payload = pickle.dumps(_Planted(marker))
     for rel in ("kept/a.bin", "kept/index.pkl", "xla/jit_run-0123456789abcdef", "analysis.pkl", "pool.bin"):
         (cache / rel).parent.mkdir(parents=True, exist_ok=True)
         (cache / rel).write_bytes(payload)
+    model.write_text(LINEAR_MODEL)
     env = dict(os.environ, JAXGEAR_CACHE_DIR=str(cache))
     r = _python("import multiprocessing, threading\n"
                 "from jaxgear.cli import main\n"
-                "rc = main(['analyze', '--grid', '4,3,4', '--no-figures', '--quiet', '--uncertainty-samples', '0', "
-                f"'--out', {str(tmp_path / 'out')!r}])\n"
+                f"rc = main(['analyze', '--system', {str(model) + ':SYSTEM'!r}, '--no-figures', '--quiet', "
+                f"'--uncertainty-samples', '0', '--out', {str(tmp_path / 'out')!r}])\n"
                 "print(rc, sorted(t.name for t in threading.enumerate()), len(multiprocessing.active_children()))",
                 env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip().splitlines()[-1] == "0 ['MainThread'] 0"
     assert (tmp_path / "out" / "result.nc").exists()
+    assert len(list((cache / "xla").iterdir())) > 1  # the run did use that folder as its cache
     assert not marker.exists()

@@ -515,7 +515,10 @@ def design(system: ForcedSystem, params, x0: Float[ArrayLike, " dim"], objective
     samples = check_int(options.samples_per_period if options.samples_per_period is not None else
                         getattr(integrator, "steps_per_period", DEFAULT_STEPS_PER_PERIOD), "samples_per_period", 2)
     optimizer = _default_optimizer(options.steps) if options.optimizer is None else options.optimizer
-    prob = _Problem(params, jnp.asarray(lows), jnp.asarray(highs), jnp.asarray(t0, jnp.float64), names, system,
+    # the free fields as arrays: their start values are data, not constants of the compiled
+    # step (a NamedTuple of Python floats would otherwise compile anew for every start)
+    start = set_fields(params, names, [jnp.asarray(get_field(params, n), jnp.float64) for n in names])
+    prob = _Problem(start, jnp.asarray(lows), jnp.asarray(highs), jnp.asarray(t0, jnp.float64), names, system,
                     objective, k, integrator, samples, options.shoot)
     u = jnp.clip(jnp.asarray([(float(get_field(params, n)) - lo) / (hi - lo) for n, lo, hi in zip(names, lows, highs)]),
                  0.0, 1.0)
