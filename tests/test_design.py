@@ -116,8 +116,14 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
     p = TwoSource(psi=0.0, a2=0.7, c=0.1)
     psi_star = float(np.angle(-H[0, 0] * A1 / (H[0, 1] * p.a2)))
     rms_min = abs(abs(H[0, 0]) * A1 - abs(H[0, 1]) * p.a2) / np.sqrt(2)
-    obj = lambda q, o: jg.rms(o.states[:, 0])
+    traces = []
+
+    def obj(q, o):
+        traces.append(1)  # a Python side effect: runs only while the step is traced
+        return jg.rms(o.states[:, 0])
+
     r = jg.design(TWO_SOURCE, p, np.zeros(4), obj, free={"psi": (-np.pi, np.pi)}, steps=300, progress=False)
+    n_traces = len(traces)
     assert r.status == "converged", r.table()
     assert abs(r.params.psi - psi_star) < 1e-4
     assert abs(r.objective - rms_min) < 1e-6 * rms_min  # RK4 at 200 steps/period: ~1e-7
@@ -128,6 +134,7 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
     rb = jg.design(TWO_SOURCE, p._replace(psi=psi_star + 1.0), np.zeros(4), obj, free={"psi": (lo, hi)},
                    steps=100, progress=False)
     hist = rb.history["psi"]
+    assert len(traces) == n_traces  # another start and other bounds (data) compiled nothing new
     assert np.all((hist >= lo) & (hist <= hi))
     assert rb.params.psi == lo and rb.status == "converged"
     # history, table, saved result
