@@ -3,16 +3,18 @@ import functools
 import logging
 import os
 
-# The suite is compile-bound (two thirds of its CPU time is XLA compiling the many small
-# programs the tests build once each). XLA's older CPU emitters compile the same programs
-# in about half the time of its default fusion emitters (the suite: 7 min 14 s -> 4 min
-# 55 s on the 2-core machine), while the code they emit runs pure-JAX integration about
-# half as fast: right for tests, wrong for users, so only the tests choose them. Set
-# before JAX starts its backend, and inherited by the commands the tests run. A choice
-# already in XLA_FLAGS wins: `XLA_FLAGS=--xla_cpu_use_fusion_emitters=true python -m
-# pytest` tests with XLA's defaults.
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+# The suite is compile-bound (most of its CPU time is XLA compiling the many small programs
+# the tests build once each), so the tests ask XLA for quick compiles: its older CPU
+# emitters (about half the compile time of its default fusion emitters) and no LLVM
+# optimisation of the emitted code (a third less again). The code then runs pure-JAX
+# integration several times slower, and the results are the same to round-off: right for
+# tests, wrong for users, so only the tests choose these. Set before JAX starts its
+# backend, and inherited by the commands the tests run. A choice already in XLA_FLAGS wins:
+# `XLA_FLAGS=--xla_cpu_use_fusion_emitters=true python -m pytest` tests with XLA's defaults.
+TEST_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false", "xla_backend_optimization_level": "0"}
+_given = os.environ.get("XLA_FLAGS", "")
+if not any(name in _given for name in TEST_XLA_FLAGS):
+    os.environ["XLA_FLAGS"] = " ".join([_given, *(f"--{k}={v}" for k, v in TEST_XLA_FLAGS.items())]).strip()
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

@@ -186,7 +186,10 @@ def test_bifurcation_diagram_labels_chaos_tori_and_cycles():
                                max_period=8, integrator=jg.RK4(200), progress=False)
     assert d.period[0, :, 0].tolist() == [1, 0] and d.attractor_type[0, :, 0].tolist() == [P, C]
     lam, err = d.largest_exponent[0, 1, 0], d.exponent_error[0, 1, 0]
-    assert lam > 3 * err and 0.08 < lam / (2 * np.pi) < 0.15 and np.isnan(d.largest_exponent[0, 0, 0])
+    # about 0.11 per unit time: within (0.08, 0.15) up to three of the estimate's standard errors
+    # (a finite-time estimate on a chaotic orbit: round-off moves it by about one)
+    slack = 3 * err / (2 * np.pi)
+    assert lam > 3 * err and 0.08 - slack < lam / (2 * np.pi) < 0.15 + slack and np.isnan(d.largest_exponent[0, 0, 0])
     assert [a["label"] for a in d.attractors_at(1)] == ["chaotic"] and "chaotic" in d.table()
     ax = plotting.plot_bifurcation(d, "x").axes[0]
     assert sorted(t.get_text() for t in ax.get_legend().get_texts()) == ["P-1", "chaotic"]
