@@ -5,16 +5,28 @@ import os
 
 # The suite is compile-bound (most of its CPU time is XLA compiling the many small programs
 # the tests build once each), so the tests ask XLA for quick compiles: its older CPU
-# emitters (about half the compile time of its default fusion emitters) and no LLVM
-# optimisation of the emitted code (a third less again). The code then runs pure-JAX
-# integration several times slower, and the results are the same to round-off: right for
-# tests, wrong for users, so only the tests choose these. Set before JAX starts its
-# backend, and inherited by the commands the tests run. A choice already in XLA_FLAGS wins:
+# emitters (about half the compile time of its default fusion emitters), and in the
+# default run (`-m 'not slow'`) no LLVM optimisation of the emitted code either (a third
+# less again). The code then runs pure-JAX integration several times slower (the older
+# emitters 1.5x, without optimisation 4x to 30x), with the same results to round-off:
+# right for the default run's short checks, wrong for the slow checks' long integrations
+# and for users, so only the default run sets the second flag and only the tests the
+# first. Set before JAX starts its backend (importing jaxgear starts none), and inherited
+# by the commands the tests run. A choice already in XLA_FLAGS wins:
 # `XLA_FLAGS=--xla_cpu_use_fusion_emitters=true python -m pytest` tests with XLA's defaults.
-TEST_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false", "xla_backend_optimization_level": "0"}
-_given = os.environ.get("XLA_FLAGS", "")
-if not any(name in _given for name in TEST_XLA_FLAGS):
-    os.environ["XLA_FLAGS"] = " ".join([_given, *(f"--{k}={v}" for k, v in TEST_XLA_FLAGS.items())]).strip()
+TEST_XLA_FLAGS = {"xla_cpu_use_fusion_emitters": "false"}
+DEFAULT_RUN_XLA_FLAGS = {"xla_backend_optimization_level": "0"}
+
+
+def pytest_configure(config):
+    given = os.environ.get("XLA_FLAGS", "")
+    if any(name in given for name in (*TEST_XLA_FLAGS, *DEFAULT_RUN_XLA_FLAGS)):
+        return
+    flags = dict(TEST_XLA_FLAGS)
+    if (config.option.markexpr or "").strip() == "not slow":
+        flags.update(DEFAULT_RUN_XLA_FLAGS)
+    os.environ["XLA_FLAGS"] = " ".join([given, *(f"--{k}={v}" for k, v in flags.items())]).strip()
+
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
