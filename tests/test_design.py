@@ -184,9 +184,9 @@ def test_design_of_two_parameters_reaches_the_closed_form_on_a_bound():
 
 
 # --------------------------------------------------------------------------- tracking limits
-def _largest_multiplier_down(q, o):
-    """An objective that pushes the largest multiplier up (one function object: the designs
-    of the spur pair below share one compiled step)."""
+def _minus_largest_multiplier(q, o):
+    """An objective whose minimum lies where the largest multiplier is largest (one function
+    object: the designs of the spur pair below share one compiled step)."""
     return -jg.max_multiplier(q, o)
 
 
@@ -195,7 +195,7 @@ def test_design_stops_at_the_stability_boundary():
     make the trivial orbit's multiplier large with require_stable stops just inside the
     first parametric tongue, whose edge is located here by bisection on the multipliers."""
     p = jg.SpurPairParams(zeta=0.01, kappa=0.01, b=0.0, f_m=0.0, e_amp=0.0, Omega=2.0)
-    r = jg.design(jg.SPUR_PAIR, p, np.zeros(2), _largest_multiplier_down, free={"kappa": (0.0, 0.2)},
+    r = jg.design(jg.SPUR_PAIR, p, np.zeros(2), _minus_largest_multiplier, free={"kappa": (0.0, 0.2)},
                   steps=100, require_stable=True, progress=False)
     assert r.status == "lost stability" and r.orbit.stable
 
@@ -254,7 +254,7 @@ def test_design_input_errors():
             jg.design(jg.REDUCED, p, x4, obj, **{"period": 4, "steps": 1, "progress": False, **kw})
     with pytest.raises(ValueError, match="no P-1 orbit"):  # free flight: no orbit at the seed
         q = jg.SpurPairParams(zeta=0.0, kappa=0.0, b=100.0, f_m=0.0, e_amp=0.0, Omega=1.0)
-        jg.design(jg.SPUR_PAIR, q, np.array([0.0, 0.5]), _largest_multiplier_down, free={"kappa": (0.0, 0.2)},
+        jg.design(jg.SPUR_PAIR, q, np.array([0.0, 0.5]), _minus_largest_multiplier, free={"kappa": (0.0, 0.2)},
                   steps=1, progress=False)
     with pytest.raises(ValueError, match="mesh forces"):
         q = jg.DuffingParams()
