@@ -290,8 +290,7 @@ def bench_kink_jax(R, X, repeat: int = 5, first_calls: bool = True):
     Y0 = jnp.asarray(X).T
     n = Y0.shape[1]
     out = {"n_cells": n}
-    for key, integ in (("rk4", jaxgear.RK4(STEPS)), ("kink_jax", jaxgear.KinkAwareRK4(STEPS, native=False))):
-        out[key] = cpu_best(lambda Y, integ=integ: integ.advance(jaxgear.REDUCED, p, Y, 0.0, 1), Y0, repeat)
+    out.update(plain_and_kink(p, Y0, repeat))
     out["ratio"] = out["kink_jax"]["cpu_s"] / out["rk4"]["cpu_s"]
     out["one_core"] = one_core_ratios(rounds=3 if first_calls else 2)
     out["crossing_fraction"] = crossing_fraction(p, Y0)
@@ -301,6 +300,15 @@ def bench_kink_jax(R, X, repeat: int = 5, first_calls: bool = True):
         out["first_calls"] = {k: _first_call(k) for k in ("periodic_orbit", "advance_20k")}
     out["user_systems"] = user_systems(repeat)
     R["kink_jax"] = out
+
+
+def plain_and_kink(p, Y0, repeat: int) -> dict:
+    """:func:`cpu_best` of one period of the states ``Y0 (4, n)`` by pure-JAX plain RK4
+    (``"rk4"``) and the pure-JAX kink-aware steps (``"kink_jax"``)."""
+    import jaxgear
+
+    return {key: cpu_best(lambda Y, integ=integ: integ.advance(jaxgear.REDUCED, p, Y, 0.0, 1), Y0, repeat)
+            for key, integ in (("rk4", jaxgear.RK4(STEPS)), ("kink_jax", jaxgear.KinkAwareRK4(STEPS, native=False)))}
 
 
 def cpu_best(fn, Y, repeat: int) -> dict:
@@ -396,21 +404,28 @@ def one_core_ratios(rounds: int) -> dict:
     per step and cell and their ratios."""
     rows = []
     for _ in range(rounds):
-        cmd = [sys.executable, os.path.abspath(__file__), "--worker", "first:one_core"]
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
-        try:
-            rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-        except (IndexError, json.JSONDecodeError):
-            return {"error": (proc.stderr or proc.stdout)[-500:]}
+        row = _in_fresh_process("one-core")
+        if "error" in row:
+            return row
+        rows.append(row)
     return {"rk4": [r["rk4"] for r in rows], "kink_jax": [r["kink_jax"] for r in rows],
             "ratios": [r["kink_jax"] / r["rk4"] for r in rows]}
 
 
-def _first_call(kind: str) -> dict:
-    """First-call wall time in a fresh process: ``periodic_orbit`` (the paper preset's P-1
-    from a seed, one shooting solve: its compile is mostly the kink step's derivatives) or
-    the compile of a ``jax.jit`` advance of 20,000 lanes with ``native=False``."""
-    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "first:" + kind]
+def _one_core_worker() -> dict:
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # before JAX starts its backend
+    import jax.numpy as jnp
+
+    import jaxgear
+
+    pair = plain_and_kink(jaxgear.paper_params(), jnp.asarray(paper_centres()).T, 5)
+    return {key: m["ns_per_step_cell"] for key, m in pair.items()}
+
+
+def _in_fresh_process(worker: str, *args: str) -> dict:
+    """The JSON dict a ``--worker`` run of this script (more arguments ``args``) prints
+    last, or ``{"error": ...}``."""
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", worker, *args]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
     try:
         return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -418,20 +433,20 @@ def _first_call(kind: str) -> dict:
         return {"error": (proc.stderr or proc.stdout)[-500:]}
 
 
+def _first_call(kind: str) -> dict:
+    """First-call wall time in a fresh process: ``periodic_orbit`` (the paper preset's P-1
+    from a seed, one shooting solve: its compile is mostly the kink step's derivatives) or
+    the compile of a ``jax.jit`` advance of 20,000 lanes with ``native=False``."""
+    return _in_fresh_process("first:" + kind)
+
+
 def _first_call_worker(kind: str) -> dict:
-    if kind == "one_core":
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import jax
     import jax.numpy as jnp
 
     import jaxgear
 
     p = jaxgear.paper_params()
-    if kind == "one_core":
-        Y0 = jnp.asarray(paper_centres()).T
-        return {key: cpu_best(lambda Y, integ=integ: integ.advance(jaxgear.REDUCED, p, Y, 0.0, 1), Y0,
-                              5)["ns_per_step_cell"]
-                for key, integ in (("rk4", jaxgear.RK4(STEPS)), ("kink_jax", jaxgear.KinkAwareRK4(STEPS, native=False)))}
     t = time.perf_counter()
     if kind == "periodic_orbit":
         jaxgear.periodic_orbit(jaxgear.REDUCED, p, np.array([5.4, -0.2, 8.3, -0.8]), period=1)
@@ -929,16 +944,9 @@ def bench_scaling(R, sizes, kinds):
     for kind in kinds:
         for n in sizes:
             repeat = 3 if n <= 100_000 else 2
-            cmd = [sys.executable, os.path.abspath(__file__), "--worker", kind, "--n", str(n),
-                   "--repeat", str(repeat)]
             t = time.perf_counter()
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900, check=False)
-            wall = time.perf_counter() - t
-            try:
-                m = json.loads(proc.stdout.strip().splitlines()[-1])
-            except (IndexError, json.JSONDecodeError):
-                m = {"error": (proc.stderr or proc.stdout)[-500:]}
-            m["process_wall_s"] = wall
+            m = _in_fresh_process(kind, "--n", str(n), "--repeat", str(repeat))
+            m["process_wall_s"] = time.perf_counter() - t
             out[f"{kind}/{n}"] = m
             print(f"  scaling {kind:18s} n={n:>9,d}: "
                   + (f"{m['steady_s']:.3f} s, {m['ns_per_step_cell']:.2f} ns, peak RSS {m['peak_rss_MB']:.0f} MB"
@@ -1220,7 +1228,9 @@ def main(argv=None):
     import jaxgear  # noqa: F401  (enables float64 before any kernel is built)
 
     if a.worker:
-        if a.worker.startswith("first:"):
+        if a.worker == "one-core":
+            print(json.dumps(_one_core_worker()))
+        elif a.worker.startswith("first:"):
             print(json.dumps(_first_call_worker(a.worker[len("first:"):])))
         else:
             print(json.dumps(_worker(a.worker, a.n, a.repeat)))
