@@ -88,15 +88,15 @@ def _switching(system, params, t, Y):
 
 
 def _switching_rate(system, params, t, Y, F):
-    """Time derivative of the switching functions along the flow, ``ds/dt = s_t + s_x f``: ``(m, n)``."""
+    """Time derivative of the switching functions along the flow, ``ds/dt = s_t + s_x f``: ``(m, n)``.
+    ``t`` is a scalar (time-only terms and their rates once for the batch) or ``(n,)``."""
     if system.switching is None:
         return jnp.zeros((0, Y.shape[1]), Y.dtype)
-    tt = jnp.broadcast_to(t, (Y.shape[1],))
 
     def one(ti, y, f):
         return jax.jvp(lambda a, b: system.switching(a, b, params), (ti, y), (jnp.ones_like(ti), f))[1]
 
-    return jax.vmap(one, in_axes=(0, 1, 1), out_axes=1)(tt, Y, F)
+    return jax.vmap(one, in_axes=(None if jnp.ndim(t) == 0 else 0, 1, 1), out_axes=1)(t, Y, F)
 
 
 def _break_fraction(system, params, t, h):
@@ -201,17 +201,25 @@ def _hermite_root(s0, s1, d0, d1, differentiable=True):
     return th - p(th) / jnp.where(d != 0, d, 1.0)
 
 
-def _first_crossing(system, params, t, Y, Y1, h, k1, S0, S1, sides, th_break):
+def _crossing_rates(system, params, t, Y, Y1, h, k1):
+    """The switching functions' rates at both ends of the step ``Y -> Y1`` (from ``t``,
+    length ``h``, field ``k1`` at its start), scaled by the step: the slopes of their cubic
+    Hermite interpolants, ``(D0, D1)`` of shape ``(m, n)``. With scalar ``t`` and ``h`` the
+    time-only terms are computed once for the batch."""
+    F1 = batch_field(system, params, t + h, Y1)
+    return _switching_rate(system, params, t, Y, k1) * h, _switching_rate(system, params, t + h, Y1, F1) * h
+
+
+def _first_crossing(system, params, t, Y, Y1, h, k1, S0, S1, sides, th_break, rates=None):
     """The earliest event of a trial step, per lane: ``(theta, which, flips)`` with
     ``which`` the index of the crossed switching function (``-1`` for a time break or no
     event) and ``flips (m, n)`` every function crossed at that same instant (identical
-    planets, or ``b = 0`` where both sides of a backlash coincide), whose sides all flip."""
+    planets, or ``b = 0`` where both sides of a backlash coincide), whose sides all flip.
+    ``rates``: :func:`_crossing_rates` of the step when already computed."""
     n = Y.shape[1]
     if S0.shape[0]:
         cross = (_sides(S1) != sides) & jnp.isfinite(S1) & jnp.isfinite(S0)
-        F1 = batch_field(system, params, t + h, Y1)
-        D0 = _switching_rate(system, params, t, Y, k1) * h
-        D1 = _switching_rate(system, params, t + h, Y1, F1) * h
+        D0, D1 = _crossing_rates(system, params, t, Y, Y1, h, k1) if rates is None else rates
         # (the root's derivative is needed only where stages are not evaluated piece by piece)
         th = _hermite_root(S0, S1, D0, D1, differentiable=system.piece_field is None)
         th = jnp.where(cross, jnp.clip(th, 0.0, 1.0), 2.0)
@@ -345,7 +353,7 @@ def _zero_tangent(a):
     return np.zeros(a.shape, jax.dtypes.float0)
 
 
-def _event(system, params, state, lazy=False):
+def _event(system, params, state, lazy=False, first=None):
     """One event of the lanes in ``state`` (each holding one): locate the first event of
     the (sub-)step ``Ys -> Ye`` (from ``tt``, length ``hh``), sub-step to it, land, flip
     the crossed surface's side, step the rest of the step. Returns the new state and
@@ -353,7 +361,9 @@ def _event(system, params, state, lazy=False):
 
     ``state = (Ys, tt, hh, k1, Ye, sides, S0, S1)``: the sub-step's start and end states,
     its start time and length, the field at its start, the sides its stages use, and the
-    switching functions at both ends.
+    switching functions at both ends. ``first = (i, rates)``: in a loop over events, the
+    event's index and the :func:`_crossing_rates` of the whole step, computed before the
+    loop where the step's times are still shared by the lanes (used by event 0).
 
     With the system's ``piece_field`` every stage of a sub-step is evaluated on that
     sub-step's piece, so each sub-step is an RK4 step of a smooth field (in value and
@@ -370,7 +380,11 @@ def _event(system, params, state, lazy=False):
     pieces = lambda sd: sd if sided else None  # noqa: E731
     Ys, tt, hh, k1, Ye, sides, S0, S1 = state
     th_break = _break_fraction(system, params, tt, hh)
-    th, which, flips = _first_crossing(system, params, tt, Ys, Ye, hh, k1, S0, S1, sides, th_break)
+    rates = None
+    if first is not None and S0.shape[0]:
+        i, rates = first
+        rates = jax.lax.cond(i == 0, lambda: rates, lambda: _crossing_rates(system, params, tt, Ys, Ye, hh, k1))
+    th, which, flips = _first_crossing(system, params, tt, Ys, Ye, hh, k1, S0, S1, sides, th_break, rates)
     h1 = th * hh
     Ym, _ = _rk4(system, params, tt, Ys, h1, window=window, sides=pieces(sides), k1=None if window else k1)
     if sided:
@@ -427,7 +441,8 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
         state = (Y, lane(t), lane(h), k1, Y1, sides, S0, S1)
 
         def dense(_):
-            ev = lambda _, c: _event(system, params, c[0])  # noqa: E731
+            rates = _crossing_rates(system, params, t, Y, Y1, h, k1) if S0.shape[0] else None
+            ev = lambda i, c: _event(system, params, c[0], first=(i, rates))  # noqa: E731
             end = jax.lax.fori_loop(0, max_splits, ev, (state, need))[0][4]
             return jnp.where(need[None], end, Y1)
 
@@ -453,10 +468,11 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
                 tt = t if jnp.ndim(t) == 0 else take(t)
                 hh = h if jnp.ndim(h) == 0 else take(h)
                 sub = _start_state(system, params, tt, take(Y), hh, take(Y1))
+                rates = _crossing_rates(system, params, tt, sub[0], sub[4], hh, sub[3]) if S0.shape[0] else None
                 sub = sub[:1] + (jnp.broadcast_to(tt, (C,)), jnp.broadcast_to(hh, (C,))) + sub[3:]
 
                 def ev(i, c):
-                    return jax.lax.cond(i <= lev, lambda c: _event(system, params, c[0], lazy=True),
+                    return jax.lax.cond(i <= lev, lambda c: _event(system, params, c[0], lazy=True, first=(i, rates)),
                                         lambda c: c, c)
 
                 (_, _, _, _, Ye, *_), more = jax.lax.fori_loop(
