@@ -2,11 +2,11 @@
 
 The converged P-k orbit of the shooting method (:func:`~jaxgear.periodic_orbit`) is a
 differentiable function of the parameters: its point ``x*(p)`` solves
-``G(x, p) = P^k(x; p) - x = 0`` and ``lax.custom_root`` gives
+``G(x, p) = P^k(x; p) - x = 0``, and its derivative is
 
     dx*/dp = -(DP^k - I)^{-1} dP^k/dp          (implicit function theorem)
 
-(``optimistix.ImplicitAdjoint``) without differentiating the solver's iterations. A scalar of the orbit — the peak-to-peak
+(a custom JVP at the root, with the Jacobian the solve computes anyway) without differentiating the solver's iterations. A scalar of the orbit — the peak-to-peak
 or RMS dynamic mesh force (model document §4, ``g_sp``, ``g_rp``), the dynamic transmission
 error, the largest Floquet multiplier modulus — is computed from a trajectory sampled
 over the ``k`` periods starting at ``x*`` with the same fixed-step RK4 scan (forward

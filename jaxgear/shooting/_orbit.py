@@ -157,7 +157,7 @@ def periodic_orbit(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch di
 
     The converged ``point`` is differentiable with respect to ``params``
     (``jax.grad``, ``jax.jacfwd``) by the implicit function theorem
-    (``optimistix.ImplicitAdjoint``; the iterations are not unrolled):
+    (a custom JVP at the root; the iterations are not unrolled):
     ``dx*/dp = -(DP^k - I)^{-1} dP^k/dp``.
 
     Args:

@@ -26,11 +26,15 @@ for ``p >= 2``), so a seed that went to a known orbit goes elsewhere.
 
 The solver is an optimistix object (``Newton``, ``Dogleg``, ``LevenbergMarquardt``, ...) under
 ``vmap`` with ``throw=False``: every seed ends with its own :class:`~jaxgear.Status`.
-Derivatives of the root with respect to the parameters are implicit
-(``optimistix.ImplicitAdjoint``: the solver's iterations are not differentiated).
+Derivatives of the root with respect to the parameters are implicit (the implicit
+function theorem, ``dX = -(dG/dX)^-1 dG/dp dp`` at the root, with the Jacobian the
+solve's singularity check already computed: the solver's iterations are not
+differentiated).
 """
 
 from __future__ import annotations
+
+import functools
 
 import equinox as eqx
 import jax
@@ -164,6 +168,32 @@ def deflation(x, known, power: float, shift: float):
     return jnp.prod(jnp.where(ok, fac, 1.0))
 
 
+def _deflated_residual(shoot: Shooting, known, power: float, shift: float, Xf, args):
+    """The function whose roots the solver finds: the deflated continuity defects
+    ``D(X_0) R(X)`` of the flattened segment starts ``Xf (M * dim,)``; ``args = (params, t0)``."""
+    X = Xf.reshape(shoot.segments, -1)
+    return deflation(X[0], known, power, shift) * shoot.residual(X, args)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+def _implicit_root(shoot: Shooting, power: float, shift: float, Xf, J, ok, known, params, t0):
+    """``Xf``, a root of :func:`_deflated_residual` at ``(params, t0)`` found by the solver,
+    with the derivatives of the implicit function theorem: ``dX = -J^-1 dG/dp dp`` with
+    ``J = dG/dX`` at the root. Where ``ok`` is false (no converged, regular root) the
+    derivative is zero."""
+    return Xf
+
+
+@_implicit_root.defjvp
+def _implicit_root_jvp(shoot, power, shift, primals, tangents):
+    Xf, J, ok, known, params, t0 = primals
+    _, dG = jax.jvp(lambda p, t: _deflated_residual(shoot, known, power, shift, Xf, (p, t)), (params, t0),
+                    (tangents[4], tangents[5]))
+    eye = jnp.eye(J.shape[0], dtype=J.dtype)  # where there is no root: the identity (no NaN either way)
+    dX = -jnp.linalg.solve(jnp.where(ok, J, eye), jnp.where(ok, dG, 0.0))
+    return Xf, dX
+
+
 def solve_orbit(shoot: Shooting, params, t0, x0, known, options: ShootOptions):
     """Solve the (deflated) multiple-shooting problem from one seed ``x0 (dim,)``.
 
@@ -178,12 +208,10 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, options: ShootOptions):
     solver = options.root_finder
     power, shift = options.deflation_power, options.deflation_shift
 
-    def fn(Xf, a):
-        X = Xf.reshape(X0.shape)
-        return deflation(X[0], known, power, shift) * shoot.residual(X, a)
+    fn = functools.partial(_deflated_residual, shoot, known, power, shift)
 
     # the solve itself is not differentiated: derivatives come from the implicit function
-    # theorem, attached below by a zero-step solve at the root
+    # theorem, attached below at the root (_implicit_root)
     sargs = jax.lax.stop_gradient(args)
     sol = optx.root_find(fn, solver, X0.reshape(-1), sargs, max_steps=int(options.max_iter), throw=False,
                          adjoint=optx.ImplicitAdjoint())
@@ -197,23 +225,16 @@ def solve_orbit(shoot: Shooting, params, t0, x0, known, options: ShootOptions):
     # a root where G' is singular is no isolated orbit (a continuum of them, e.g. free
     # flight): reported as SINGULAR, whatever a regularised solver (Levenberg-Marquardt)
     # converged to; its implicit derivatives would not exist
-    sv = jnp.linalg.svd(jax.jacfwd(fn)(jnp.where(finite, Xs, X0.reshape(-1)), sargs), compute_uv=False)
+    J = jax.jacfwd(fn)(jnp.where(finite, Xs, X0.reshape(-1)), sargs)
+    sv = jnp.linalg.svd(J, compute_uv=False)
     singular_root = ~(sv[-1] > SINGULAR_RCOND * jnp.maximum(sv[0], 1.0))
     st = jnp.where((st == Status.CONVERGED) & singular_root, Status.SINGULAR, st)
-    # Implicit derivatives (optimistix.ImplicitAdjoint) at a converged root. A seed that did
-    # not converge gets the residual X - X_end instead (identity Jacobian, zero derivative;
-    # its point is NaN anyway): the adjoint's linear solve would otherwise raise on a
-    # singular Jacobian (e.g. past a fold), where a batch must report failure as data.
+    # implicit derivatives at a converged, regular root (that Jacobian); a seed without one
+    # gets zero derivatives (its point is NaN anyway): a linear solve with a singular
+    # Jacobian (e.g. past a fold) must not fail a batch that reports failure as data
     conv = st == Status.CONVERGED
-    X_end = jnp.where(conv, Xs, X0.reshape(-1))
-
-    def gated(Xf, a):
-        p_, t_, ok, Xe = a
-        return jnp.where(ok, fn(Xf, (p_, t_)), Xf - Xe)
-
-    sol_ad = optx.root_find(gated, solver, X_end, (params, t0, conv, X_end), max_steps=0,
-                            throw=False, adjoint=optx.ImplicitAdjoint())
-    x_ad = sol_ad.value.reshape(X0.shape)[0]
+    x_ad = _implicit_root(shoot, float(power), float(shift), jnp.where(conv, Xs, X0.reshape(-1)),
+                         jax.lax.stop_gradient(J), conv, known, params, t0).reshape(X0.shape)[0]
     # a seed that already meets the tolerance counts no iteration (optimistix always takes
     # one step, a correction below the tolerance, before it tests for termination)
     x0s = jax.lax.stop_gradient(x0)
