@@ -286,6 +286,19 @@ def test_failures_are_reported_as_data():
     assert st[1] in (SHOOT_CONVERGED, SHOOT_SINGULAR)  # at rest: a fixed point of P
 
 
+def test_gradient_through_singular_seeds_is_finite():
+    # implicit derivatives exist only at a converged, regular root: where DP - I is
+    # singular the seed carries a zero derivative, so a batch's gradient stays finite
+    def total(f_m):
+        p = jg.SpurPairParams(zeta=0.0, kappa=0.0, b=100.0, f_m=f_m, e_amp=0.0, Omega=1.0)
+        r = jg.periodic_orbit(jg.SPUR_PAIR, p, jnp.array([[0.0, 0.5], [1.0, 0.0]]))
+        return jnp.sum(jnp.where(jnp.isfinite(r.point), r.point, 0.0)), r.status
+
+    (_, st), g = jax.value_and_grad(total, has_aux=True)(0.0)
+    assert np.asarray(st)[0] == SHOOT_SINGULAR
+    assert np.isfinite(float(g))
+
+
 # --------------------------------------------------------------------------- figure
 def test_plot_orbit_figure():
     from matplotlib.figure import Figure
