@@ -441,7 +441,7 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
         state = (Y, lane(t), lane(h), k1, Y1, sides, S0, S1)
 
         def dense(_):
-            rates = _crossing_rates(system, params, t, Y, Y1, h, k1) if S0.shape[0] else None
+            rates = _crossing_rates(system, params, t, Y, Y1, h, k1)
             ev = lambda i, c: _event(system, params, c[0], first=(i, rates))  # noqa: E731
             end = jax.lax.fori_loop(0, max_splits, ev, (state, need))[0][4]
             return jnp.where(need[None], end, Y1)
@@ -468,7 +468,7 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
                 tt = t if jnp.ndim(t) == 0 else take(t)
                 hh = h if jnp.ndim(h) == 0 else take(h)
                 sub = _start_state(system, params, tt, take(Y), hh, take(Y1))
-                rates = _crossing_rates(system, params, tt, sub[0], sub[4], hh, sub[3]) if S0.shape[0] else None
+                rates = _crossing_rates(system, params, tt, sub[0], sub[4], hh, sub[3])
                 sub = sub[:1] + (jnp.broadcast_to(tt, (C,)), jnp.broadcast_to(hh, (C,))) + sub[3:]
 
                 def ev(i, c):
