@@ -157,6 +157,7 @@ from .design import (
     transmission_error_rms as transmission_error_rms,
 )
 from ._io import load as load
+from ._cache import enable_compilation_cache as enable_compilation_cache
 
 
 def __getattr__(name):

@@ -17,6 +17,7 @@ the user's private :func:`native_dir`, whatever ``JAXGEAR_CACHE_DIR`` says.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 __all__ = ["cache_root", "native_dir", "enable_compilation_cache"]
@@ -47,11 +48,24 @@ def native_dir() -> Path:
 
 
 def enable_compilation_cache() -> Path | None:
-    """Keep every compiled XLA computation in ``<cache root>/xla`` (whatever its compile
-    time: a run of the global analysis compiles a dozen computations of under a second
-    each, which together cost seconds), through JAX's public configuration. Returns the
-    folder, or ``None`` when caching is off or the folder cannot be created (then
-    nothing changes).
+    """Keep every XLA computation jaxgear compiles in ``<cache root>/xla``, so that a new
+    Python process (a restarted notebook kernel, a repeated command) loads them instead of
+    compiling them again: call it once, before the first analysis.
+
+    What it changes in the process: JAX's public settings ``jax_compilation_cache_dir``
+    (that folder), ``jax_persistent_cache_min_compile_time_secs`` and
+    ``jax_persistent_cache_min_entry_size_bytes`` (both 0: a global analysis compiles a
+    dozen computations of under a second each, which together cost seconds). Every JAX
+    computation of the process is then cached there, not only jaxgear's. The root is
+    ``$JAXGEAR_CACHE_DIR`` (default ``~/.cache/jaxgear``; ``off`` turns the cache off).
+
+    The folder holds data that JAX itself reads and checks, nothing executed as Python;
+    it is created private to the user (0700) and not used when others can write to it.
+
+    Returns:
+        The folder, or ``None`` (with one warning, and nothing changed) when caching is
+        off, the folder cannot be created, others can write to it, or its path is not
+        valid text.
 
     JAX writes entries from process 0 of a multi-process run only; on CPUs the other
     processes' keys name their own devices, so they compile their computations at each
@@ -63,10 +77,22 @@ def enable_compilation_cache() -> Path | None:
 
     path = root / "xla"
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        str(path).encode("utf-8")
+        path.mkdir(mode=0o700, parents=True, exist_ok=True)
+        if path.stat().st_mode & 0o022:
+            warnings.warn(f"jaxgear: compilation cache not used: others can write to {path} "
+                          "(set JAXGEAR_CACHE_DIR to a private folder).", stacklevel=2)
+            return None
         jax.config.update("jax_compilation_cache_dir", str(path))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    except (OSError, AttributeError):  # read-only home or an older jax: run without the cache
+    except UnicodeError:
+        warnings.warn(f"jaxgear: compilation cache not used: its folder {path!r} is not valid text "
+                      "(set JAXGEAR_CACHE_DIR to another folder).", stacklevel=2)
+        return None
+    except (OSError, AttributeError) as exc:  # read-only home or an older jax: run without the cache
+        warnings.warn(f"jaxgear: compilation cache not used: {path} cannot be created "
+                      f"({getattr(exc, 'strerror', None) or exc}).", stacklevel=2)
         return None
     return path
+

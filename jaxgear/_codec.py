@@ -42,7 +42,7 @@ import numpy as np
 from ._checks import article
 
 __all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
-           "RESULT_TYPES", "plain"]
+           "RESULT_TYPES", "plain", "FieldError"]
 
 FORMAT = 4
 """Layout version written into every file: 4 since every result's settings are typed
@@ -308,20 +308,50 @@ def to_dataset(obj):
 
 
 # ------------------------------------------------------------------------ decode
+class FieldError(ValueError):
+    """A field of a result file that cannot be decoded: ``field`` names it (its path in the
+    file), the message says why."""
+
+    def __init__(self, field: str, why: str):
+        super().__init__(f"field {field!r}: {why}")
+        self.field = field
+
+
+MAX_ARRAY_BYTES = 1 << 34
+"""Largest array a result file may ask the reader to allocate (16 GiB); a larger one is
+refused before it is read."""
+
+
 class _Reader:
+    """Reads the fields of a dataset that may still be on disk: only the variables a
+    field asks for are read, each after its size is checked."""
+
     def __init__(self, ds):
         self.ds = ds
-        self.schema = json.loads(ds.attrs.get("jaxgear_schema", "{}"))
+        schema = ds.attrs.get("jaxgear_schema", "{}")
+        try:
+            self.schema = json.loads(schema) if isinstance(schema, str) else None
+        except ValueError:
+            self.schema = None
+        if not isinstance(self.schema, dict) or not all(isinstance(v, dict) for v in self.schema.values()):
+            raise FieldError("jaxgear_schema", "not a JSON object of field records")
+
+    def values(self, name):
+        v = self.ds[name]
+        nbytes = int(np.prod(v.shape, dtype=np.float64)) * v.dtype.itemsize
+        if nbytes > MAX_ARRAY_BYTES:
+            raise FieldError(name, f"{nbytes / 2**30:.3g} GiB, more than a result holds ({MAX_ARRAY_BYTES >> 30} GiB)")
+        return v.values
 
     def array(self, path):
         info = self.schema.get(path, {})
         if "complex" in info:
-            re = self.ds[f"{path}__real"].values
-            im = self.ds[f"{path}__imag"].values
+            re = self.values(f"{path}__real")
+            im = self.values(f"{path}__imag")
             z = np.empty(re.shape, dtype=np.dtype(info["complex"]))
             z.real, z.imag = re, im
             return z
-        return _native(self.ds[path].values)
+        return _native(self.values(path))
 
 
 def _native(a: np.ndarray) -> np.ndarray:
@@ -349,8 +379,19 @@ def _decode_record(r: _Reader, cls, path: str):
     values = {}
     for name, hint, meta in _record_fields(cls):
         if not _missing(r, meta, f"{path}{name}"):
-            values[name] = _decode_value(r, hint, meta, f"{path}{name}")
-    return cls(**values)
+            try:
+                values[name] = _decode_value(r, hint, meta, f"{path}{name}")
+            except FieldError:
+                raise
+            except KeyError:
+                raise FieldError(f"{path}{name}", "missing from the file") from None
+            except Exception as exc:  # a crafted or damaged file: any decoding failure names its field
+                why = str(exc).strip().splitlines()[0].rstrip(".") if str(exc).strip() else ""
+                raise FieldError(f"{path}{name}", f"{type(exc).__name__}{': ' + why if why else ''}") from None
+    try:
+        return cls(**values)
+    except Exception as exc:
+        raise FieldError(path.rstrip("_") or cls.__name__, f"does not make {article(cls.__name__)} ({exc})") from None
 
 
 def _decode_value(r: _Reader, hint, meta, path):
@@ -391,7 +432,7 @@ def _decode_items(r: _Reader, cls, path: str) -> tuple:
             continue
         if _is_array_hint(hint):
             stacked = r.array(p)
-            shapes = r.ds[f"{p}__shape"].values
+            shapes = r.values(f"{p}__shape")
             out = []
             for i in range(n):
                 if np.any(shapes[i] < 0):
@@ -400,7 +441,7 @@ def _decode_items(r: _Reader, cls, path: str) -> tuple:
                     out.append(np.ascontiguousarray(stacked[(i,) + tuple(slice(0, int(s)) for s in shapes[i])]))
             cols[name] = out
         else:
-            raw = r.ds[p].values
+            raw = r.values(p)
             h = _strip_optional(hint)
             if h in (int, float, bool):
                 cols[name] = [h(x) for x in raw]

@@ -25,6 +25,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._model import backlash
+from ._params import params_type
 from ._system import ForcedSystem
 
 __all__ = ["DuffingParams", "DUFFING", "SpurPairParams", "SPUR_PAIR", "ParamDuffingParams", "PARAM_DUFFING",
@@ -35,6 +36,7 @@ def _f64(x):
     return jnp.asarray(x, dtype=jnp.float64)
 
 
+@params_type
 class DuffingParams(eqx.Module):
     """Forced Duffing parameters of ``x'' + delta x' + alpha x + beta x^3 = gamma cos(omega t)``.
 
@@ -67,6 +69,7 @@ DUFFING = ForcedSystem(
 """Forced Duffing oscillator, state ``(x, v)``, period ``2 pi / omega``."""
 
 
+@params_type
 class SpurPairParams(eqx.Module):
     """Single spur-gear pair with backlash (dimensionless; the one-mesh analogue of paper eq. 3-5).
 
@@ -103,6 +106,7 @@ SPUR_PAIR = ForcedSystem(
 """Single spur-gear pair with backlash, state ``(x, v)`` (dynamic transmission error)."""
 
 
+@params_type
 class ParamDuffingParams(eqx.Module):
     """Parametrically excited Duffing parameters: damping ratio ``zeta``, stiffness
     modulation depth ``epsilon``, cubic stiffness ``beta``, excitation frequency ``Omega``
@@ -138,6 +142,7 @@ amplitude ``A`` satisfies ``(1 - Omega^2/4 + 3 beta A^2/4)^2 + zeta^2 Omega^2 = 
 """
 
 
+@params_type
 class VanDerPolParams(eqx.Module):
     """Forced van der Pol parameters of ``x'' - mu (1 - x^2) x' + x = F cos(omega t)``.
 

@@ -14,6 +14,8 @@ file untouched; files get the permissions of the user's umask.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -22,8 +24,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ._checks import article
-from ._codec import FORMAT, from_dataset, to_dataset
+from ._codec import FORMAT, FieldError, from_dataset, to_dataset
 
 __all__ = ["load", "save_result", "atomic_write", "write_json", "write_text", "save_figure", "read_dataset",
            "strict_json", "TMP_PREFIX", "remove_stale_temporaries", "NotAResultFile"]
@@ -113,15 +117,9 @@ def save_result(result, path: str | Path) -> Path:
     return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
 
 
-def read_dataset(path: str | Path):
-    """The netCDF dataset at ``path`` fully read into memory (the file is closed on return).
-
-    Raises :class:`NotAResultFile` (a ``ValueError``) with the reason when ``path`` is
-    missing, a folder, empty, truncated or not netCDF.
-    """
-    import xarray as xr
-
-    path = Path(path)
+def _check_result_path(path: Path) -> None:
+    """Raise :class:`NotAResultFile` with the reason unless ``path`` is a readable file that
+    starts like netCDF-4/HDF5."""
     if not path.exists():
         raise NotAResultFile(f"not a jaxgear result file: {path} does not exist.")
     if path.is_dir():
@@ -137,49 +135,108 @@ def read_dataset(path: str | Path):
     if not head.startswith(b"\x89HDF\r\n\x1a\n"):
         what = "a JSON file" if head.lstrip()[:1] in (b"{", b"[") else "not a netCDF-4/HDF5 file"
         raise NotAResultFile(f"not a jaxgear result file: {path} is {what}.")
+
+
+@contextlib.contextmanager
+def _open_dataset(path: Path):
+    """The netCDF dataset at ``path`` opened lazily (variables are read when asked for);
+    :class:`NotAResultFile` when it is not one."""
+    import xarray as xr
+
+    _check_result_path(path)
     try:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            return ds.load()
+        ds = xr.open_dataset(path, engine="h5netcdf", phony_dims="sort")
     except Exception as exc:  # truncated or corrupted HDF5: h5py raises many kinds
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise NotAResultFile(f"not a jaxgear result file: {path} is damaged or truncated ({first}).") from None
+    with ds:
+        yield ds
 
 
-def load(path: str | Path, expected: str | None = None) -> Any:
+def read_dataset(path: str | Path):
+    """The netCDF dataset at ``path`` fully read into memory (the file is closed on return).
+
+    Raises :class:`NotAResultFile` (a ``ValueError``) with the reason when ``path`` is
+    missing, a folder, empty, truncated or not netCDF.
+    """
+    path = Path(path)
+    with _open_dataset(path) as ds:
+        try:
+            return ds.load()
+        except Exception as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise NotAResultFile(f"not a jaxgear result file: {path} is damaged or truncated ({first}).") from None
+
+
+def load(path: str | Path, expected: str | None = None, *, params_type: type | None = None) -> Any:
     """Load any saved jaxgear result (``GlobalResult``, ``OrbitSearch``, sweeps, branches,
     designs), exactly as it was saved.
 
     Reads ``attrs["jaxgear_type"]`` of the netCDF file and rebuilds the object through the
-    codec (the class registered under that name). ``expected``: a type name the file
-    must hold. Files of jaxgear 0.1 (no ``jaxgear_format``) are not read.
+    codec (the class registered under that name). A file is data: nothing it names is
+    imported or called, and only the variables of the result's fields are read (each
+    after its size is checked). Parameters of a type that is not the package's own come
+    back as a plain dict of their values, unless ``params_type`` (the class of your
+    system's parameters, e.g. a ``NamedTuple``) is given: then they are rebuilt as
+    ``params_type(**values)``. ``expected``: a type name the file must hold. Files of
+    jaxgear 0.1 (no ``jaxgear_format``) are not read.
 
     Raises:
-        ValueError: the path is not a readable jaxgear result file (the message says
-            why: missing, a folder, empty, truncated, not netCDF, another program's
-            file, an unknown or unexpected result type).
+        NotAResultFile: (a ``ValueError``) the path is not a readable jaxgear result file;
+            the message says why (missing, a folder, empty, truncated, not netCDF, another
+            program's file, an unknown or unexpected result type, the field that cannot
+            be read).
     """
-    ds = read_dataset(path)
-    fmt = ds.attrs.get("jaxgear_format")
-    if fmt is None:
-        kind = ds.attrs.get("jaxgear_type")
-        if kind is None and not ("labels" in ds.variables and "grid" in ds.attrs):
-            raise NotAResultFile(f"not a jaxgear result file: {path} is a netCDF file without "
-                                 "attrs['jaxgear_type'] (written by another program: open it with "
-                                 "xarray.open_dataset instead).")
-        kind = str(kind or "GlobalResult")
-        raise NotAResultFile(f"{path} holds {article(kind)} written by jaxgear 0.1, whose files this version no "
-                             "longer reads: re-run the analysis with this version (or load it with jaxgear 0.1 "
-                             "and save the arrays you need with xarray).")
-    if int(fmt) > FORMAT:
-        raise NotAResultFile(f"{path} was written by a newer jaxgear (format {fmt}, this one reads up to "
-                             f"{FORMAT}): upgrade jaxgear.")
-    try:
-        return from_dataset(ds, expected)
-    except (KeyError, TypeError, ValueError) as exc:
-        if int(fmt) < FORMAT and not (isinstance(exc, ValueError) and "jaxgear.load(path)" in str(exc)):
-            raise NotAResultFile(f"{path} was written by an earlier development version of jaxgear (format {fmt}, "
-                                 f"before typed settings; this one writes {FORMAT}) and cannot be read: re-run "
-                                 "the analysis with this version.") from None
-        if isinstance(exc, ValueError):
-            raise ValueError(f"{path}: {exc}") from None
-        raise NotAResultFile(f"not a jaxgear result file: {path} is missing {exc} of its layout.") from None
+    path = Path(path)
+    with _open_dataset(path) as ds:
+        fmt = ds.attrs.get("jaxgear_format")
+        if fmt is None:
+            kind = ds.attrs.get("jaxgear_type")
+            if kind is None and not ("labels" in ds.variables and "grid" in ds.attrs):
+                raise NotAResultFile(f"not a jaxgear result file: {path} is a netCDF file without "
+                                     "attrs['jaxgear_type'] (written by another program: open it with "
+                                     "xarray.open_dataset instead).")
+            kind = str(kind or "GlobalResult")
+            raise NotAResultFile(f"{path} holds {article(kind)} written by jaxgear 0.1, whose files this version "
+                                 "no longer reads: re-run the analysis with this version (or load it with jaxgear "
+                                 "0.1 and save the arrays you need with xarray).")
+        fmt = _format_number(fmt)
+        if fmt is None:
+            raise NotAResultFile(f"not a jaxgear result file: {path}: field 'jaxgear_format' is not an integer.")
+        if fmt > FORMAT:
+            raise NotAResultFile(f"{path} was written by a newer jaxgear (format {fmt}, this one reads up to "
+                                 f"{FORMAT}): upgrade jaxgear.")
+        try:
+            return _with_params_type(from_dataset(ds, expected), params_type)
+        except FieldError as exc:
+            if fmt < FORMAT:
+                raise NotAResultFile(f"{path} was written by an earlier development version of jaxgear (format "
+                                     f"{fmt}, before typed settings; this one writes {FORMAT}) and cannot be read: "
+                                     "re-run the analysis with this version.") from None
+            raise NotAResultFile(f"not a jaxgear result file: {path}: {exc}.") from None
+        except ValueError as exc:  # an unknown or unexpected result type
+            raise NotAResultFile(f"{path}: {exc}") from None
+
+
+def _with_params_type(result, params_type: type | None):
+    """``result`` with its parameter fields that loaded as plain dicts (a user's parameter
+    type) rebuilt as ``params_type(**values)``."""
+    if params_type is None:
+        return result
+    changes = {}
+    for f in dataclasses.fields(result):
+        value = getattr(result, f.name)
+        if f.name.endswith("params") and isinstance(value, dict) and params_type is not dict:
+            try:
+                changes[f.name] = params_type(**value)
+            except (TypeError, ValueError) as exc:
+                raise FieldError(f.name, f"does not fit params_type={params_type.__name__} ({exc})") from None
+    return dataclasses.replace(result, **changes) if changes else result
+
+
+def _format_number(value) -> int | None:
+    """The file's ``jaxgear_format`` as an int, or ``None`` when it is not one integer."""
+    a = np.asarray(value)
+    if a.ndim != 0 or a.dtype.kind not in "iu":
+        return None
+    return int(a)

@@ -11,7 +11,6 @@ half backlashes); sweeps, continuation, design and the CLI are built on this.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
 from collections.abc import Mapping
 from typing import Any
@@ -44,6 +43,8 @@ __all__ = [
     "replace_params",
     "params_type_name",
     "params_from_dict",
+    "PARAMS_TYPES",
+    "params_type",
 ]
 
 PARAM_NAMES = (
@@ -117,8 +118,18 @@ def require(cond: bool, name: str, value, allowed: str) -> None:
         raise ValueError(f"parameter {name}={fmt_value(value)} is out of range: {allowed}.")
 
 
+PARAMS_TYPES: dict[str, type] = {}
+"""The package's own parameter classes by :func:`params_type_name`: the only classes a
+saved file's parameters are rebuilt as (:func:`params_from_dict`)."""
 
 
+def params_type(cls: type) -> type:
+    """Class decorator: a parameter class of this package that saved results may name."""
+    PARAMS_TYPES[f"{cls.__module__}:{cls.__qualname__}"] = cls
+    return cls
+
+
+@params_type
 class GearParams(eqx.Module):
     """Canonical dimensionless parameters of the planetary set (docs/model.md §4).
 
@@ -455,17 +466,27 @@ def params_type_name(params) -> str:
 
 
 def params_from_dict(type_name: str, d: dict):
-    """Parameters from their saved dict: GearParams by canonical names, other classes by
-    keyword construction of ``module:qualname`` (falls back to the dict)."""
-    if type_name.endswith(":GearParams"):
-        return GearParams.from_dict(d)
-    try:
-        mod, qual = type_name.split(":")
-        obj = importlib.import_module(mod)
-        for part in qual.split("."):
-            obj = getattr(obj, part)
-        if obj is dict:
-            return dict(d)
-        return obj(**d)
-    except Exception:  # a local class or one whose constructor differs: keep the values
+    """Parameters from their saved dict, without importing or calling anything the file
+    names: one of the package's own classes (:data:`PARAMS_TYPES`) rebuilt by keyword;
+    any other type (a user's parameters) comes back as the plain ``dict`` of its values
+    (rebuild it with ``MyParams(**values)``).
+
+    Raises:
+        ValueError: the values are not a dict of numbers and lists of numbers, or do not
+            fit the named package class.
+    """
+    if not isinstance(d, dict) or not all(isinstance(k, str) and _is_number_tree(v) for k, v in d.items()):
+        raise ValueError("saved parameters must be a dict of numbers or lists of numbers.")
+    cls = PARAMS_TYPES.get(str(type_name))
+    if cls is None:
         return dict(d)
+    try:
+        return cls.from_dict(d) if cls is GearParams else cls(**d)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"saved parameters do not fit {cls.__name__}: {exc}") from None
+
+
+def _is_number_tree(v) -> bool:
+    if isinstance(v, (list, tuple)):
+        return all(_is_number_tree(x) for x in v)
+    return isinstance(v, (int, float)) and not isinstance(v, bool) or v is None

@@ -143,7 +143,9 @@ def test_design_reaches_closed_form_optimum_and_respects_bounds(tmp_path):
     text = rb.table()
     assert "psi" in text and "(at bound)" in text
     path = rb.save(tmp_path / "design.nc")
-    back = jg.load(path)
+    # a user's parameter type is rebuilt from the class the user names, never imported from the file
+    assert jg.load(path).params == rb.params._asdict()
+    back = jg.load(path, params_type=TwoSource)
     assert back.params == rb.params and isinstance(back.params, TwoSource)
     for key in rb.history:
         np.testing.assert_array_equal(back.history[key], rb.history[key])

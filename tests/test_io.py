@@ -180,7 +180,7 @@ def test_a_file_written_before_a_field_existed_loads_with_its_default(duffing_re
     assert [a.share for a in q.attractors] == [a.share for a in r.attractors]
     np.testing.assert_array_equal(q.labels, r.labels)
     broken.to_netcdf(tmp_path / "broken.nc", engine="h5netcdf")
-    with pytest.raises(ValueError, match="missing 'mean_periods'"):
+    with pytest.raises(ValueError, match="'mean_periods': missing"):
         jg.load(tmp_path / "broken.nc")
 
 
@@ -421,3 +421,112 @@ def test_orbit_figures_from_a_loaded_search(paper_search, duffing_search, tmp_pa
         np.testing.assert_array_equal(coll.get_offsets(), np.stack([orb.multipliers.real, orb.multipliers.imag], -1))
     circle = ax.lines[0].get_xydata()
     np.testing.assert_allclose(np.hypot(circle[:, 0], circle[:, 1]), 1.0)
+
+
+# ---------------------------------------------------------------- a file is data
+def _attrs_file(path, **attrs):
+    base = {"jaxgear_type": "DesignResult", "jaxgear_format": FORMAT, "jaxgear_schema": "{}"}
+    base.update(attrs)
+    xr.Dataset(attrs=base).to_netcdf(path, engine="h5netcdf")
+    return path
+
+
+def test_a_crafted_file_runs_nothing(tmp_path, capfd):
+    """A file naming a callable (``subprocess:run`` with a command) as its parameters' type is
+    refused without running it, and a type named with numbers as values is not even imported
+    (the standard library's ``this`` prints a poem when imported): parameters come back as
+    a plain dict, and only the package's own classes are rebuilt."""
+    import sys
+
+    marker = tmp_path / "marker"
+    cmd = json.dumps({"type": "subprocess:run", "values": {"args": ["sh", "-c", f"touch {marker}"]}})
+    from jaxgear._io import NotAResultFile
+
+    try:
+        jg.load(_attrs_file(tmp_path / "crafted.nc", params=cmd))
+    except Exception as exc:  # noqa: BLE001 (checked below, after the marker)
+        error = exc
+    else:
+        error = None
+    assert not marker.exists(), "loading a file ran the command it names"
+    assert isinstance(error, NotAResultFile) and "'params'" in str(error)
+    from jaxgear._params import params_from_dict, params_to_dict
+
+    sys.modules.pop("this", None)
+    assert params_from_dict("this:Zen", {"a": 1.0}) == {"a": 1.0}
+    assert "this" not in sys.modules and capfd.readouterr().out == ""
+    # the package's own classes are rebuilt; a crafted value that does not fit them is refused
+    back = params_from_dict("jaxgear._examples:DuffingParams", params_to_dict(DOUBLE_WELL))
+    assert type(back) is jg.DuffingParams and params_to_dict(back) == params_to_dict(DOUBLE_WELL)
+    with pytest.raises(ValueError, match="do not fit DuffingParams"):
+        params_from_dict("jaxgear._examples:DuffingParams", {"nonsense": 1.0})
+
+
+def test_crafted_fields_are_refused_naming_the_field(duffing_results, tmp_path):
+    """Fields of the wrong kind, a schema that promises more items than the file holds, and a
+    format that is not one integer: one ``NotAResultFile`` line naming the field, never a
+    TypeError, AttributeError or IndexError."""
+    from jaxgear._io import NotAResultFile
+
+    cases = [({"jaxgear_format": np.array([4, 4])}, "jaxgear_format"),
+             ({"jaxgear_schema": "[1, 2]"}, "jaxgear_schema")]
+    for i, (attrs, field) in enumerate(cases):
+        with pytest.raises(NotAResultFile, match=field) as info:
+            jg.load(_attrs_file(tmp_path / f"a{i}.nc", **attrs))
+        assert "\n" not in str(info.value)
+    with xr.open_dataset(duffing_results["direct"].save(tmp_path / "r.nc"), engine="h5netcdf") as ds:
+        good = ds.load()
+    bad = good.copy()
+    bad.attrs["method"] = "[1, 2, 3]"
+    bad.to_netcdf(tmp_path / "method.nc", engine="h5netcdf")
+    with pytest.raises(NotAResultFile, match="'method'"):
+        jg.load(tmp_path / "method.nc")
+    schema = json.loads(good.attrs["jaxgear_schema"])
+    items = [k for k, v in schema.items() if "n" in v and v["n"] > 0]
+    assert items, "the result has an item field (its attractors)"
+    schema[items[0]]["n"] += 5
+    bad = good.copy()
+    bad.attrs["jaxgear_schema"] = json.dumps(schema)
+    bad.to_netcdf(tmp_path / "count.nc", engine="h5netcdf")
+    with pytest.raises(NotAResultFile, match=repr(items[0])):
+        jg.load(tmp_path / "count.nc")
+
+
+def test_only_the_fields_variables_are_read(duffing_results, tmp_path):
+    """A small file declaring a large unused variable (its chunks never written) loads without
+    reading it, and a used variable declared larger than a result can hold is refused before
+    anything is allocated."""
+    import tracemalloc
+
+    import h5py
+
+    path = duffing_results["direct"].save(tmp_path / "r.nc")
+    with h5py.File(path, "a") as f:
+        f.create_dataset("unused", shape=(40_000_000,), dtype="f8", chunks=(1_000_000,))
+    assert path.stat().st_size < 1_000_000
+    tracemalloc.start()
+    try:
+        back = jg.load(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert_same(back.labels, duffing_results["direct"].labels)
+    assert peak < 50e6, f"{peak / 1e6:.0f} MB read for a file whose result is a few kB"
+    path = duffing_results["direct"].save(tmp_path / "huge.nc")
+    with h5py.File(path, "a") as f:
+        del f["labels"]
+        f.create_dataset("labels", shape=(3_000_000_000,), dtype="i8", chunks=(1_000_000,))
+    from jaxgear._io import NotAResultFile
+
+    with pytest.raises(NotAResultFile, match="labels"):
+        jg.load(path)
+
+
+def test_a_basin_sweep_resumes_only_global_results(tmp_path):
+    """A sweep part that holds another result type (a crafted design file) is not taken as
+    the value's result: it is computed again."""
+    from jaxgear.sweep._basins import _load_part
+
+    _attrs_file(tmp_path / "value_00000.nc")
+    with pytest.raises(ValueError, match="GlobalResult"):
+        _load_part(tmp_path / "value_00000.nc")

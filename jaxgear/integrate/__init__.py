@@ -60,7 +60,11 @@ def integrator_from_dict(d: Mapping[str, Any]) -> AbstractIntegrator:
     if kind == "Adaptive":
         import diffrax
 
-        solver = getattr(diffrax, str(d.get("solver", "Tsit5")))()
+        name = str(d.get("solver", "Tsit5"))
+        cls = getattr(diffrax, name, None) if name.isidentifier() else None
+        if not (isinstance(cls, type) and issubclass(cls, diffrax.AbstractSolver)) or getattr(cls, "__abstractmethods__", None):
+            raise ValueError(f"solver {name!r} in the saved settings is not a diffrax solver.")
+        solver = cls()
         return Adaptive(solver=solver, rtol=float(d.get("rtol", 1e-10)), atol=float(d.get("atol", 1e-10)),
                         max_steps=int(d.get("max_steps", 200_000)),
                         search_steps_per_period=int(d.get("search_steps_per_period", 400)))

@@ -77,10 +77,13 @@ def solver_from_dict(d: dict[str, Any] | None):
     tolerances (``None`` for the library's choice)."""
     if d is None:
         return None
-    cls = getattr(_optx(), str(d["type"]), None)
-    if not isinstance(cls, type):
-        raise ValueError(f"solver type {d['type']!r} is not an optimistix solver.")
-    return cls(rtol=float(d["rtol"]), atol=float(d["atol"]))
+    optx, name = _optx(), str(d["type"])
+    cls = getattr(optx, name, None) if name.isidentifier() else None
+    if not (isinstance(cls, type) and issubclass(cls, (optx.AbstractRootFinder, optx.AbstractLeastSquaresSolver))):
+        raise ValueError(f"solver type {name!r} is not an optimistix root finder or least-squares solver.")
+    solver = cls(rtol=float(d["rtol"]), atol=float(d["atol"]))
+    check_solver(solver)
+    return solver
 
 
 def _integrator_to_dict(integrator) -> dict[str, Any] | None:

@@ -514,7 +514,7 @@ def analyses_at(system, params_list, grid, method, options: BasinOptions, settin
     todo = []
     for i in range(n):
         part = f"value_{i:05d}.nc"
-        results[i] = ck.load_result(part, load) if ck.has(part) else None
+        results[i] = ck.load_result(part, _load_part) if ck.has(part) else None
         if results[i] is None:
             if i % n_proc == me:  # this process's share of the values
                 todo.append(i)
@@ -536,10 +536,15 @@ def analyses_at(system, params_list, grid, method, options: BasinOptions, settin
         missing = [i for i in range(n) if results[i] is None]
         wait_for_parts([ck.path(f"value_{i:05d}.nc") for i in missing])
         for i in missing:
-            results[i] = ck.load_result(f"value_{i:05d}.nc", load)
+            results[i] = ck.load_result(f"value_{i:05d}.nc", _load_part)
             if results[i] is None:
                 raise RuntimeError(f"the part of value {i} written by another process is unreadable; rerun.")
     return results
+
+
+def _load_part(path):
+    """A saved value of a basin sweep or map: a :class:`~jaxgear.GlobalResult` and nothing else."""
+    return load(path, expected="GlobalResult")
 
 
 def _num(x) -> str:
