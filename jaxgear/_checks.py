@@ -123,17 +123,26 @@ def _bytes_text(n: float) -> str:
     return f"{n:.3g} PiB"  # pragma: no cover
 
 
-def check_memory(name: str, value: Any, count: int, unit_bytes: float, what: str) -> int:
+def check_memory(name: str, value: Any, count: int, unit_bytes: float, what: str, bytes_of=None) -> int:
     """``count`` if ``count`` units of ``what`` (cells, values, seeds) at ``unit_bytes``
     bytes each fit in half of this machine's physical memory (:func:`physical_memory`);
     otherwise ``ValueError`` naming ``name``, its ``value``, the memory it would need and
     the largest count that fits (checked before any work: no allocation, no minutes of
-    silence before a failure)."""
+    silence before a failure). ``bytes_of(count)``: the bytes of ``count`` units where
+    they do not grow in proportion (``unit_bytes`` is then ignored; increasing in
+    ``count``)."""
     total = physical_memory()
     budget = total // 2
-    need = float(count) * float(unit_bytes)
+    need = float(bytes_of(count)) if bytes_of is not None else float(count) * float(unit_bytes)
     if need > budget:
-        most = int(budget // max(float(unit_bytes), 1.0))
+        if bytes_of is None:
+            most = int(budget // max(float(unit_bytes), 1.0))
+        else:  # the largest count whose bytes fit: bisection
+            lo, hi = 0, int(count)
+            while lo < hi:
+                mid = (lo + hi + 1) // 2
+                lo, hi = (mid, hi) if float(bytes_of(mid)) <= budget else (lo, mid - 1)
+            most = lo
         raise ValueError(f"{name}={_show(value) if not isinstance(value, str) else value}: {count:,} {what} need "
                          f"about {_bytes_text(need)}, more than half of this machine's memory "
                          f"({_bytes_text(total)}); at most {most:,} {what} fit.")

@@ -58,6 +58,11 @@ def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
         write(tmp)
         os.chmod(tmp, _umask_mode())
         os.replace(tmp, path)
+    except OSError as exc:  # (a full disk, a quota): the error names the file being written
+        Path(tmp).unlink(missing_ok=True)
+        if exc.filename is None and exc.errno is not None:
+            raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -109,12 +114,16 @@ def save_figure(fig, path: str | Path, **kw) -> Path:
 
 def save_result(result, path: str | Path) -> Path:
     """Write a result object to a netCDF file atomically through the codec; large arrays
-    are compressed."""
+    are compressed. The file is built in memory first (a result is at most a few times
+    the size of its labels)."""
     ds = to_dataset(result)
     for k in ds.data_vars:
         if ds[k].size > 4096 and ds[k].dtype.kind in "biuf":
             ds[k].encoding.update(zlib=True, complevel=4)
-    return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    # built in memory, then written with plain file I/O: a full disk is one OSError from
+    # the write, never a half-written HDF5 file whose native finaliser runs later
+    data = ds.to_netcdf(engine="h5netcdf")
+    return atomic_write(path, lambda tmp: Path(tmp).write_bytes(data))
 
 
 def _check_result_path(path: Path) -> None:

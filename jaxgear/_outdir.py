@@ -17,11 +17,17 @@ point, or its parent folder is not writable) the files are moved in one by one, 
 atomically, and the command's stale files are removed afterwards: every file is whole,
 but a kill during those few renames can leave a mix.
 
-Several runs may share one output folder: each staging folder is named with its owner's
-process id and holds a lock file (``.jaxgear-owner``, the pid, locked with ``flock``
-while the run lasts), and the start-up clean-up removes only staging folders whose owner
-is gone (the lock is free, or without a lock file the pid is not alive). Each run swaps
-in its own whole result; the last to finish wins.
+One run owns an output folder at a time: on entering, a run takes an exclusive ``flock``
+on ``--out/.jaxgear-lock`` (holding its pid; released by the kernel when the run ends or
+is killed) and a second run on the same folder is refused at once, naming the folder and
+the owner's pid. Every clean-up of ``--out`` (temporary files of killed writes, in
+``--out`` and ``--out/parts``) happens under that lock. Each staging folder is named with
+its owner's process id and holds its own lock file (``.jaxgear-owner``), so the start-up
+clean-up of the parent folder removes only staging folders whose owner is gone.
+
+A symbolic link given as ``--out`` stands for its target folder: the results are written
+there and the link is kept; a link that leads nowhere (a loop, a missing target) or to a
+file is refused before any work.
 """
 
 from __future__ import annotations
@@ -38,7 +44,7 @@ from pathlib import Path
 
 from ._io import TMP_PREFIX, remove_stale_temporaries
 
-__all__ = ["OutputFolder", "check_output_folder"]
+__all__ = ["OutputFolder", "check_output_folder", "FolderInUse"]
 
 try:
     import fcntl
@@ -49,6 +55,13 @@ _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 OWNER_FILE = ".jaxgear-owner"
 """Lock file of a staging folder: its owner's pid, ``flock``-ed while the owner runs."""
+FOLDER_LOCK = ".jaxgear-lock"
+"""Lock file of an output folder: its owner's pid, ``flock``-ed (exclusive) while the run
+lasts and removed when it ends (not a temporary file: the swap carries it over)."""
+
+
+class FolderInUse(ValueError):
+    """The output folder is held by another run (its lock is taken)."""
 _PID = re.compile(r"\.run-(\d+)-[a-z0-9_]+(?:\.old)?$")  # the last .run-PID-XXXXXXXX of the name
 
 
@@ -112,18 +125,43 @@ def _take_lock(folder: Path):
     return fd
 
 
+def _link_target(p: Path, name: str) -> Path | None:
+    """The folder a symbolic link ``p`` leads to (``None`` when ``p`` is no link);
+    ``ValueError`` naming ``name`` for a loop, a missing target or a file."""
+    if not os.path.islink(p):
+        return None
+    try:
+        target = Path(os.path.realpath(p, strict=True))
+    except OSError as exc:
+        why = ("a loop of symbolic links" if exc.errno == errno.ELOOP
+               else f"a symbolic link to {os.readlink(p)!r}, which does not exist")
+        raise ValueError(f"{name}={str(p)!r} is {why}: give a folder.") from None
+    except RuntimeError:  # Python < 3.13 reports a loop so
+        raise ValueError(f"{name}={str(p)!r} is a loop of symbolic links: give a folder.") from None
+    if not target.is_dir():
+        raise ValueError(f"{name}={str(p)!r} is a symbolic link to {str(target)!r}, which is not a folder: "
+                         "give a folder for the results.")
+    return target
+
+
 def check_output_folder(path, name: str = "--out") -> Path:
     """``path`` as a ``Path`` if it can be an output folder: not an existing file, and
     its nearest existing ancestor is a folder where a folder can be made (``ValueError``
-    naming ``name`` otherwise). Nothing is left behind (an empty probe folder is made and
-    removed at once)."""
+    naming ``name`` otherwise). A symbolic link to a folder gives its target; a link
+    that leads nowhere (a loop, a missing target), also among the ancestors, is refused.
+    Nothing is left behind (an empty probe folder is made and removed at once)."""
     if not isinstance(path, (str, os.PathLike)) or not str(path).strip():
         raise ValueError(f"{name}={path!r} must name a folder.")
     p = Path(path)
+    target = _link_target(p, name)
+    if target is not None:
+        p = target
     if p.exists() and not p.is_dir():
         raise ValueError(f"{name}={str(p)!r} is an existing file, not a folder: give a folder for the results.")
     anc = p.absolute()
     while not anc.exists():
+        if os.path.islink(anc):  # a link that leads nowhere above the folder
+            _link_target(anc, f"{name}={str(path)!r}: {anc}")
         anc = anc.parent
     if not anc.is_dir():
         raise ValueError(f"{name}={str(p)!r}: {anc} is a file, so the folder cannot be created.")
@@ -139,6 +177,42 @@ def check_output_folder(path, name: str = "--out") -> Path:
     except OSError:  # already removed (another run's clean-up of --out)
         pass
     return p
+
+
+def _lock_folder(folder: Path, name: str):
+    """Take ``folder``'s lock (:data:`FOLDER_LOCK`, exclusive, not waiting) and write this
+    process's pid into it: the descriptor, to be closed when the run ends (``None`` where
+    ``flock`` is missing). :class:`FolderInUse` naming the folder and the owner's pid when
+    another run holds it."""
+    lock = folder / FOLDER_LOCK
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
+        if fcntl is None:
+            os.close(fd)
+            return None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise
+            try:
+                owner = lock.read_text().strip()
+            except OSError:
+                owner = ""
+            pid = f" (pid {owner})" if owner.isdigit() else ""
+            raise FolderInUse(f"{name}={str(folder)!r} is in use by another jaxgear run{pid}: wait for it to end, "
+                              "or give another folder.") from None
+        try:  # the owner before us may have removed the file as it ended: lock the one in place
+            same = os.path.samestat(os.fstat(fd), os.stat(lock))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    return fd
 
 
 def _exchange(a: Path, b: Path) -> bool:
@@ -199,7 +273,10 @@ class OutputFolder:
         self.create = create
         self.work: Path | None = None
         self.swap = False
+        self.name = name
         self._lock = None
+        self._folder_lock = None
+        self._made = False
 
     # ---------------------------------------------------------------- helpers
     def _prefix(self) -> str:
@@ -234,12 +311,26 @@ class OutputFolder:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise ValueError(f"--out={str(self.path)!r} cannot be created ({exc.strerror}).") from None
+            raise ValueError(f"{self.name}={str(self.path)!r} cannot be created ({exc.strerror}).") from None
         self.swap = self._can_swap()
         if self.swap:
             self._recover()
-        if self.create or not self.swap:
-            self.path.mkdir(parents=True, exist_ok=True)
+        self._made = not self.path.exists()
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)  # to hold its lock
+            self._folder_lock = _lock_folder(self.path, self.name)
+        except FolderInUse:
+            raise
+        except OSError as exc:
+            raise ValueError(f"{self.name}={str(self.path)!r} is not writable ({exc.strerror}).") from None
+        try:
+            return self._stage()
+        except BaseException:
+            self._release(failed=True)
+            raise
+
+    def _stage(self) -> Path:
+        """Under the folder's lock: remove the files of killed writes, make the staging folder."""
         for folder in (self.path, self.path / "parts"):  # files of killed writes
             if folder.is_dir() and not folder.is_symlink():
                 remove_stale_temporaries(folder)
@@ -247,19 +338,38 @@ class OutputFolder:
                     if p.is_dir() and not owner_alive(p):
                         shutil.rmtree(p, ignore_errors=True)
         host = self.path.parent if self.swap else self.path
-        host.mkdir(parents=True, exist_ok=True)
         try:  # the pid in the name marks the folder as taken until the lock file is in place
             self.work = Path(tempfile.mkdtemp(prefix=f"{self._prefix()}{os.getpid()}-", dir=host))
             self._lock = _take_lock(self.work)
         except OSError as exc:
-            raise ValueError(f"--out={str(self.path)!r} is not writable ({exc.strerror}).") from None
+            raise ValueError(f"{self.name}={str(self.path)!r} is not writable ({exc.strerror}).") from None
         mode = (os.stat(self.path).st_mode & 0o7777) if self.path.is_dir() else 0o777 & ~_umask()
         os.chmod(self.work, mode)
         return self.work
 
+    def _release(self, failed: bool) -> None:
+        """End the run's hold on the folder: remove its lock file (then close the lock, so a
+        run that opened the old file sees it gone) and, after a failure, the folder this run
+        made if nothing else is in it."""
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
+        if self._folder_lock is not None or fcntl is None:
+            self.path.joinpath(FOLDER_LOCK).unlink(missing_ok=True)
+        if self._folder_lock is not None:
+            os.close(self._folder_lock)
+            self._folder_lock = None
+        if failed and self._made:
+            try:
+                os.rmdir(self.path)  # only when empty
+            except OSError:
+                pass
+
     def __exit__(self, kind, exc, tb) -> bool:
         try:
             if kind is not None:
+                if isinstance(exc, OSError) and self.work is not None:
+                    self._name_final_path(exc)
                 shutil.rmtree(self.work, ignore_errors=True)
                 return False
             # the lock file is not part of the result; the pid in the name keeps the folder
@@ -271,9 +381,24 @@ class OutputFolder:
                 self._commit_in_place()
             return False
         finally:
-            if self._lock is not None:
-                os.close(self._lock)
-                self._lock = None
+            self._release(failed=kind is not None)
+
+    def _name_final_path(self, exc: OSError) -> None:
+        """An error writing a file of the staging folder (``exc.filename``, or the file
+        HDF5 names in its message) names the file of ``--out`` it stands for: the same
+        name in ``--out``, without the temporary prefix and suffix of an atomic write."""
+        where = exc.filename
+        if where is None:
+            m = re.search(r"filename = '([^']*)'", str(exc))
+            where = m.group(1) if m else None
+        try:
+            rel = Path(os.fsdecode(where)).absolute().relative_to(self.work)
+        except (ValueError, TypeError):
+            return
+        name = rel.name
+        if name.startswith(TMP_PREFIX):  # .jaxgear-tmp-result.nc.XXXXXXXX -> result.nc
+            name = name[len(TMP_PREFIX):].rsplit(".", 1)[0]
+        exc.filename = str(self.path / rel.parent / name)
 
     def _commit_swap(self) -> None:
         work, path = self.work, self.path

@@ -121,11 +121,13 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
 
     Raises ``ValueError`` when
 
-    - ``system.period(params)`` fails, is not a positive finite number, or is not a
-      scalar although the parameters are not batched (a period that depends on the
-      parameters in a non-scalar way);
-    - ``system.vector_field(0, x, params)`` fails, returns something other than an
-      array of shape ``(dim,)`` for a state of shape ``(dim,)``, or a non-finite value
+    - ``system.period(params)`` fails, is not a positive finite real number, is so
+      small that its time steps are lost in float64 rounding (:data:`STEPS_RESOLVED`),
+      or is not a scalar although the parameters are not batched (a period that depends
+      on the parameters in a non-scalar way);
+    - ``system.vector_field(0, x, params)`` fails, returns something other than a real
+      floating-point array of shape ``(dim,)`` for a state of shape ``(dim,)`` (complex
+      or integer values are refused), or a non-finite value
       at ``x0`` (default: the origin; the first state if ``x0`` is a batch).
 
     Args:
@@ -136,9 +138,16 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
     """
     name = getattr(system, "name", "system")
     try:
-        T = np.asarray(system.period(params), dtype=float)
+        raw = system.period(params)
     except Exception as e:  # a user function failing on these parameters
         raise ValueError(f"{name}: period(params) failed on these parameters: {type(e).__name__}: {e}") from e
+    if np.iscomplexobj(raw):
+        raise ValueError(f"{name}: period(params) must be a real number; it returned complex values "
+                         f"({np.asarray(raw).tolist()}).")
+    try:
+        T = np.asarray(raw, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name}: period(params) must return a number; it returned {type(raw).__name__}.") from e
     if T.ndim:
         leaves_nd = [np.ndim(leaf) for leaf in jax.tree_util.tree_leaves(params)]
         if batched is None:
@@ -151,6 +160,12 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
     if not (np.all(np.isfinite(T)) and np.all(T > 0)):
         got = float(T) if T.ndim == 0 else T
         raise ValueError(f"{name}: the forcing period must be positive and finite, got period(params) = {got}.")
+    if np.any(1.0 + T / STEPS_RESOLVED == 1.0):
+        got = float(np.min(T))
+        raise ValueError(f"{name}: the forcing period {got:g} is too small for float64 times: a step of "
+                         f"period/{STEPS_RESOLVED:g} is lost in rounding next to t = 1, so the integration "
+                         "would not advance as asked. Rescale time so that the period is of order 1 (e.g. "
+                         "time in units of 1/omega).")
     if T.ndim:
         return  # batched parameters: the per-lane field check happens in the caller
     x = jnp.zeros(system.dim) if x0 is None else jnp.asarray(x0, dtype=float)
@@ -165,6 +180,11 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
     if not isinstance(dx, jax.Array):
         raise ValueError(f"{name}: the vector field must return one array of shape ({system.dim},) "
                          f"(use jnp.stack([...])); it returned {type(dx).__name__}.")
+    if not jnp.issubdtype(dx.dtype, jnp.floating):
+        raise ValueError(f"{name}: the vector field must return real floating-point values (float64); it "
+                         f"returned dtype {dx.dtype}"
+                         + (" (take the real part, or keep the state real)" if jnp.issubdtype(dx.dtype, jnp.complexfloating)
+                            else " (compute in floats: 1.0 * x, jnp.asarray(..., float))") + ".")
     if dx.shape != (system.dim,):
         raise ValueError(
             f"{name}: the vector field must return shape ({system.dim},) for a state "
@@ -176,6 +196,13 @@ def check_system(system: ForcedSystem, params: Any, x0: Any | None = None, *, ba
             f"{name}: the vector field is not finite at t=0, x={np.asarray(x).tolist()}: "
             f"{val.tolist()}. Check the parameters."
         )
+
+
+STEPS_RESOLVED = 1000.0
+"""A step of ``period / STEPS_RESOLVED`` must change a time of 1 in float64:
+:func:`check_system` refuses a smaller period (about 1e-13), whose steps vanish in
+rounding next to the times an integration meets (the steps of the built-in integrators
+are ``period / steps_per_period``, 200 by default)."""
 
 
 @functools.partial(jax.jit, static_argnums=0)

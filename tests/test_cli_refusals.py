@@ -98,6 +98,10 @@ HUGE_CASES = [
     (["shoot", "--from", "5,0,8,0", "--verify", "2000000000"], "--verify=2000000000"),
     (["analyze", "--grid", "100000,100000,100000", "--out", "{out}"], "--grid=100000,100000,100000"),
     (["analyze", "--max-period", "100000000", "--out", "{out}"], "--max-period=100000000"),
+    # the cycle test of the lane pool holds K x K states (it passed the old, linear estimate)
+    (["analyze", "--grid", "8,5,10", "--max-period", "10000", "--out", "{out}"], "--max-period=10000"),
+    (["sweep", "--param", "b", "--values", "4:6:3", "--kind", "basins", "--grid", "8,5,10", "--max-period", "10000",
+      "--out", "{out}"], "--max-period=10000"),
 ]
 
 
@@ -202,6 +206,27 @@ PROBE_CASES = [
      2, 1, "beyond the escape bound"),
     (["analyze", "--method", "poincare-like", "--mapping-steps", "0", "--out", "{out}"], 2, 1,
      "--mapping-steps=0 is out of range"),
+    # row 6: the check by direct integration shorter than the orbit (failed after the search)
+    (["shoot", "--from", "5.3298,-0.0849,8.0966,-0.9659", "--period", "8", "--verify", "5"], 2, 1,
+     "--verify=5 is shorter than the longest orbit: --period/--periods asks for period 8"),
+    (["shoot", "--random", "3", "--periods", "1-400"], 2, 1, "--verify (default 300) is shorter"),
+    # row 8: one cell on an axis (failed after the analysis, in its basin entropy)
+    (["analyze", "--grid", "1,1,1", "--out", "{out}"], 2, 1, "needs at least 2 cells on every axis"),
+    (["analyze", "--method", "stroboscopic", "--grid", "3,3,1,3", "--out", "{out}"], 2, 1,
+     "needs at least 2 cells on every axis"),
+    (["sweep", "--param", "b", "--values", "4:6:3", "--kind", "basins", "--grid", "3,1,3", "--out", "{out}"], 2, 1,
+     "needs at least 2 cells on every axis"),
+    # row 15: digits grouped with '_' (Python reads 0_9 as 9)
+    (["analyze", "--set", "Omega=0_9", "--out", "{out}"], 2, 1, "numbers are written without '_' (got '0_9')"),
+    (["params", "--set", "b_sp=1_5"], 2, 1, "without '_'"),
+    (["analyze", "--grid", "5_0,30,60", "--out", "{out}"], 2, 1, "without '_'"),
+    (["analyze", "--region", "-2_5:25,-10:20,-10:50", "--out", "{out}"], 2, 1, "without '_'"),
+    (["analyze", "--max-period", "1_6", "--out", "{out}"], 2, 1, "without '_'"),
+    (["shoot", "--from", "5_0,0,8,0"], 2, 1, "without '_'"),
+    (["shoot", "--random", "3", "--tol", "1e-1_0"], 2, 1, "without '_'"),
+    (["shoot", "--random", "3", "--periods", "1-1_0"], 2, 1, "without '_'"),
+    (["sweep", "--param", "b", "--values", "4:6:1_0", "--out", "{out}"], 2, 1, "without '_'"),
+    (["sweep", "--param", "b", "--values", "4_0:60:3", "--out", "{out}"], 2, 1, "without '_'"),
 ]
 
 
@@ -383,3 +408,35 @@ def test_region_check_uses_the_farthest_corner_of_the_box():
         check_region(box, "--region", 2, ("x", "y"), escape_bound=1.5, base=(1.0,))
     with pytest.raises(ValueError, match="the box -1e\\+300:1e\\+300,-0.5:1 reaches"):  # no overflow
         check_region(((-1e300, 1e300), (-0.5, 1.0)), "--region", 2, ("x", "y"), escape_bound=1e6)
+
+
+# ----------------------------------------------------------------- row 6: --verify against --seeds-from
+@pytest.mark.parametrize("period, verify, fragment", [
+    (8, "5", "--verify=5 is shorter than the longest orbit: the attractors of --seeds-from R.nc have period 8"),
+    (2**31 - 1, None, "--verify (default 300) is shorter than the longest orbit: the attractors of --seeds-from R.nc "
+     "have period 2147483647"),  # a crafted file
+])
+def test_seeds_from_periods_longer_than_verify_are_refused(period, verify, fragment, tmp_path, capsys, monkeypatch,
+                                                          no_work):
+    import jaxgear.cli.shoot as shoot_cli
+
+    monkeypatch.setattr(shoot_cli, "_load_seeds",
+                        lambda path, system: (SimpleNamespace(params=None), {period: np.array([[5.3, -0.08, 8.1, -1.0]])}))
+    argv = ["shoot", "--seeds-from", "R.nc"] + (["--verify", verify] if verify else [])
+    _check_refusal(argv, 2, 1, fragment, tmp_path, capsys, monkeypatch)
+
+
+# ----------------------------------------------------------------- rows 5, 13: --out a link
+@pytest.mark.parametrize("kind", ["loop", "dangling"])
+def test_out_a_link_that_leads_nowhere_is_refused_before_work(kind, tmp_path, capsys, monkeypatch, no_work):
+    out = tmp_path / "out"
+    if kind == "loop":
+        (tmp_path / "back").symlink_to(out)
+        out.symlink_to(tmp_path / "back")
+    else:
+        out.symlink_to(tmp_path / "gone")
+    fragment = "a loop of symbolic links" if kind == "loop" else "which does not exist"
+    for argv in (["analyze", "--out", "{out}"], ["sweep", "--param", "b", "--values", "4:6:3", "--out", "{out}"],
+                 ["shoot", "--from", "5,0,8,0", "--out", "{out}"]):
+        _check_refusal(argv, 2, 1, fragment, tmp_path, capsys, monkeypatch)
+        assert out.is_symlink()

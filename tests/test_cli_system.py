@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import textwrap
 
@@ -64,6 +65,11 @@ MODULE = textwrap.dedent('''
 
     NOT_A_SYSTEM = 3
     NO_PARAMS = {"system": SYSTEM}
+
+    COMPLEX = SimpleNamespace(system=jg.ForcedSystem(lambda t, x, p: x.astype(jnp.complex128), period=lambda p: 1.0,
+                                                     state_names=("x", "v")), params={"a": 1.0})
+    INTEGER = SimpleNamespace(system=jg.ForcedSystem(lambda t, x, p: jnp.zeros(2, jnp.int32), period=lambda p: 1.0,
+                                                     state_names=("x", "v")), params={"a": 1.0})
 ''')
 
 DELTA, ALPHA, OMEGA = 0.2, 1.0, 1.3
@@ -181,6 +187,12 @@ REFUSALS = [
     (["--system", "usermod:LINEAR", "--region", "-1:1,-1:1,-1:1"], "user-duffing has 2 coordinates (x, v)"),
     (["--system", "usermod:LINEAR", "--grid", "3,3,3"], "--grid needs 2 counts (x, v)"),
     (["--system", "usermod:LINEAR", "--method", "poincare-like"], "give 1 --region ranges"),
+    # row 11: a field that is not real floating point
+    (["--system", "usermod:COMPLEX"], "must return real floating-point values (float64); it returned dtype complex128"),
+    (["--system", "usermod:INTEGER"], "must return real floating-point values (float64); it returned dtype int32"),
+    # row 12: a period whose time steps vanish in rounding
+    (["--system", "usermod:LINEAR", "--set", "omega=1e300"], "the forcing period 6.28319e-300 is too small for "
+     "float64 times"),
 ]
 
 
@@ -223,3 +235,47 @@ def test_sweep_refuses_a_parameter_the_system_does_not_have(usermod, capsys):
     cap = capsys.readouterr()
     assert rc == 2
     assert "unknown parameter 'b_sp'" in cap.err and "delta, alpha, beta, gamma, omega" in cap.err
+
+
+def _bad_module(folder, kind: str) -> str:
+    """A --system spec of a module with a problem of ``kind`` (written into ``folder``)."""
+    if kind == "exits":
+        (folder / "exits.py").write_text("import sys\nprint('a script')\nsys.exit(0)\n")
+        return "exits:SYSTEM"
+    if kind == "exits in a file":
+        (folder / "exits2.py").write_text("import sys\nsys.exit(3)\n")
+        return "./exits2.py:SYSTEM"
+    if kind == "exits in a function":
+        (folder / "exits3.py").write_text("import sys\ndef make():\n    sys.exit(0)\n")
+        return "exits3:make"
+    if kind == "stdlib name":
+        (folder / "json.py").write_text("from usermod import SYSTEM, PARAMS, REGION\n")
+        return "json:SYSTEM"
+    if kind == "stdlib name, no file":
+        return "string:SYSTEM"
+    name = os.fsdecode(b"mod\xff")  # a non-UTF-8 file name
+    (folder / f"{name}.py").write_text("from usermod import SYSTEM, PARAMS, REGION\n")
+    return f"./{name}.py:SYSTEM"
+
+
+@pytest.mark.parametrize("kind, message", [
+    ("exits", "--system exits:SYSTEM: importing exits called sys.exit(0) (a script's exit): a module given to "
+     "--system must only define things"),
+    ("exits in a file", "loading ./exits2.py called sys.exit(3)"),
+    ("exits in a function", "calling make() called sys.exit(0)"),
+    ("stdlib name", "json is a module of Python's standard library, which Python imports instead of ./json.py: "
+     "give the file, --system ./json.py:SYSTEM"),
+    ("stdlib name, no file", "string has no attribute 'SYSTEM' (string is a module of Python's standard library"),
+    ("non-UTF-8 name", "is not valid UTF-8 text"),
+])
+def test_a_module_that_exits_or_cannot_be_the_one_meant_is_named(usermod, capsys, kind, message):
+    """Row 16: a module calling sys.exit (the run ended silently with status 0), a name of
+    the standard library next to a file of that name (the standard module was loaded), a
+    file name that is not UTF-8 (``std::bad_cast`` from deep inside JAX): one line, status 2."""
+    spec = _bad_module(usermod, kind)
+    rc = main(["analyze", "--system", spec, "--quiet", "--no-figures", "--out", str(usermod / "out")])
+    cap = capsys.readouterr()
+    assert rc == 2, cap
+    (line,) = cap.err.strip().splitlines()
+    assert line.startswith("jaxgear analyze: error: --system ") and message in line, line
+    assert not (usermod / "out").exists()

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from jaxgear import _outdir
-from jaxgear._outdir import OWNER_FILE, OutputFolder, owner_alive
+from jaxgear._outdir import FOLDER_LOCK, OWNER_FILE, FolderInUse, OutputFolder, owner_alive
 
 ROOT = Path(__file__).resolve().parent.parent
 OWNED = ("result.nc", "summary.json", "*.png")
@@ -33,7 +33,9 @@ print("swapped", flush=True)
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    """The files of ``folder`` but the lock of the run that holds it."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != FOLDER_LOCK}
 
 
 def _old_folder(tmp_path) -> Path:
@@ -70,11 +72,11 @@ def _finish(proc: subprocess.Popen) -> None:
 
 
 @pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "two-renames"])
-def test_two_runs_on_one_out_keep_each_others_staging(tmp_path, monkeypatch, exchange):
-    """Run A (another process) holds its staging folder; run B starts on the same --out
-    (its start-up clean-up runs), finishes and swaps: A's staging folder and files are
-    still there, --out holds B's whole result; then A swaps: --out holds A's whole result
-    and no staging folder or lock file is left."""
+def test_a_second_run_on_a_held_out_is_refused(tmp_path, monkeypatch, exchange):
+    """Run A (another process) holds --out; run B on the same --out is refused at once,
+    naming the folder and A's pid, and touches nothing: A's staging folder and the old
+    result stay; then A swaps in its whole result, and no staging folder or lock file is
+    left."""
     if not exchange:
         monkeypatch.setattr(_outdir, "_exchange", lambda a, b: False)
     out = _old_folder(tmp_path)
@@ -82,52 +84,109 @@ def test_two_runs_on_one_out_keep_each_others_staging(tmp_path, monkeypatch, exc
     try:
         assert work_a.parent == tmp_path and str(proc.pid) in work_a.name
         assert owner_alive(work_a)
-        with OutputFolder(out, OWNED) as work_b:
-            assert work_a.is_dir() and (work_a / "result.nc").read_text() == "A"  # survived B's start-up
-            assert _snapshot(out) == dict(_whole("old"), **{"attractors.png": b"old figure"})
-            (work_b / "result.nc").write_text("B")
-            (work_b / "summary.json").write_text("B")
-        assert _snapshot(out) == _whole("B")  # B's whole result, the old figure gone with the old run
-        assert work_a.is_dir() and (work_a / "summary.json").read_text() == "A"  # survived B's swap
+        with pytest.raises(FolderInUse, match=rf"--out='{out}' is in use by another jaxgear run \(pid {proc.pid}\)"):
+            with OutputFolder(out, OWNED):
+                pytest.fail("the second run got the folder")
+        assert work_a.is_dir() and (work_a / "result.nc").read_text() == "A"
+        assert _snapshot(out) == dict(_whole("old"), **{"attractors.png": b"old figure"})
     finally:
         _finish(proc)
-    assert _snapshot(out) == _whole("A")  # A's whole result (B's user files carried over)
+    assert _snapshot(out) == _whole("A")  # A's whole result, the user's files carried over
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
-    assert not (out / OWNER_FILE).exists()
+    assert not (out / OWNER_FILE).exists() and not (out / FOLDER_LOCK).exists()
 
 
-def test_two_runs_in_the_current_folder_keep_each_others_staging(tmp_path, monkeypatch):
-    """--out is the folder the runs stand in (files moved in one by one, staging inside
-    --out): B's start-up clean-up of --out leaves A's staging folder."""
+def test_a_second_run_in_the_current_folder_is_refused(tmp_path, monkeypatch):
+    """--out is the folder the runs stand in (files moved in one by one): the same lock."""
     out = _old_folder(tmp_path)
     proc, work_a = _start_holder(".", out)
     try:
         assert work_a.resolve().parent == out.resolve()
         monkeypatch.chdir(out)
-        with OutputFolder(".", OWNED) as work_b:
-            assert work_a.is_dir() and (work_a / "result.nc").read_text() == "A"
-            (work_b / "result.nc").write_text("B")
-            (work_b / "summary.json").write_text("B")
+        with pytest.raises(FolderInUse, match="in use by another jaxgear run"):
+            with OutputFolder(".", OWNED):
+                pytest.fail("the second run got the folder")
         assert work_a.is_dir() and (work_a / "result.nc").read_text() == "A"
-        assert (out / "result.nc").read_text() == "B" and (out / "summary.json").read_text() == "B"
     finally:
         _finish(proc)
     assert {k: v for k, v in _snapshot(out).items() if k != "attractors.png"} == _whole("A")
     assert not [p.name for p in out.iterdir() if p.name.startswith(".jaxgear")]
 
 
-def test_two_runs_in_one_process_keep_each_others_staging(tmp_path):
+def test_a_second_run_in_one_process_is_refused(tmp_path):
     out = _old_folder(tmp_path)
     with OutputFolder(out, OWNED) as work_a:
         (work_a / "result.nc").write_text("A")
         (work_a / "summary.json").write_text("A")
-        with OutputFolder(out, OWNED) as work_b:
-            assert work_a.is_dir() and (work_a / "result.nc").read_text() == "A"
-            (work_b / "result.nc").write_text("B")
-            (work_b / "summary.json").write_text("B")
-        assert _snapshot(out) == _whole("B")
+        with pytest.raises(FolderInUse):
+            with OutputFolder(out, OWNED):
+                pytest.fail("the second run got the folder")
+        assert _snapshot(out) == dict(_whole("old"), **{"attractors.png": b"old figure"})
     assert _snapshot(out) == _whole("A")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_killed_owner_frees_the_folder(tmp_path):
+    """The lock goes with its process: after A is killed (SIGKILL, no clean-up) the next
+    run takes the folder, removes A's staging folder and swaps in its own result."""
+    out = _old_folder(tmp_path)
+    proc, work_a = _start_holder(str(out), tmp_path)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert work_a.is_dir() and (out / FOLDER_LOCK).exists()  # left behind, unlocked
+    with OutputFolder(out, OWNED) as work:
+        (work / "result.nc").write_text("B")
+        (work / "summary.json").write_text("B")
+    assert _snapshot(out) == _whole("B")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"] and not (out / FOLDER_LOCK).exists()
+
+
+def test_clean_up_of_parts_happens_under_the_lock(tmp_path):
+    """A half-written part of the run that holds --out (its temporary file in
+    --out/parts) survives a second run's start, which is refused before any clean-up."""
+    out = _old_folder(tmp_path)
+    half = out / "parts" / ".jaxgear-tmp-value_00001.nc.x1"
+    with OutputFolder(out, OWNED, create=True):
+        half.write_text("half-written")
+        with pytest.raises(FolderInUse):
+            with OutputFolder(out, OWNED, create=True):
+                pass
+        assert half.read_text() == "half-written"
+    with OutputFolder(out, OWNED, create=True):  # the next owner removes what a killed write left
+        assert not half.exists()
+
+
+def test_a_link_as_out_writes_into_its_target_and_stays_a_link(tmp_path):
+    target = _old_folder(tmp_path)
+    link = tmp_path / "link"
+    link.symlink_to(target, target_is_directory=True)
+    with OutputFolder(link, OWNED) as work:
+        (work / "result.nc").write_text("new")
+        (work / "summary.json").write_text("new")
+    assert link.is_symlink() and link.resolve() == target.resolve()
+    assert _snapshot(target) == _whole("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "out"]
+
+
+@pytest.mark.parametrize("kind", ["loop", "dangling", "file", "loop above"])
+def test_a_link_that_leads_nowhere_is_refused_before_any_work(tmp_path, kind):
+    from jaxgear._outdir import check_output_folder
+
+    link = tmp_path / "link"
+    if kind in ("loop", "loop above"):
+        (tmp_path / "other").symlink_to(link)
+        link.symlink_to(tmp_path / "other")
+    elif kind == "dangling":
+        link.symlink_to(tmp_path / "missing")
+    else:
+        (tmp_path / "f").write_text("x")
+        link.symlink_to(tmp_path / "f")
+    given = link / "sub" if kind == "loop above" else link
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(ValueError, match={"loop": "a loop of symbolic links", "loop above": "a loop of symbolic links",
+                                          "dangling": "which does not exist", "file": "which is not a folder"}[kind]):
+        check_output_folder(given)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 def _dead_pid() -> int:

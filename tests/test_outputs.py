@@ -78,7 +78,8 @@ def test_output_folder_undoes_an_interrupted_two_rename_swap(tmp_path):
     staging.mkdir()
     with pytest.raises(RuntimeError):
         with OutputFolder(out, OWNED):
-            assert _snapshot(out) == before
+            # (the run's lock file aside: it holds the folder while the run works)
+            assert {k: v for k, v in _snapshot(out).items() if k != ".jaxgear-lock"} == before
             raise RuntimeError
     assert _snapshot(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]

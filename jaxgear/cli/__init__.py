@@ -8,7 +8,9 @@ multipliers), ``jaxgear sweep`` (bifurcation diagrams, basin shares, continuatio
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import re
 import sys
 import warnings
@@ -85,27 +87,95 @@ def _one_line_warnings(command: str):
     return show
 
 
+INTERRUPTED = 130
+"""Exit status of a run stopped by Ctrl-C (SIGINT), as a shell reports it (128 + 2)."""
+
+
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "command", None):
-        parser.print_help()
-        return 2
-    enable_compilation_cache()
+    """Run the command ``argv`` (default ``sys.argv[1:]``): its exit status. The one error
+    boundary of the command line: bad input (``ValueError``, status 2), a stop by Ctrl-C
+    (status 130), a file that cannot be written (``OSError``: a full disk, a loop of links),
+    memory exhausted (``MemoryError``, XLA's ``RESOURCE_EXHAUSTED``) (status 1) each print
+    one line ``jaxgear COMMAND: ...`` instead of a traceback."""
+    command = "jaxgear"
     previous = warnings.showwarning
-    warnings.showwarning = _one_line_warnings(args.command)
+    args = None
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "command", None):
+            parser.print_help()
+            return 2
+        command = f"jaxgear {args.command}"
+        warnings.showwarning = _one_line_warnings(args.command)  # before anything can warn
+        enable_compilation_cache()
         return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        if sys.stderr.isatty():  # after a progress bar's unfinished line
+            print(file=sys.stderr)
+        note = getattr(args, "interrupt_note", None)
+        try:
+            text = note() if note is not None else ""
+        except Exception:  # the note is a courtesy: never a traceback for it
+            text = ""
+        _say(command, f"interrupted; {text or 'the previous result is unchanged'}")
+        return INTERRUPTED
     except ValueError as exc:  # bad input: a clear message, no traceback
-        text = " ".join(str(exc).split())
-        print(f"jaxgear {args.command}: error: {text}", file=sys.stderr)
+        _say(command, f"error: {exc}")
         return 2
-    except OSError as exc:  # a file could not be written (disk full, permissions)
-        where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
-        print(f"jaxgear {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+    except OSError as exc:  # a file could not be written (disk full, permissions, a loop of links)
+        _say(command, f"error: {describe_os_error(exc)}")
+        return 1
+    except MemoryError as exc:
+        _say(command, "error: out of memory" + (f" ({_first_line(str(exc))})" if str(exc) else "") + f"; {LESS_WORK}")
+        return 1
+    except Exception as exc:
+        if "RESOURCE_EXHAUSTED" not in str(exc):
+            raise
+        _say(command, "error: out of memory on the device (XLA RESOURCE_EXHAUSTED: "
+             f"{_first_line(str(exc).split('RESOURCE_EXHAUSTED', 1)[1].lstrip(': '))}); {LESS_WORK}")
         return 1
     finally:
         warnings.showwarning = previous
+
+
+LESS_WORK = "ask for less work (fewer cells, values, starts or periods; a smaller --max-period or --chunk-size)."
+
+
+def _first_line(text: str, limit: int = 200) -> str:
+    line = " ".join(text.strip().splitlines()[0].split()) if text.strip() else ""
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
+def _say(command: str, text: str) -> None:
+    """One line on stderr: ``jaxgear COMMAND: text`` (white space folded)."""
+    print(f"{command}: {' '.join(str(text).split())}", file=sys.stderr)
+
+
+_H5_FILE = re.compile(r"filename = '([^']*)'")
+
+
+def describe_os_error(exc: OSError) -> str:
+    """What went wrong with a file, in a few words, and where: ``no space left on device
+    (writing PATH)``, ``too many levels of symbolic links (PATH)``. HDF5 (h5py, netCDF4)
+    reports a full disk in its own text, ``errno = 28`` among it: read as ENOSPC."""
+    text = str(exc)
+    code = exc.errno
+    if code is None:
+        m = re.search(r"errno = (\d+)", text)
+        code = int(m.group(1)) if m else None
+    where = exc.filename
+    if where is None:
+        m = _H5_FILE.search(text)
+        where = m.group(1) if m else None
+    where = os.fsdecode(where) if where is not None else None
+    if code == errno.ENOSPC or "No space left on device" in text:
+        return "no space left on device" + (f" (writing {where})" if where else "")
+    if code is not None and code == getattr(errno, "EDQUOT", None):
+        return "disk quota exceeded" + (f" (writing {where})" if where else "")
+    reason = os.strerror(code) if code else (exc.strerror or _first_line(text))
+    reason = reason[:1].lower() + reason[1:]
+    return reason + (f" ({where})" if where else "")
 
 
 def console() -> None:

@@ -28,6 +28,7 @@ import dataclasses
 import importlib
 import importlib.util
 import math
+import os
 import re
 import sys
 from collections.abc import Mapping, Sequence
@@ -57,9 +58,29 @@ class UserSystem:
     grid: tuple[int, ...] | None = None
 
 
+def _text_name(name: str, spec: str, what: str) -> None:
+    """Refuse a file or module name that is not valid UTF-8 text (bytes a file system
+    allows in names, read as surrogates): JAX records the source file of every traced
+    function and fails on such a name deep inside (``std::bad_cast``)."""
+    try:
+        os.fsencode(name).decode("utf-8")
+    except UnicodeError:
+        shown = os.fsencode(spec).decode("utf-8", "backslashreplace")
+        raise ValueError(f"--system {shown}: the {what} {os.fsencode(name).decode('utf-8', 'backslashreplace')!r} is "
+                         "not valid UTF-8 text, which JAX cannot trace code from: rename it with UTF-8 (or ASCII) "
+                         "characters.") from None
+
+
+def _exit_message(spec: str, doing: str, exc: SystemExit) -> str:
+    return (f"--system {spec}: {doing} called sys.exit({exc.code!r}) (a script's exit): a module given to --system "
+            "must only define things; put the script part under if __name__ == '__main__':.")
+
+
 def _import(module: str, spec: str):
     """The module ``module``: a file path (``.py``) or an importable name (the current
-    folder searched first, as ``python -m`` does)."""
+    folder searched first, as ``python -m`` does). A name of the standard library with a
+    file of that name in the current folder is refused (Python would import its own)."""
+    _text_name(module, spec, "module file name" if module.endswith(".py") else "module name")
     if module.endswith(".py") or "/" in module or "\\" in module:
         path = Path(module).expanduser()
         if not path.is_file():
@@ -69,26 +90,38 @@ def _import(module: str, spec: str):
         mod = importlib.util.module_from_spec(loader_spec)
         try:
             loader_spec.loader.exec_module(mod)
+        except SystemExit as exc:
+            raise ValueError(_exit_message(spec, f"loading {module}", exc)) from None
         except Exception as exc:  # the user's code failed while loading
             raise ValueError(f"--system {spec}: loading {module} failed: {type(exc).__name__}: {exc}") from exc
         return mod
+    top = module.split(".")[0]
+    if top in getattr(sys, "stdlib_module_names", ()) and (Path.cwd() / f"{top}.py").is_file():
+        attr = spec.rsplit(":", 1)[1]
+        raise ValueError(f"--system {spec}: {top} is a module of Python's standard library, which Python imports "
+                         f"instead of ./{top}.py: give the file, --system ./{top}.py:{attr} (or rename it).")
     added = False
     if "" not in sys.path and str(Path.cwd()) not in sys.path:  # the console script does not search the
         sys.path.insert(0, str(Path.cwd()))  # current folder; python -m does
         added = True
     try:
-        return importlib.import_module(module)
+        mod = importlib.import_module(module)
     except ModuleNotFoundError as exc:
         if exc.name is not None and (module == exc.name or module.startswith(exc.name + ".")):
             raise ValueError(f"--system {spec}: no module named {module!r} (run from the folder that holds "
                              f"{module.split('.')[0]}.py, put that folder on PYTHONPATH, or give the file: "
                              f"--system path/to/{module.split('.')[-1]}.py:{spec.rsplit(':', 1)[1]}).") from exc
         raise ValueError(f"--system {spec}: importing {module} failed: {type(exc).__name__}: {exc}") from exc
+    except SystemExit as exc:
+        raise ValueError(_exit_message(spec, f"importing {module}", exc)) from None
     except Exception as exc:  # the user's code failed while importing
         raise ValueError(f"--system {spec}: importing {module} failed: {type(exc).__name__}: {exc}") from exc
     finally:
         if added:
             sys.path.remove(str(Path.cwd()))
+    if getattr(mod, "__file__", None):
+        _text_name(mod.__file__, spec, "module file")
+    return mod
 
 
 def _field(obj, name: str):
@@ -158,11 +191,17 @@ def resolve_system(spec: str, overrides: Sequence[str] = ()) -> UserSystem:
             where = module if i == 0 else f"{module}:{'.'.join(attr.split('.')[:i])}"
             systems = sorted(k for k, v in vars(mod).items() if isinstance(v, ForcedSystem) and not k.startswith("_"))
             hint = f" (its ForcedSystem attributes: {', '.join(systems)})" if systems and i == 0 else ""
+            top = module.split(".")[0]
+            if i == 0 and not hint and top in getattr(sys, "stdlib_module_names", ()) and not module.endswith(".py"):
+                hint = (f" ({top} is a module of Python's standard library; for your own file give its path: "
+                        f"--system ./{module.replace('.', '/')}.py:{attr})")
             raise ValueError(f"--system {spec}: {where} has no attribute {part!r}{hint}.")
         obj = getattr(obj, part)
     if callable(obj) and not isinstance(obj, (ForcedSystem, type)):
         try:
             obj = obj()
+        except SystemExit as exc:
+            raise ValueError(_exit_message(spec, f"calling {attr}()", exc)) from None
         except Exception as exc:  # the user's function failed
             raise ValueError(f"--system {spec}: calling {attr}() failed: {type(exc).__name__}: {exc}") from exc
     if isinstance(obj, ForcedSystem):

@@ -20,9 +20,11 @@ from .common import (
     cell_bytes,
     check_counts,
     check_options,
+    check_pool_history,
     check_region,
     check_work,
     escape_bound,
+    int_arg,
     parse_counts,
     parse_ranges,
     resolve_cli_system,
@@ -60,22 +62,22 @@ def add_parser(sub) -> None:
                    help="box bounds per gridded axis (default the paper's D: -25:25,-10:20,-10:50; "
                    "stroboscopic adds x4 in -12:12; with --system the object's REGION: one range per coordinate, "
                    "or per coordinate but the section coordinate for cells on the section)")
-    p.add_argument("--mapping-steps", type=int, default=None, metavar="L",
+    p.add_argument("--mapping-steps", type=int_arg, default=None, metavar="L",
                    help=f"cell methods: forcing periods per cell-map step l (default "
                    f"{PoincareCellMap.mapping_steps} poincare-like, 1 stroboscopic)")
-    p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
+    p.add_argument("--steps-per-period", type=int_arg, default=None, metavar="N",
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
-    p.add_argument("--direction", type=int, default=None, choices=(-1, 0, 1),
+    p.add_argument("--direction", type=int_arg, default=None, choices=(-1, 0, 1),
                    help="used by --method poincare-like only: crossing direction of the section x4 = 0 "
                    "(default 1: increasing x4; -1 decreasing; 0 both)")
-    p.add_argument("--max-period", type=int, default=None, metavar="K",
+    p.add_argument("--max-period", type=int_arg, default=None, metavar="K",
                    help=f"largest period P-k detected (default {Direct.max_period})")
-    p.add_argument("--chunk-size", type=int, default=None, metavar="N",
+    p.add_argument("--chunk-size", type=int_arg, default=None, metavar="N",
                    help=f"cells per batch (bounds memory; default {Direct.chunk_size})")
-    p.add_argument("--uncertainty-samples", type=int, default=DEFAULT_SAMPLES, metavar="N",
+    p.add_argument("--uncertainty-samples", type=int_arg, default=DEFAULT_SAMPLES, metavar="N",
                    help=f"cells sampled for the label uncertainty (default {DEFAULT_SAMPLES}; 0 skips it): the "
                    "share whose label changes with a halved step, and with the start moved by 1e-3 cell")
-    p.add_argument("--compare", nargs="?", type=int, const=500, default=None, metavar="N",
+    p.add_argument("--compare", nargs="?", type=int_arg, const=500, default=None, metavar="N",
                    help="also run the direct method on N >= 1 random cells (500 if N is left out) and report "
                    "agreement")
     p.add_argument("--out", default="jaxgear-out", metavar="DIR",
@@ -133,10 +135,8 @@ def _check_work(args, method, counts, system=None) -> None:
     dim = (system or REDUCED).dim
     n_cells = math.prod(counts)
     check_work("--grid", ",".join(map(str, counts)), n_cells, cell_bytes(dim), "cells")
-    if hasattr(method, "round_periods"):  # the lane pool: every lane keeps a ring of its last 2 K + 1 states
-        lanes = min(int(method.chunk_size), n_cells)  # and a streak per period k <= K (K = --max-period)
-        check_work("--max-period", method.max_period, int(method.max_period),
-                   2 * lanes * (2 * dim * 8 + 8), f"periods of history in each of {lanes:,} lanes")
+    if hasattr(method, "round_periods"):  # the lane pool: a history of 2 K + 1 states per lane (K = --max-period)
+        check_pool_history("--max-period", int(method.max_period), min(int(method.chunk_size), n_cells), dim)
 
 
 def _run_checked(args) -> int:
@@ -178,6 +178,7 @@ def _run_user(args, user) -> int:
     grid = user_grid(user, args.region, args.grid, args.method)
     names = grid.axis_names
     check_region(tuple(zip(grid.lower, grid.upper)), "--region", len(names), names, escape_bound(method))
+    check_counts(grid.counts, "--grid")
     _check_work(args, method, grid.counts, system)
     method.check(system, grid)
     return _run_on(args, system, user.params, grid, method, f"system {user.spec} ({system.name})")
@@ -197,8 +198,8 @@ def _run_on(args, system, params, grid, method, head: str) -> int:
             with contextlib.redirect_stdout(io.StringIO()):
                 _analyze(args, system, params, grid, method, None)
             return 0
-    print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, {head}")
-    with OutputFolder(args.out, OWNED) as out:
+    with OutputFolder(args.out, OWNED) as out:  # --out held by this run from here on
+        print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, {head}")
         written = _analyze(args, system, params, grid, method, out)
     print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0

@@ -62,6 +62,13 @@ class SetOnce(argparse.Action):
 
     def __call__(self, parser, namespace, value, option_string=None):
         items = list(getattr(namespace, self.dest, None) or [])
+        if "=" in value:  # the value (a number or a comma list of them): no '_' (names have them)
+            try:
+                for t in value.split("=", 1)[1].split(","):
+                    if "_" in t:
+                        number(t)
+            except ValueError as exc:
+                raise argparse.ArgumentError(self, f"{value.strip()}: {exc}") from None
         new = _set_fields(value)
         for old in items:
             both = sorted(_set_fields(old) & new)
@@ -72,6 +79,38 @@ class SetOnce(argparse.Action):
         setattr(namespace, self.dest, [*items, value])
 
 
+def number(text: str, kind=float):
+    """The number written in ``text`` (``kind`` ``float`` or ``int``), as the command line
+    reads every number: ``ValueError`` for what is not one, also for digits grouped with
+    ``_`` (``0_9``, which Python would read as 9: a typo for 0.9 more often than not)."""
+    if "_" in text:
+        raise ValueError(f"numbers are written without '_' (got {text.strip()!r}); did you mean "
+                         f"{text.strip().replace('_', '.', 1)!r}?")
+    return kind(text)
+
+
+def _argument_type(kind):
+    """An ``argparse`` type reading a ``kind`` with :func:`number` (a one-line refusal
+    naming the option for ``0_9``; argparse's own for what is no number)."""
+
+    def parse(text: str):
+        if "_" in text:
+            try:
+                number(text, kind)
+            except ValueError as exc:
+                raise argparse.ArgumentTypeError(str(exc)) from None
+        return kind(text)
+
+    parse.__name__ = kind.__name__  # argparse names it in "invalid int value: 'x'"
+    return parse
+
+
+int_arg = _argument_type(int)
+"""``type=`` of the integer options (``int`` without ``_``)."""
+float_arg = _argument_type(float)
+"""``type=`` of the real-number options (``float`` without ``_``)."""
+
+
 def parse_ranges(text: str) -> tuple[tuple[float, float], ...]:
     """``--region`` value ``LO:HI,LO:HI,...`` -> ``((lo, hi), ...)``, one pair per coordinate."""
     out = []
@@ -80,8 +119,10 @@ def parse_ranges(text: str) -> tuple[tuple[float, float], ...]:
         try:
             if not sep:
                 raise ValueError
-            out.append((float(lo), float(hi)))
-        except ValueError:
+            out.append((number(lo), number(hi)))
+        except ValueError as exc:
+            if "'_'" in str(exc):
+                raise argparse.ArgumentTypeError(str(exc)) from None
             raise argparse.ArgumentTypeError(
                 f"--region expects LO:HI per coordinate, comma-separated (e.g. -25:25,-10:20,-10:50), got {text!r}"
             ) from None
@@ -91,8 +132,10 @@ def parse_ranges(text: str) -> tuple[tuple[float, float], ...]:
 def parse_point(text: str) -> tuple[float, ...]:
     """``--from`` value ``x1,x2,...`` -> a state tuple."""
     try:
-        return tuple(float(t) for t in text.split(","))
-    except ValueError:
+        return tuple(number(t) for t in text.split(","))
+    except ValueError as exc:
+        if "'_'" in str(exc):
+            raise argparse.ArgumentTypeError(str(exc)) from None
         raise argparse.ArgumentTypeError(
             f"--from expects comma-separated numbers like 5.4,-0.2,8.3,-0.8, got {text!r}") from None
 
@@ -100,8 +143,10 @@ def parse_point(text: str) -> tuple[float, ...]:
 def parse_counts(text: str) -> tuple[int, ...]:
     """``--grid`` value ``N1,N2,...`` (or ``N1xN2x...``) -> positive cell counts per axis."""
     try:
-        vals = tuple(int(t) for t in text.replace("x", ",").split(",") if t.strip())
-    except ValueError:
+        vals = tuple(number(t, int) for t in text.replace("x", ",").split(",") if t.strip())
+    except ValueError as exc:
+        if "'_'" in str(exc):
+            raise argparse.ArgumentTypeError(str(exc)) from None
         vals = ()
     if not vals or min(vals) < 1:
         raise argparse.ArgumentTypeError(f"--grid expects positive counts like 50,30,60, got {text!r}")
@@ -162,11 +207,19 @@ def check_point(point, flag: str, dim: int) -> None:
         raise ValueError(f"{flag}={','.join(f'{v:g}' for v in point)} must hold finite numbers.")
 
 
-def check_counts(counts, flag: str, n_axes: int, names) -> None:
-    """``--grid`` counts: ``n_axes`` of them (each >= 1 already)."""
-    if len(counts) != n_axes:
+MIN_CELLS = 2
+"""Fewest cells per axis of an analysed grid: the result's basin entropy counts the labels
+in boxes of at least 2 x 2 cells (:func:`jaxgear.basin_entropy`)."""
+
+
+def check_counts(counts, flag: str, n_axes: int | None = None, names=()) -> None:
+    """``--grid`` counts: ``n_axes`` of them (unless ``None``), each at least :data:`MIN_CELLS`."""
+    if n_axes is not None and len(counts) != n_axes:
         raise ValueError(f"{flag} needs {n_axes} counts ({', '.join(names)}), got {len(counts)}: "
                          f"{','.join(map(str, counts))}.")
+    if min(counts) < MIN_CELLS:
+        raise ValueError(f"{flag} needs at least {MIN_CELLS} cells on every axis (the basin entropy of the result "
+                         f"counts labels in boxes of {MIN_CELLS} cells a side or more), got {','.join(map(str, counts))}.")
 
 
 def check_work(flag: str, value, count: int, unit_bytes: float, what: str) -> None:
@@ -175,6 +228,24 @@ def check_work(flag: str, value, count: int, unit_bytes: float, what: str) -> No
     (:func:`jaxgear._checks.check_memory`); the message names ``flag``, its ``value``
     and the largest count that fits."""
     check_memory(flag, value, count, unit_bytes, what)
+
+
+def check_pool_history(flag: str, max_period: int, lanes: int, dim: int) -> None:
+    """The direct method's lane pool keeps, per lane, a ring of its last ``2 K + 1``
+    states and a streak per period ``k <= K`` (``K = max_period``), and each round tests
+    its :data:`~jaxgear.analysis._recurrence.CANDIDATE_POOL` oldest undecided lanes for a
+    cycle by comparing their last ``2 K`` points at every lag ``k <= K``: ``K x K`` states
+    at once, which is what outgrows memory for a large ``K``. Refuse (naming ``flag``)
+    a ``K`` whose arrays do not fit."""
+    from ..analysis._recurrence import CANDIDATE_POOL
+
+    candidates = min(CANDIDATE_POOL, lanes)
+
+    def history(k: int) -> float:
+        return 2.0 * lanes * (2 * dim * 8 + 8) * k + 8.0 * (dim + 1) * candidates * float(k) * k
+
+    check_memory(flag, max_period, int(max_period), 0, "periods (a cycle test of K periods holds K x K states)",
+                 history)
 
 
 def cell_bytes(dim: int) -> int:

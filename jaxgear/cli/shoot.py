@@ -14,6 +14,7 @@ object (with the full parameter set);
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -31,6 +32,9 @@ from .common import (
     check_region,
     check_shoot_work,
     check_work,
+    float_arg,
+    int_arg,
+    number,
     parse_point,
     parse_ranges,
     resolve_cli_system,
@@ -67,13 +71,13 @@ def add_parser(sub) -> None:
     src.add_argument("--seeds-from", metavar="RESULT",
                      help="a saved global-analysis result (jaxgear analyze): every point of each P-k attractor "
                      "seeds a P-k orbit; the result's own parameters are used (--set overrides canonical names)")
-    p.add_argument("--random", type=int, metavar="N",
+    p.add_argument("--random", type=int_arg, metavar="N",
                    help="N random seeds in --region (with --periods, also together with --seeds-from)")
     p.add_argument("--region", type=parse_ranges, default=None, metavar="LO:HI,...",
                    help="box for --random, one LO:HI per coordinate (default the paper's D with x4 in [-5,5]: "
                    "-25:25,-10:20,-10:50,-5:5)")
-    p.add_argument("--seed", type=int, default=0, help="random seed for --random (default 0)")
-    p.add_argument("--period", type=int, action="append", metavar="K",
+    p.add_argument("--seed", type=int_arg, default=0, help="random seed for --random (default 0)")
+    p.add_argument("--period", type=int_arg, action="append", metavar="K",
                    help="shoot for P-K orbits (fixed points of P^K); repeatable (default 1, or the attractors' "
                    "periods with --seeds-from)")
     p.add_argument("--periods", type=_parse_periods, default=None, metavar="K1-K2",
@@ -81,18 +85,18 @@ def add_parser(sub) -> None:
                    "--random, plus the attractors of --seeds-from")
     p.add_argument("--solver", default=None, choices=tuple(SOLVERS),
                    help="nonlinear solver, an optimistix one (default: the library's choice, levenberg-marquardt)")
-    p.add_argument("--segments", type=int, default=None, metavar="M",
+    p.add_argument("--segments", type=int_arg, default=None, metavar="M",
                    help="multiple shooting with M segments per orbit (default 1)")
-    p.add_argument("--deflation-rounds", type=int, default=None, metavar="R",
+    p.add_argument("--deflation-rounds", type=int_arg, default=None, metavar="R",
                    help="deflated rounds after the plain one (default 0)")
-    p.add_argument("--transient", type=int, default=None, metavar="PERIODS",
+    p.add_argument("--transient", type=int_arg, default=None, metavar="PERIODS",
                    help=f"map each seed PERIODS forcing periods forward before shooting (default {RANDOM_TRANSIENT} "
                    "with --random, else 0)")
-    p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
+    p.add_argument("--steps-per-period", type=int_arg, default=None, metavar="N",
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
-    p.add_argument("--tol", type=float, default=1e-10, help="Newton tolerance on ||P^K(x) - x|| (default 1e-10)")
-    p.add_argument("--max-iter", type=int, default=40, help="Newton iteration limit (default 40)")
-    p.add_argument("--verify", type=int, default=None, metavar="PERIODS",
+    p.add_argument("--tol", type=float_arg, default=1e-10, help="Newton tolerance on ||P^K(x) - x|| (default 1e-10)")
+    p.add_argument("--max-iter", type=int_arg, default=40, help="Newton iteration limit (default 40)")
+    p.add_argument("--verify", type=int_arg, default=None, metavar="PERIODS",
                    help="check each orbit by direct integration over PERIODS >= 1 periods from a perturbed start "
                    f"(default {VERIFY_PERIODS})")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
@@ -111,8 +115,10 @@ def _parse_periods(text: str) -> list[int]:
 
     try:
         lo, _, hi = text.partition("-")
-        a, b = int(lo), int(hi or lo)
-    except ValueError:
+        a, b = number(lo, int), number(hi or lo, int)
+    except ValueError as exc:
+        if "'_'" in str(exc):
+            raise argparse.ArgumentTypeError(f"--periods={text}: {exc}") from None
         raise argparse.ArgumentTypeError(f"--periods expects K1-K2 (e.g. 1-8), got {text!r}") from None
     if not 1 <= a <= b <= INT_MAX:
         raise argparse.ArgumentTypeError(f"--periods needs 1 <= K1 <= K2 <= {INT_MAX}, got {text!r}")
@@ -208,6 +214,19 @@ def _check_args(args, system, user) -> list[int] | None:
     return periods
 
 
+def _check_verify(args, periods, seeds_from=None) -> None:
+    """The check by direct integration (``--verify``) runs at least as many periods as the
+    longest orbit shot (it compares the orbit's points over one whole orbit at least)."""
+    longest = max(int(k) for k in periods)
+    verify = VERIFY_PERIODS if args.verify is None else args.verify
+    if longest > verify:
+        given = f"--verify={verify}" if args.verify is not None else f"--verify (default {verify})"
+        source = (f"the attractors of --seeds-from {seeds_from} have" if seeds_from
+                  else "--period/--periods asks for")
+        raise ValueError(f"{given} is shorter than the longest orbit: {source} period {longest}; give "
+                         f"--verify {longest} or more (periods of direct integration per check).")
+
+
 def _random_seeds(args):
     from ..shooting import seeds_in_box
 
@@ -271,15 +290,20 @@ def run(args) -> int:
     user = resolve_cli_system(args)  # --system: its ForcedSystem replaces the gear model
     system = REDUCED if user is None else user.system
     periods = _check_args(args, system, user)
+    _check_verify(args, periods or [1])
     params, seeds, source = _params_and_seeds(args, periods, system, user)
+    if isinstance(seeds, dict):  # the periods of the --seeds-from attractors
+        _check_verify(args, list(seeds), args.seeds_from)
     integ = default_integrator(args.steps_per_period)
-    search = find_periodic_orbits(system, params, seeds, period=periods or [1], integrator=integ,
-                                  options=_search_options(args, integ), progress=not (args.quiet or args.json))
-    summary = _summary(search, system, params, args) if (args.json or args.out) else {}
+    held = OutputFolder(args.out, OWNED) if args.out else contextlib.nullcontext()
+    with held as out:  # --out held by this run before the search
+        search = find_periodic_orbits(system, params, seeds, period=periods or [1], integrator=integ,
+                                      options=_search_options(args, integ), progress=not (args.quiet or args.json))
+        summary = _summary(search, system, params, args) if (args.json or args.out) else {}
+        written = _write_files(search, summary, args, out) if args.out else []
     if args.json:
         print(json.dumps(summary))
-    written = _write_outputs(search, summary, args) if args.out else []
-    if not args.json:
+    else:
         _print_search(search, system, params, args, source)
         if written:
             print(f"\nwrote {', '.join(written)} to {args.out}/")
@@ -337,13 +361,9 @@ def _print_orbit(i: int, o, check, system) -> None:
               + ("" if check["consistent"] else " (INCONSISTENT with the multipliers)"))
 
 
-def _write_outputs(search, summary: dict, args) -> list[str]:
-    """``orbits.nc``, ``orbits.json`` and (unless ``--no-figures``) PNG figures in ``--out``."""
-    with OutputFolder(args.out, OWNED) as out:
-        return _write_files(search, summary, args, out)
-
-
 def _write_files(search, summary: dict, args, out: Path) -> list[str]:
+    """``orbits.nc``, ``orbits.json`` and (unless ``--no-figures``) PNG figures in the
+    staging folder ``out`` of ``--out``."""
     search.save(out / "orbits.nc")
     write_json(summary, out / "orbits.json")
     written = ["orbits.nc", "orbits.json"]

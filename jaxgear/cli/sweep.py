@@ -26,10 +26,13 @@ from .common import (
     check_counts,
     check_options,
     check_point,
+    check_pool_history,
     check_region,
     check_resume,
     check_work,
     escape_bound,
+    int_arg,
+    number,
     parse_counts,
     parse_point,
     parse_ranges,
@@ -63,12 +66,16 @@ def _range(text: str, flag: str = "--values") -> tuple[float, float, int]:
     if len(parts) != 3:
         raise ValueError(f"{flag} expects START:STOP:COUNT (e.g. 3:7:41), got {text!r}.")
     try:
-        start, stop = float(parts[0]), float(parts[1])
-    except ValueError:
+        start, stop = number(parts[0]), number(parts[1])
+    except ValueError as exc:
+        if "'_'" in str(exc):
+            raise ValueError(f"{flag}={text}: {exc}") from None
         raise ValueError(f"{flag} expects numbers in START:STOP:COUNT, got {text!r}.") from None
     try:
-        count = int(parts[2])
-    except ValueError:
+        count = number(parts[2], int)
+    except ValueError as exc:
+        if "'_'" in str(exc):
+            raise ValueError(f"{flag}={text}: {exc}") from None
         raise ValueError(f"{flag}: COUNT must be an integer, got {parts[2]!r} in {text!r}.") from None
     if not (np.isfinite(start) and np.isfinite(stop)):
         raise ValueError(f"{flag}: START and STOP must be finite, got {text!r}.")
@@ -108,11 +115,11 @@ def add_parser(sub) -> None:
                    "starts reach), up/down (state carried from value to value: a branch is followed until it "
                    "vanishes), both (up and down: hysteresis shows where they differ), all (default: the three)")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--starts", type=int, default=None, metavar="N",
+    src.add_argument("--starts", type=int_arg, default=None, metavar="N",
                      help="bifurcation: N random starts in the paper's region D on x4 = 0 (jaxgear.seeds_in_box over x1, x2, x3 with --seed; default 16)")
     src.add_argument("--from", dest="points", type=parse_point, action="append", metavar="x1,x2,x3,x4",
                      help="a start (repeatable; continuation: the point on or near the orbit to follow)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of --starts (default 0)")
+    p.add_argument("--seed", type=int_arg, default=0, help="random seed of --starts (default 0)")
     p.add_argument("--grid", type=parse_counts, default=None, metavar="N1,N2,N3[,N4]",
                    help="basins: cells over x1, x2, x3 on x4 = 0 (default 20,12,24); with --method "
                    "stroboscopic over x1..x4 (default 10,6,12,6)")
@@ -121,17 +128,17 @@ def add_parser(sub) -> None:
                    "--method stroboscopic adds x4 in -12:12); bifurcation: the box of the random starts")
     p.add_argument("--method", default=DEFAULT_METHOD, choices=tuple(METHODS),
                    help=f"basins: the global-analysis method (default {DEFAULT_METHOD})")
-    p.add_argument("--period", type=int, default=1, metavar="K", help="continuation: period of the orbit (default 1)")
-    p.add_argument("--max-steps", type=int, default=500, help="continuation: step limit (default 500)")
-    p.add_argument("--transient", type=int, default=400, help="bifurcation: periods dropped per value (default 400)")
-    p.add_argument("--record", type=int, default=64,
+    p.add_argument("--period", type=int_arg, default=1, metavar="K", help="continuation: period of the orbit (default 1)")
+    p.add_argument("--max-steps", type=int_arg, default=500, help="continuation: step limit (default 500)")
+    p.add_argument("--transient", type=int_arg, default=400, help="bifurcation: periods dropped per value (default 400)")
+    p.add_argument("--record", type=int_arg, default=64,
                    help="bifurcation: stroboscopic points kept (default 64; at least 2 --max-period + 1)")
-    p.add_argument("--steps-per-period", type=int, default=None, metavar="N",
+    p.add_argument("--steps-per-period", type=int_arg, default=None, metavar="N",
                    help=f"fixed steps per forcing period (default {DEFAULT_STEPS_PER_PERIOD})")
-    p.add_argument("--max-period", type=int, default=16, help="largest period P-k detected (default 16)")
+    p.add_argument("--max-period", type=int_arg, default=16, help="largest period P-k detected (default 16)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (also holds the resume parts)")
     p.add_argument("--restart", action="store_true", help="discard a previous sweep of other settings in --out")
-    p.add_argument("--uncertainty-samples", type=int, default=None, metavar="N",
+    p.add_argument("--uncertainty-samples", type=int_arg, default=None, metavar="N",
                    help="basins: cells sampled at each value for its label uncertainty (default 1024; 0 skips it, "
                    "which on a small grid saves much of the time): the share whose label changes with a refined "
                    "step, and with the start moved by 1e-3 cell")
@@ -184,6 +191,8 @@ def run(args) -> int:
         if process_index() != 0:  # its share of the values (exchanged, or parts in --out); process 0 writes
             _share(args, plan)
             return 0
+    if args.kind != "continuation":  # Ctrl-C: the boundary of the command line says what a rerun resumes from
+        args.interrupt_note = lambda: _resume_note(args, plan)
     with OutputFolder(args.out, OWNED, create=True) as work:
         t0 = time.perf_counter()
         if args.kind == "continuation":
@@ -192,6 +201,32 @@ def run(args) -> int:
             files = _sweep(args, plan, work, head, t0)
     print(f"\nwrote {', '.join(files)} to {args.out}/")
     return 0
+
+
+def _resume_note(args, plan: _Plan) -> str:
+    """What an interrupted bifurcation or basin sweep keeps: ``the sweep resumes from N of
+    M values`` (the values, or for a bifurcation sweep the (direction, value) pairs, saved
+    in ``--out/parts`` with these settings)."""
+    import numpy as np
+
+    from ..sweep._checkpoint import saved_parts
+
+    done = 0
+    for part in saved_parts(args.out):
+        if part.suffix == ".npz":  # a block of a bifurcation pass: points (values, directions, ...)
+            try:
+                with np.load(part) as z:
+                    shape = z["points"].shape
+                done += int(shape[0]) * int(shape[1])
+            except Exception:  # unreadable: computed again
+                continue
+        else:
+            done += 1
+    total = plan.count * (1 if plan.values2 is None else len(plan.values2))
+    if args.kind == "bifurcation":
+        total *= {"independent": 1, "up": 1, "down": 1, "both": 2, "all": 3}[args.direction]
+    return (f"the sweep resumes from {done} of {total} values (run the same command again)" if done
+            else "no value was finished; the previous result is unchanged")
 
 
 def _plan(args) -> _Plan:
@@ -297,6 +332,9 @@ def _check_values(args, plan: _Plan) -> _Plan:
         check_values(system, params, (args.param,), values[:, None])
         return plan
     grid, method = _basins_grid(args, plan)
+    if hasattr(method, "round_periods"):  # the direct method's lane pool (analyze checks the same)
+        check_pool_history("--max-period", int(method.max_period), min(int(method.chunk_size), grid.n_cells),
+                           system.dim)
     method.check(system, grid)
     if plan.values2 is None:
         check_values(system, params, (args.param,), values[:, None])
@@ -320,6 +358,7 @@ def _basins_grid(args, plan: _Plan):
         grid = plan.grid
         names = grid.axis_names
         check_region(tuple(zip(grid.lower, grid.upper)), "--region", len(names), names, escape_bound(method))
+        check_counts(grid.counts, "--grid")
         return grid, method
     default = method.default_grid(REDUCED)
     names = default.axis_names

@@ -15,11 +15,16 @@ from .._devices import allgather, cell_processes, process_count, process_index
 from .._io import atomic_write
 
 __all__ = ["Checkpoint", "diff_settings", "mismatch_message", "open_shared_checkpoint", "checkpoint_on_zero",
-           "shared_block"]
+           "shared_block", "saved_parts"]
 
 
 def _hash(settings: Mapping) -> str:
     return hashlib.sha256(json.dumps(settings, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+TAG_SUFFIX = ".settings"
+"""Suffix of a part's tag: ``parts/NAME.settings`` holds the settings (and their hash) of
+the sweep that wrote ``parts/NAME``."""
 
 
 class Checkpoint:
@@ -28,15 +33,24 @@ class Checkpoint:
     ``out=None`` keeps nothing (every block is computed). A directory with a manifest
     of other settings raises ``ValueError`` naming the differing settings, unless
     ``restart`` (then the old parts are removed).
+
+    Every part is tagged: ``parts/NAME.settings`` holds the settings and their hash,
+    written before the part by :meth:`path` and :meth:`save`. A part counts as saved
+    (:meth:`has`) only with a tag of these settings, so a part that another sweep wrote
+    into the same folder (two runs at once, a manifest replaced under a running sweep) is
+    never read as this one's; opening a folder that holds parts of other settings raises
+    ``ValueError`` naming the differing fields (``restart`` removes them).
     """
 
     def __init__(self, out, kind: str, settings: dict, restart: bool = False):
         self.dir = None if out is None else Path(out)
+        self.key = _hash(settings)
         if self.dir is None:
             return
         self.parts = self.dir / "parts"
+        self.kind, self.settings = kind, settings
         man = self.dir / "manifest.json"
-        key = _hash(settings)
+        key = self.key
         if man.is_file():
             try:
                 old = json.loads(man.read_text())
@@ -52,21 +66,57 @@ class Checkpoint:
                 shutil.rmtree(self.parts, ignore_errors=True)
         elif self.parts.exists() and restart:
             shutil.rmtree(self.parts, ignore_errors=True)
+        for name, saved in self._foreign_parts():
+            if restart:  # parts another sweep wrote here: discarded with the old ones
+                (self.parts / name).unlink(missing_ok=True)
+                (self.parts / (name + TAG_SUFFIX)).unlink(missing_ok=True)
+                continue
+            diff = diff_settings(saved.get("settings", {}), settings)
+            raise ValueError(f"{mismatch_message(self.dir, saved.get('kind', '?'), diff)} (the part {name} in "
+                             f"{self.parts} was saved with those settings)")
         self.parts.mkdir(parents=True, exist_ok=True)
         text = json.dumps({"kind": kind, "hash": key, "settings": settings}, indent=1, sort_keys=True)
         atomic_write(man, lambda tmp: Path(tmp).write_text(text))
+        self._tag_text = json.dumps({"kind": kind, "hash": key, "settings": settings}, sort_keys=True)
+
+    def _foreign_parts(self):
+        """``(name, tag)`` of every part in ``parts`` tagged with other settings."""
+        if not self.parts.is_dir():
+            return
+        for tag in sorted(self.parts.glob(f"*{TAG_SUFFIX}")):
+            saved = _read_tag(tag)
+            name = tag.name[: -len(TAG_SUFFIX)]
+            if saved is not None and saved.get("hash") != self.key and (self.parts / name).is_file():
+                yield name, saved  # (an unreadable tag: its part is not read, but computed again)
+
+    def _tag(self, name: str) -> None:
+        """Tag part ``name`` with these settings (before it is written)."""
+        atomic_write(self.parts / (name + TAG_SUFFIX), lambda tmp: Path(tmp).write_text(self._tag_text))
 
     def path(self, name: str) -> Path | None:
-        """Where part ``name`` is saved (``None`` without an output folder)."""
-        return None if self.dir is None else self.parts / name
+        """Where part ``name`` is to be saved (``None`` without an output folder), its tag
+        of these settings written (a part of the same name with another tag is removed)."""
+        if self.dir is None:
+            return None
+        if (self.parts / name).exists() and not self._tagged(name):
+            (self.parts / name).unlink(missing_ok=True)
+        self._tag(name)
+        return self.parts / name
+
+    def _tagged(self, name: str) -> bool:
+        saved = _read_tag(self.parts / (name + TAG_SUFFIX))
+        return saved is not None and saved.get("hash") == self.key
 
     def has(self, name: str) -> bool:
-        """Whether part ``name`` was saved by an earlier run."""
-        return self.dir is not None and (self.parts / name).is_file()
+        """Whether part ``name`` was saved by an earlier run of these settings (its tag)."""
+        return self.dir is not None and (self.parts / name).is_file() and self._tagged(name)
 
     def load(self, name: str) -> dict[str, np.ndarray] | None:
-        """The arrays of a saved block, or ``None`` when the part is unreadable (it is then
-        removed and the block is computed again)."""
+        """The arrays of a saved block, or ``None`` when the part is unreadable or not
+        tagged with these settings (it is then removed and the block is computed again)."""
+        if not self._tagged(name):
+            (self.parts / name).unlink(missing_ok=True)
+            return None
         try:
             with open(self.parts / name, "rb") as f, np.load(f) as z:  # closed also when np.load fails
                 return {k: z[k] for k in z.files}
@@ -75,8 +125,11 @@ class Checkpoint:
             return None
 
     def load_result(self, name: str, loader):
-        """A saved result part read with ``loader(path)``, or ``None`` when unreadable
-        (removed, to be computed again)."""
+        """A saved result part read with ``loader(path)``, or ``None`` when unreadable or
+        not tagged with these settings (removed, to be computed again)."""
+        if not self._tagged(name):
+            (self.parts / name).unlink(missing_ok=True)
+            return None
         try:
             return loader(self.parts / name)
         except Exception:  # truncated or corrupted part (any reader error): recompute it
@@ -84,9 +137,36 @@ class Checkpoint:
             return None
 
     def save(self, name: str, **arrays) -> None:
-        """Save a finished block (atomically)."""
+        """Save a finished block (atomically), tagged with these settings."""
         if self.dir is not None:
+            self._tag(name)
             _save_part(self.parts / name, arrays)
+
+
+def _read_tag(path: Path) -> dict | None:
+    """The tag ``{"kind", "hash", "settings"}`` of a part, ``None`` where missing or unreadable."""
+    try:
+        tag = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+    return tag if isinstance(tag, dict) else None
+
+
+def saved_parts(out) -> list[Path]:
+    """The parts in ``out/parts`` tagged with the settings of ``out``'s manifest (those a
+    resume with the same settings reads); ``[]`` without a readable manifest."""
+    try:
+        key = json.loads((Path(out) / "manifest.json").read_text()).get("hash")
+    except (OSError, ValueError, AttributeError):
+        return []
+    parts = Path(out) / "parts"
+    found = []
+    for tag in sorted(parts.glob(f"*{TAG_SUFFIX}")) if parts.is_dir() else ():
+        part = parts / tag.name[: -len(TAG_SUFFIX)]
+        saved = _read_tag(tag)
+        if saved is not None and saved.get("hash") == key and part.is_file():
+            found.append(part)
+    return found
 
 
 def open_shared_checkpoint(out, kind: str, settings: dict, restart: bool = False, timeout: float = 600.0):
