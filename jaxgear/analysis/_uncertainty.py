@@ -14,7 +14,7 @@ result's attractors as the known ones:
 - ``start``: the share whose label changes when the start moves by ``perturbation``
   cell widths (uniformly in that box along the gridded coordinates): the basin-boundary
   uncertainty at that scale. The same samples moved by :data:`EXPONENT_SCALES` times
-  that (three decades, a pool each) give the uncertain fraction ``f(eps)`` and the
+  that (three decades, all in one pool) give the uncertain fraction ``f(eps)`` and the
   uncertainty exponent ``alpha`` of ``f ~ eps**alpha`` (Grebogi, McDonald, Ott & Yorke,
   Phys. Lett. A 99, 415, 1983): 1 for a smooth basin boundary, below 1 for a fractal one.
 """
@@ -103,8 +103,9 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
 
     fine = direct.integrator.refined()
     steps = relabel(X, fine, "uncertainty: step halved")
-    # one pool per start move (each holds the values' rows, as the step pool does)
-    starts = [relabel(Xm, direct.integrator, "uncertainty: start moved") for Xm in moved]
+    # every start move in one pool (the samples moved by each scale, one after the other)
+    together = relabel(np.concatenate(moved), direct.integrator, "uncertainty: start moved")
+    starts = [[lab[j * S:(j + 1) * S] for lab in together] for j in range(len(scales))]
     out = []
     for v, (step, ref) in enumerate(zip(steps, refs)):
         f = np.array([float(np.mean(starts[j][v] != ref)) for j in range(len(scales))])
