@@ -81,16 +81,24 @@ def get_preset(name: str) -> GearSet:
     return PRESETS[name]()
 
 
+def _number(text: str) -> float:
+    """``float(text)`` without Python's literal extras (``0_9`` would be 9)."""
+    if "_" in text:
+        raise ValueError(f"cannot read {text!r} as a number: numbers are written without '_'.")
+    try:
+        return float(text)
+    except ValueError as exc:
+        raise ValueError(f"cannot read {text!r} as a number (or comma-separated numbers).") from exc
+
+
 def parse_value(text: str):
+    """A ``--set``/override value: a number, comma-separated numbers, or ``none``."""
     text = text.strip()
     if text.lower() in ("none", "null"):
         return None
     if "," in text:
-        return [float(t) for t in text.split(",") if t.strip()]
-    try:
-        v = float(text)
-    except ValueError as exc:
-        raise ValueError(f"cannot read {text!r} as a number (or comma-separated numbers).") from exc
+        return [_number(t.strip()) for t in text.split(",") if t.strip()]
+    v = _number(text)
     return int(v) if v.is_integer() and "." not in text and "e" not in text.lower() else v
 
 

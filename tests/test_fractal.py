@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
+import jaxgear as jg
 from jaxgear.analysis._fractal import LOG2, basin_entropy, uncertain_fraction, uncertainty_exponent
 
 
@@ -141,3 +142,12 @@ def test_bad_input_is_refused():
         uncertain_fraction(lambda p: np.zeros(3), [0, 0], [1, 1], [0.1], n_samples=5)
     with pytest.raises(ValueError, match="low < high"):
         uncertain_fraction(_half_plane, [0, 0], [1, 0], [0.1])
+
+
+def test_a_grid_with_an_axis_of_one_cell_has_no_basin_entropy():
+    """Boxes of the basin entropy need two cells a side: a grid with an axis of one cell
+    gets its analysis and no entropy (instead of an error after the whole analysis)."""
+    grid = jg.CellGrid.box([(-2, 2), (-2, 2)], (1, 4), names=("x", "v"))
+    r = jg.analyze_global(jg.DUFFING, jg.DuffingParams(delta=0.5, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0), grid,
+                          method=jg.Direct(integrator=jg.RK4(64)), progress=False, uncertainty=0)
+    assert r.basin_entropy is None and sum(a.share for a in r.attractors) == 1.0

@@ -308,3 +308,13 @@ def test_tables_name_every_parameter():
     gt = jg.paper_gear_set().table()
     for n in ("module", "J_c", "omega_n", "assumed"):
         assert n in gt
+
+
+def test_override_values_refuse_python_literal_extras():
+    """``0_9`` is not 0.9 (Python's ``float`` reads it as 9): refused, in a list too."""
+    from jaxgear._presets import parse_value
+
+    assert parse_value("0.9") == 0.9 and parse_value("1,2.5") == [1.0, 2.5]
+    for text in ("0_9", "1,0_5"):
+        with pytest.raises(ValueError, match="without '_'"):
+            parse_value(text)

@@ -280,5 +280,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
         state_names=tuple(system.state_names), n_sink=int((out_labels == SINK).sum()),
         n_unresolved=int((out_labels == UNRESOLVED).sum()), runtime_s=float(runtime), version=__version__,
         mean_periods=float(mean_periods),
-        basin_entropy=basin_entropy(out_labels.reshape(grid.counts), box=max(1, min(ENTROPY_BOX, *grid.counts))),
+        # (boxes need 2 cells a side: a grid with an axis of one cell has no basin entropy)
+        basin_entropy=basin_entropy(out_labels.reshape(grid.counts), box=min(ENTROPY_BOX, *grid.counts))
+        if min(grid.counts) >= 2 else None,
     )
