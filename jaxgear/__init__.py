@@ -126,6 +126,8 @@ from .continuation import (
     ContinuationOptions as ContinuationOptions,
     Branch as Branch,
     BifurcationPoint as BifurcationPoint,
+    BifurcationKind as BifurcationKind,
+    BranchStatus as BranchStatus,
 )
 from .sweep import (
     bifurcation_diagram as bifurcation_diagram,
@@ -144,6 +146,7 @@ from .design import (
     DesignResult as DesignResult,
     DesignOptions as DesignOptions,
     DesignSettings as DesignSettings,
+    DesignStatus as DesignStatus,
     OrbitSamples as OrbitSamples,
     sample_orbit as sample_orbit,
     MeshForces as MeshForces,

@@ -7,7 +7,8 @@ decide how they are stored, from their type annotations and their ``metadata``:
   names their dimensions (strings, or a callable of the object for dimensions named
   at run time, such as the grid axes ``x1, x2, x3``); complex arrays are stored as
   ``<name>__real`` and ``<name>__imag``;
-- ``int``, ``float``, ``str`` and ``bool`` become attributes;
+- ``int``, ``float``, ``str`` and ``bool`` become attributes, and so do enumerations
+  (outcomes such as a status or a kind: stored as their value, rebuilt by their class);
 - nested result dataclasses and ``NamedTuple`` s are stored under ``<name>__<field>``;
 - a tuple of dataclasses (``items_field(dim)``: attractors, orbits, bifurcation points)
   becomes one variable per item field along the item dimension, arrays padded to the
@@ -30,6 +31,7 @@ other field equal.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import types
 import typing
@@ -138,6 +140,20 @@ def _json_default(o):
     raise TypeError(f"not JSON-able: {type(o).__name__}")
 
 
+def _is_enum(hint) -> bool:
+    return isinstance(hint, type) and issubclass(hint, enum.Enum)
+
+
+def _enum(cls, value):
+    """The member of the enumeration ``cls`` stored as ``value`` (its value: a string for a
+    ``StrEnum``, an integer code otherwise); ``ValueError`` naming the members if none."""
+    try:
+        return cls(str(value) if issubclass(cls, str) else int(value))
+    except (TypeError, ValueError):
+        raise ValueError(f"{value!r} is not a {cls.__name__} (one of {', '.join(str(m.value) for m in cls)})") \
+            from None
+
+
 def _to_json(v) -> str:
     return json.dumps(v, default=_json_default)
 
@@ -238,6 +254,9 @@ def _encode_value(w: _Writer, v, hint, meta, path, owner) -> None:
             for k, tag in zip(keys, _key_tags(keys)):
                 _encode_value(w, v[k], vt, {}, f"{path}__{tag}", owner)
             return
+    if _is_enum(h):  # an outcome: stored as its value (a name or a code), rebuilt by its class
+        w.attrs[path] = h(v).value
+        return
     if h in (int, float, str) and not isinstance(v, bool):
         w.attrs[path] = v
         return
@@ -275,6 +294,9 @@ def _encode_items(w: _Writer, items: tuple, cls, dim: str, path: str) -> None:
             t = _strip_optional(hint)
             dt = {int: np.int64, float: np.float64, bool: np.bool_}[t]
             w.data[p] = ((dim,), np.array(vals, dtype=dt).reshape(len(items)), {})
+        elif _is_enum(_strip_optional(hint)) and all(x is not None for x in vals):
+            h = _strip_optional(hint)
+            w.data[p] = ((dim,), np.array([h(x).value for x in vals], dtype=object).reshape(len(items)), {})
         elif _strip_optional(hint) is str and all(x is not None for x in vals):
             w.data[p] = ((dim,), np.array(vals, dtype=object).reshape(len(items)), {})
         else:
@@ -412,6 +434,8 @@ def _decode_value(r: _Reader, hint, meta, path):
         raw = json.loads(info["keys"])
         return {_retype(k, kt): _decode_value(r, vt, {}, f"{path}__{tag}") for k, tag in zip(raw, _key_tags(raw))}
     a = r.ds.attrs[path]
+    if _is_enum(h):
+        return _enum(h, a)
     if h is int:
         return int(a)
     if h is float:
@@ -443,7 +467,9 @@ def _decode_items(r: _Reader, cls, path: str) -> tuple:
         else:
             raw = r.values(p)
             h = _strip_optional(hint)
-            if h in (int, float, bool):
+            if _is_enum(h):
+                cols[name] = [_enum(h, x) for x in raw]
+            elif h in (int, float, bool):
                 cols[name] = [h(x) for x in raw]
             elif h is str:
                 cols[name] = [str(x) for x in raw]

@@ -15,7 +15,7 @@ import xarray as xr
 
 import jaxgear as jg
 from jaxgear import CellGrid
-from jaxgear._codec import FORMAT, RESULT_TYPES, array_field, custom_field, from_dataset, to_dataset
+from jaxgear._codec import FORMAT, RESULT_TYPES, array_field, custom_field, from_dataset, items_field, to_dataset
 from jaxgear.analysis import LabelUncertainty
 from jaxgear.integrate import integrator_from_dict
 
@@ -273,6 +273,40 @@ def test_typed_settings_round_trip_with_none_and_text(monkeypatch):
     assert cases[0].settings.note is None and from_dataset(to_dataset(cases[0])).settings.note is None
     assert from_dataset(to_dataset(cases[1])).settings.note == "null"
     assert "settings__stop" in to_dataset(cases[1]).attrs and "settings__stop" not in to_dataset(cases[0]).attrs
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _Event:
+    kind: jg.BifurcationKind
+    at: float
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _Outcomes:
+    status: jg.DesignStatus
+    ended: jg.BranchStatus
+    code: jg.Status
+    events: tuple[_Event, ...] = items_field("event")
+
+
+def test_outcomes_are_enums_stored_by_their_values(monkeypatch):
+    """Statuses and kinds are enumerations: they round-trip as the same members, are stored
+    as their plain values (what files written when they were strings hold, so those still
+    load), and a value that is no member is refused naming the field."""
+    monkeypatch.setitem(RESULT_TYPES, "_Outcomes", _Outcomes)
+    h = _Outcomes(status=jg.DesignStatus.LOST_STABILITY, ended=jg.BranchStatus.CORRECTOR_FAILED,
+                  code=jg.Status.DIVERGED, events=(_Event(kind=jg.BifurcationKind.PD, at=0.5),
+                                                   _Event(kind=jg.BifurcationKind.NS, at=0.7)))
+    ds = to_dataset(h)
+    assert (ds.attrs["status"], ds.attrs["ended"], int(ds.attrs["code"])) == ("lost stability", "corrector_failed", 3)
+    assert list(ds["events__kind"].values) == ["PD", "NS"]
+    q = from_dataset(ds, "_Outcomes")
+    assert q == h and type(q.status) is jg.DesignStatus and type(q.code) is jg.Status
+    assert [type(e.kind) for e in q.events] == [jg.BifurcationKind] * 2
+    bad = ds.copy()
+    bad.attrs["status"] = "exploded"
+    with pytest.raises(ValueError, match="'status'.*not a DesignStatus"):
+        from_dataset(bad, "_Outcomes")
 
 
 # ---------------------------------------------------------------- jaxgear.load

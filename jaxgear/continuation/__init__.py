@@ -6,8 +6,17 @@
 """
 
 from ._arclength import continue_orbit, switch_branch
-from ._branch import BIFURCATION_KINDS, BRANCH_STATUS, BifurcationPoint, Branch, BranchSettings, bifurcation_orbit
+from ._branch import (
+    BIFURCATION_KINDS,
+    BRANCH_STATUS,
+    BifurcationKind,
+    BifurcationPoint,
+    Branch,
+    BranchSettings,
+    BranchStatus,
+    bifurcation_orbit,
+)
 from ._options import CORRECTOR, ContinuationOptions
 
-__all__ = ["continue_orbit", "switch_branch", "ContinuationOptions", "CORRECTOR", "Branch", "BranchSettings", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS",
+__all__ = ["continue_orbit", "switch_branch", "ContinuationOptions", "CORRECTOR", "Branch", "BranchSettings", "BifurcationPoint", "BifurcationKind", "BranchStatus", "BIFURCATION_KINDS", "BRANCH_STATUS",
            "bifurcation_orbit"]

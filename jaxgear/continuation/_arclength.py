@@ -68,7 +68,7 @@ from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
 from ..shooting import ShootOptions, periodic_orbit, sorted_eigvals
 from ..shooting._floquet import check_period
-from ._branch import BifurcationPoint, Branch, BranchSettings
+from ._branch import BifurcationKind, BifurcationPoint, Branch, BranchSettings, BranchStatus
 from ._options import CORRECTOR, ContinuationOptions
 
 __all__ = ["continue_orbit", "switch_branch", "START_ITERATIONS"]
@@ -293,13 +293,13 @@ def _detect(ctx: _Ctx, a: _Step, b: _Step, index: int, locate_tol: float) -> lis
     fold = changes(_T_TP)
     candidates = []
     if changes(_T_PD):
-        candidates.append(("PD", _T_PD))
+        candidates.append((BifurcationKind.PD, _T_PD))
     if fold:
-        candidates.append(("SN", _T_TP))
+        candidates.append((BifurcationKind.SN, _T_TP))
     elif changes(_T_DET):
-        candidates.append(("BP", _T_DET))
+        candidates.append((BifurcationKind.BP, _T_DET))
     if changes(_T_NS):
-        candidates.append(("NS", _T_NS))
+        candidates.append((BifurcationKind.NS, _T_NS))
     for kind, col in candidates:
         p, nonsmooth = _locate(ctx, a, b, col, locate_tol)
         if p is None:  # location failed: report the linear interpolation of the bracket
@@ -310,7 +310,7 @@ def _detect(ctx: _Ctx, a: _Step, b: _Step, index: int, locate_tol: float) -> lis
             point, val, tv = z[:-1], z[-1], float("nan")
         else:
             lam, point, val, tv, orbit = p.multipliers, p.z[:-1], p.z[-1], float(p.tests[col]), p.pts
-        if kind == "NS":
+        if kind == BifurcationKind.NS:
             # a complex pair on the unit circle, not a real pair with product 1 (neutral saddle)
             near = np.abs(np.abs(lam) - 1.0) < 1e-3
             cplx = np.abs(np.imag(lam)) > 1e-6 * np.maximum(1.0, np.abs(lam))
@@ -344,9 +344,9 @@ def _end_point(ctx: _Ctx, cur: _Step, out: _Step, settings: BranchSettings):
     z, stop, bounds = cur.z, settings.stop, settings.options.bounds
     p_old, p_new = float(z[-1]), float(out.z[-1])
     if stop is not None and (p_old - stop) * (p_new - stop) <= 0 and p_new != p_old and p_old != stop:
-        target, reason = stop, "stop"
+        target, reason = stop, BranchStatus.STOP
     elif bounds is not None and not (bounds[0] <= p_new <= bounds[1]):
-        target, reason = (bounds[0] if p_new < bounds[0] else bounds[1]), "bounds"
+        target, reason = (bounds[0] if p_new < bounds[0] else bounds[1]), BranchStatus.BOUNDS
     else:
         return out, None
     zg = z + (target - p_old) / (p_new - p_old) * (out.z - z)
@@ -359,7 +359,7 @@ def _run(ctx: _Ctx, first: _Step, settings: BranchSettings, progress: bool, para
     """The continuation loop from the converged point ``first`` (tangent oriented already)."""
     opts = settings.options
     ds, (ds_min, ds_max) = float(opts.ds), opts.step_range
-    steps, bifs, status, cur = [first], [], "max_steps", first
+    steps, bifs, status, cur = [first], [], BranchStatus.MAX_STEPS, first
     cos_max = math.cos(opts.max_angle)
     bar = progress_bar(int(opts.max_steps), f"P-{ctx.k} continuation in {ctx.name}", progress, unit="step")
     try:
@@ -370,7 +370,7 @@ def _run(ctx: _Ctx, first: _Step, settings: BranchSettings, progress: bool, para
                 float(np.linalg.norm(out.z - zp)) <= ds
             if not ok:
                 if ds <= ds_min * (1 + 1e-12):
-                    status = "diverged" if out.status == _DIVERGED else "corrector_failed"
+                    status = BranchStatus.DIVERGED if out.status == _DIVERGED else BranchStatus.CORRECTOR_FAILED
                     break
                 ds = max(0.5 * ds, ds_min)
                 continue
@@ -393,7 +393,7 @@ def _run(ctx: _Ctx, first: _Step, settings: BranchSettings, progress: bool, para
     return _branch(ctx, steps, tuple(bifs), status, settings, params_start)
 
 
-def _branch(ctx: _Ctx, steps: list[_Step], bifs: tuple, status: str, settings: BranchSettings,
+def _branch(ctx: _Ctx, steps: list[_Step], bifs: tuple, status: BranchStatus, settings: BranchSettings,
             params_start: dict) -> Branch:
     """The :class:`Branch` of the corrected points ``steps``."""
     Z = np.array([s.z for s in steps])
@@ -543,7 +543,7 @@ def switch_branch(system: ForcedSystem, params, branch: Branch, bifurcation: Bif
         if not 0 <= int(bifurcation) < len(branch.bifurcations):
             raise ValueError(f"bifurcation index {bifurcation} outside 0..{len(branch.bifurcations) - 1}.")
         bifurcation = branch.bifurcations[int(bifurcation)]
-    if bifurcation.kind != "PD":
+    if bifurcation.kind != BifurcationKind.PD:
         raise ValueError(f"switch_branch starts the doubled branch at a period doubling (kind 'PD'), "
                          f"got kind {bifurcation.kind!r}.")
     options, shoot = _options(branch.settings.options if options is None else options,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import enum
 from typing import Any
 
 import numpy as np
@@ -15,29 +16,57 @@ from ..integrate import AbstractIntegrator, integrator_from_dict
 from ..shooting import ShootOptions
 from ._options import ContinuationOptions
 
-__all__ = ["Branch", "BranchSettings", "BifurcationPoint", "BIFURCATION_KINDS", "BRANCH_STATUS"]
+__all__ = ["Branch", "BranchSettings", "BifurcationPoint", "BifurcationKind", "BranchStatus", "BIFURCATION_KINDS",
+           "BRANCH_STATUS"]
 
-BIFURCATION_KINDS = {
-    "PD": "period doubling (real multiplier through -1)",
-    "SN": "saddle-node / fold (real multiplier through +1, the parameter turns)",
-    "BP": "branch point (real multiplier through +1, no fold)",
-    "NS": "Neimark-Sacker (complex pair through |lambda| = 1)",
-}
-# Why a branch ended.
-BRANCH_STATUS = {
-    "stop": "reached the stop value of the parameter",
-    "bounds": "left the parameter bounds",
-    "max_steps": "took max_steps steps",
-    "diverged": "the orbit or the flow diverged (||x|| > max_norm or non-finite) at the smallest step",
-    "corrector_failed": "the corrector did not converge at the smallest step ds_min",
-}
+class BifurcationKind(enum.StrEnum):
+    """What crossed the unit circle at a located bifurcation (:attr:`meaning` says it in
+    words). A ``StrEnum``: each member equals its short name (``"PD"``, ...)."""
+
+    PD = "PD"
+    SN = "SN"
+    BP = "BP"
+    NS = "NS"
+
+    @property
+    def meaning(self) -> str:
+        return {"PD": "period doubling (real multiplier through -1)",
+                "SN": "saddle-node / fold (real multiplier through +1, the parameter turns)",
+                "BP": "branch point (real multiplier through +1, no fold)",
+                "NS": "Neimark-Sacker (complex pair through |lambda| = 1)"}[self.value]
+
+
+class BranchStatus(enum.StrEnum):
+    """Why a continued branch ended (:attr:`meaning` says it in words). A ``StrEnum``: each
+    member equals its name in files (``"stop"``, ``"max_steps"``, ...)."""
+
+    STOP = "stop"
+    BOUNDS = "bounds"
+    MAX_STEPS = "max_steps"
+    DIVERGED = "diverged"
+    CORRECTOR_FAILED = "corrector_failed"
+
+    @property
+    def meaning(self) -> str:
+        return {"stop": "reached the stop value of the parameter",
+                "bounds": "left the parameter bounds",
+                "max_steps": "took max_steps steps",
+                "diverged": "the orbit or the flow diverged (||x|| > max_norm or non-finite) at the smallest step",
+                "corrector_failed": "the corrector did not converge at the smallest step ds_min"}[self.value]
+
+
+BIFURCATION_KINDS = {k.value: k.meaning for k in BifurcationKind}
+"""``{kind: meaning}`` of :class:`BifurcationKind` (a view for tables)."""
+BRANCH_STATUS = {s.value: s.meaning for s in BranchStatus}
+"""``{status: meaning}`` of :class:`BranchStatus` (a view for tables)."""
+
 
 @dataclasses.dataclass(frozen=True, eq=False, kw_only=True)
 class BifurcationPoint:
     """A bifurcation located on a branch.
 
     Attributes:
-        kind: ``"PD"``, ``"SN"``, ``"BP"`` or ``"NS"`` (see :data:`BIFURCATION_KINDS`).
+        kind: a :class:`BifurcationKind` (``PD``, ``SN``, ``BP`` or ``NS``).
         param_value: the parameter at the bifurcation (located to ``locate_tol`` in
             arclength, typically 1e-10).
         point: ``(dim,)`` the orbit's point at phase ``t0`` (fixed point of ``P^k``).
@@ -54,7 +83,7 @@ class BifurcationPoint:
             location and ``multipliers`` those on one side of it.
     """
 
-    kind: str
+    kind: BifurcationKind
     param_value: float
     point: np.ndarray = array_field(("state",))
     multipliers: np.ndarray = array_field(("multiplier",), default_factory=lambda: np.zeros(0, complex))
@@ -115,7 +144,7 @@ class Branch:
         residuals: ``(m,)`` ``||P^k(x*) - x*||`` at each point.
         tangents: ``(m, dim + 1)`` unit tangent ``(dx, dp)`` of the branch at each point.
         arclength: ``(m,)`` cumulative arclength in ``(x, p)``.
-        status: why the branch ended (a key of :data:`BRANCH_STATUS`).
+        status: why the branch ended (a :class:`BranchStatus`).
         bifurcations: the located :class:`BifurcationPoint` s, in order along the branch.
         period: ``k`` (forcing periods per return of the continued map).
         system: the system's name; state_names: its coordinate names.
@@ -132,7 +161,7 @@ class Branch:
     residuals: np.ndarray = array_field(("point",))
     tangents: np.ndarray = array_field(("point", "tangent_component"))
     arclength: np.ndarray = array_field(("point",))
-    status: str = ""
+    status: BranchStatus = BranchStatus.STOP
     bifurcations: tuple[BifurcationPoint, ...] = items_field("bifurcation", default=())
     period: int = 1
     system: str = ""
@@ -172,7 +201,7 @@ class Branch:
             param_end=float(self.values[-1]) if len(self) else None,
             param_min=float(self.values.min()) if len(self) else None,
             param_max=float(self.values.max()) if len(self) else None,
-            n_stable=int(np.sum(self.stable)), status=self.status, status_text=BRANCH_STATUS.get(self.status, ""),
+            n_stable=int(np.sum(self.stable)), status=self.status, status_text=BranchStatus(self.status).meaning,
             max_residual=float(np.max(self.residuals)) if len(self) else None,
             bifurcations=[dict(kind=b.kind, param_value=float(b.param_value), point=np.asarray(b.point).tolist(),
                                multipliers=[[float(z.real), float(z.imag)] for z in np.asarray(b.multipliers)],
@@ -187,7 +216,7 @@ class Branch:
         names = self.state_names
         head = (f"P-{self.period} branch of {self.system} in {self.param}: {m} points, "
                 f"{self.param} {self.values.min():.6g} .. {self.values.max():.6g}, "
-                f"status: {self.status} ({BRANCH_STATUS.get(self.status, '')})") if m else "empty branch"
+                f"status: {self.status} ({BranchStatus(self.status).meaning})") if m else "empty branch"
         if m == 0:
             return head
         rows_idx = set(np.unique(np.linspace(0, m - 1, min(m, max(2, int(max_rows)))).round().astype(int)).tolist())

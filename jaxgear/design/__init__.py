@@ -5,7 +5,7 @@
 - :mod:`._design` — :func:`design` (optax, projection onto bounds) and :class:`DesignResult`.
 """
 
-from ._design import DesignOptions, DesignResult, DesignSettings, design
+from ._design import DesignOptions, DesignResult, DesignSettings, DesignStatus, design
 from ._objectives import (
     MeshForces,
     OrbitSamples,
@@ -20,6 +20,6 @@ from ._objectives import (
     transmission_error_rms,
 )
 
-__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings", "OrbitSamples", "sample_orbit", "MeshForces", "mesh_forces",
+__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings", "DesignStatus", "OrbitSamples", "sample_orbit", "MeshForces", "mesh_forces",
            "transmission_error", "peak_to_peak", "rms", "max_multiplier", "mesh_force_ptp", "mesh_force_rms",
            "transmission_error_rms"]

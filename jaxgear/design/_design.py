@@ -39,6 +39,7 @@ preferred.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
@@ -63,7 +64,21 @@ from ..shooting._floquet import check_period
 from ..shooting._options import with_changes
 from ._objectives import OrbitSamples, sample_orbit
 
-__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings"]
+__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings", "DesignStatus"]
+
+
+class DesignStatus(enum.StrEnum):
+    """How a :func:`design` ended. A ``StrEnum``: each member equals its text in files and
+    tables (``"converged"``, ``"max steps"``, ...)."""
+
+    CONVERGED = "converged"
+    """The projected gradient fell to ``tol``."""
+    MAX_STEPS = "max steps"
+    """The step limit was reached."""
+    NEWTON_FAILED = "newton failed"
+    """No converged orbit of the tracked period near the last iterate, even after shrinking."""
+    LOST_STABILITY = "lost stability"
+    """Every shrunk step made the orbit unstable (``require_stable``)."""
 
 
 def _params_to_json(p) -> dict[str, Any]:
@@ -91,8 +106,8 @@ class DesignResult:
             bound range), ``"newton_iterations"``, ``"residual"``, ``"step_scale"``
             (1, or the factor the step was shrunk by to keep the orbit converged/stable).
         free: ``{name: (low, high)}`` bounds of the free parameters.
-        status: ``"converged"`` (projected gradient <= tol), ``"max steps"``,
-            ``"newton failed"`` or ``"lost stability"`` (a step could not be taken even
+        status: a :class:`DesignStatus`: ``CONVERGED`` (projected gradient <= tol),
+            ``MAX_STEPS``, ``NEWTON_FAILED`` or ``LOST_STABILITY`` (a step could not be taken even
             after shrinking it; the last good iterate is returned).
         message: a sentence explaining ``status``.
         initial_params: the parameters at the start (same pytree type as the input).
@@ -107,7 +122,7 @@ class DesignResult:
     initial_orbit: PeriodicOrbit = None  # type: ignore[assignment]
     history: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     free: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
-    status: str = ""
+    status: DesignStatus = DesignStatus.MAX_STEPS
     message: str = ""
     initial_params: Any = custom_field(_params_to_json, _params_from_json)
     system: str = ""
@@ -388,36 +403,36 @@ class _History:
         return {key: np.asarray(v) for key, v in self.data.items()}
 
 
-def _rejection(ev: _Eval, ev_new: _Eval, period0: int, options: DesignOptions) -> str:
-    """Why the step to ``ev_new`` is refused (``""``: accepted)."""
+def _rejection(ev: _Eval, ev_new: _Eval, period0: int, options: DesignOptions) -> DesignStatus | None:
+    """Why the step to ``ev_new`` is refused (``None``: accepted)."""
     finite = np.isfinite(float(ev_new.value)) and np.all(np.isfinite(np.asarray(ev_new.grad)))
     if int(ev_new.status) != Status.CONVERGED or not finite:
-        return "newton failed"
+        return DesignStatus.NEWTON_FAILED
     x, x_new = np.asarray(ev.point), np.asarray(ev_new.point)
     jump = options.max_jump is not None and np.linalg.norm(x_new - x) > options.max_jump * (1.0 + np.linalg.norm(x))
     if int(ev_new.min_period) != period0 or jump:
-        return "newton failed"  # it converged to another orbit: the tracked one is gone
+        return DesignStatus.NEWTON_FAILED  # it converged to another orbit: the tracked one is gone
     if options.require_stable and not np.max(np.abs(np.asarray(ev_new.multipliers))) < 1.0:
-        return "lost stability"
-    return ""
+        return DesignStatus.LOST_STABILITY
+    return None
 
 
 def _try_step(evaluate, u, target, ev: _Eval, period0: int, options: DesignOptions):
     """Step from ``u`` toward ``target``, halved up to ``max_shrink`` times until the orbit
-    stays tracked. Returns ``(u, ev, scale, why)`` (``why`` empty when a step was taken)."""
-    scale, why = 1.0, ""
+    stays tracked. Returns ``(u, ev, scale, why)`` (``why`` ``None`` when a step was taken)."""
+    scale, why = 1.0, None
     for _ in range(options.max_shrink + 1):
         trial = u + scale * (target - u)
         ev_new = evaluate(trial, ev.point)
         why = _rejection(ev, ev_new, period0, options)
-        if not why:
-            return trial, ev_new, scale, ""
+        if why is None:
+            return trial, ev_new, scale, None
         scale *= 0.5
     return u, ev, scale, why
 
 
-def _stop_message(why: str, period0: int, max_shrink: int) -> str:
-    if why == "newton failed":
+def _stop_message(why: DesignStatus, period0: int, max_shrink: int) -> str:
+    if why is DesignStatus.NEWTON_FAILED:
         return (f"no converged P-{period0} orbit near the last iterate even after {max_shrink} step halvings "
                 "(the solver failed or reached another orbit): the tracked orbit ends near a fold")
     return (f"every step toward lower objective (down to 1/{2 ** max_shrink} of the proposed one) "
@@ -429,7 +444,7 @@ def _optimise(evaluate, u, ev: _Eval, hist: _History, options: DesignOptions, op
     pg = hist.record(ev, u, 1.0)
     period0 = int(ev.min_period)
     opt_state = optimizer.init(u)
-    status, message = "max steps", f"the step limit ({options.steps}) was reached."
+    status, message = DesignStatus.MAX_STEPS, f"the step limit ({options.steps}) was reached."
     bar = progress_bar(options.steps, "design", progress, unit="step")
     try:
         for _ in range(options.steps):
@@ -440,7 +455,7 @@ def _optimise(evaluate, u, ev: _Eval, hist: _History, options: DesignOptions, op
             with jax.numpy_dtype_promotion("standard"):
                 updates, new_state = optimizer.update(ev.grad, opt_state, u)
             u, ev, scale, why = _try_step(evaluate, u, jnp.clip(u + updates, 0.0, 1.0), ev, period0, options)
-            if why:
+            if why is not None:
                 return u, ev, why, _stop_message(why, period0, options.max_shrink)
             opt_state = new_state
             pg = hist.record(ev, u, scale)
@@ -449,7 +464,7 @@ def _optimise(evaluate, u, ev: _Eval, hist: _History, options: DesignOptions, op
     finally:
         bar.close()
     if pg <= options.tol:
-        status, message = "converged", f"projected gradient {pg:.2e} <= tol={options.tol:g}."
+        status, message = DesignStatus.CONVERGED, f"projected gradient {pg:.2e} <= tol={options.tol:g}."
     return u, ev, status, message
 
 
