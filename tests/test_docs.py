@@ -1,20 +1,31 @@
-"""The documentation site (mkdocs.yml, docs/) builds in strict mode.
+"""The documentation (README.md, CONTRIBUTING.md, mkdocs.yml, docs/) is checked like code.
 
-A broken link or anchor, a page missing from the navigation, or an API reference to a
-name that no longer exists fails the build, and so this test. The reference pages are
-generated from the docstrings of this checkout's ``jaxgear`` (``paths: [.]`` in
-mkdocs.yml), not from whichever copy is installed.
+The site builds in strict mode: a broken link or anchor, a page missing from the
+navigation, or an API reference to a name that no longer exists fails the build, and so
+these tests. The reference pages are generated from the docstrings of this checkout's
+``jaxgear`` (``paths: [.]`` in mkdocs.yml), not from whichever copy is installed.
+
+Every ```` ```python ```` block of the README and of the pages runs: the blocks of one
+page in order, in one namespace, in a fresh folder, so a renamed or removed option fails
+the suite instead of misleading a reader. Output excerpts use ```` ```text ```` or
+```` ```console ````; a Python block that cannot run here (one process of a cluster job)
+is preceded by ``<!-- not run: why -->``. Every ``--option`` of a ``jaxgear`` command in
+the shell and output blocks is one that ``jaxgear <command> --help`` lists.
 """
 
 from __future__ import annotations
 
 import ast
+import contextlib
 import html
 import importlib.util
+import io
 import os
 import re
 import subprocess
 import sys
+import textwrap
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -156,3 +167,203 @@ def test_docstring_extension_rewrites():
     assert ext.rewrite_model_refs("(docs/model.md §4) and docs/model.md §2-§4") == (
         "([model §4][section-4]) and [model §2–§4][section-2]"
     )
+
+
+# --- the code in the documentation runs ------------------------------------------------
+
+PAGES = sorted([ROOT / "README.md", ROOT / "CONTRIBUTING.md", *DOCS.rglob("*.md")])
+
+SLOW_PAGES = {
+    # page: why its examples run in the slow tier only. The default tier runs the README's
+    # example and those that reuse its compiled analysis (the paper's region D in
+    # 10 x 6 x 12 cells, the default method); each page below compiles programs of its
+    # own (tens of seconds each) or integrates long.
+    "docs/index.md": "the paper's cell map",
+    "docs/howto/custom-gear-set.md": "a four-planet analysis",
+    "docs/howto/own-system.md": "a user system analysed by every method, shooting, figures",
+    "docs/howto/reproduce-paper.md": "the paper's full-size analyses (minutes)",
+    "docs/howto/save-load.md": "shooting, figures, files",
+    "docs/methods/attractors.md": "2,000-period Lyapunov runs and a 12-value backlash sweep",
+    "docs/methods/continuation.md": "continuation and branch switching",
+    "docs/methods/design.md": "40 gradient steps through a P-4 orbit",
+    "docs/methods/global-analysis.md": "every method, the 4-D stroboscopic grid",
+    "docs/methods/index.md": "a reference flow, shooting and RK4(400) analyses",
+    "docs/methods/shooting.md": "orbit searches over periods 1 to 8",
+    "docs/methods/sweeps.md": "bifurcation diagrams, basin sweeps and maps",
+}
+
+_FENCE = re.compile(
+    r"^(?P<indent>[ \t]*)(?P<fence>`{3,})(?P<info>[^`\n]*)\n(?P<body>.*?)^(?P=indent)(?P=fence)[ \t]*$",
+    flags=re.M | re.S,
+)
+_NOT_RUN = re.compile(r"<!--\s*not run:\s*(?P<why>[^>]*?)\s*-->\s*$")
+
+
+@dataclass(frozen=True)
+class Block:
+    """One fenced code block: its language, first code line (1-based) and text."""
+
+    lang: str
+    line: int
+    code: str
+    not_run: str | None  # the reason given in a ``<!-- not run: ... -->`` line just above
+
+
+def code_blocks(text: str) -> list[Block]:
+    """The fenced code blocks of a markdown text (indented ones, in lists and admonitions, too)."""
+    blocks = []
+    for m in _FENCE.finditer(text):
+        before = text[: m.start()].rstrip("\n").rsplit("\n", 1)[-1]
+        why = _NOT_RUN.search(before)
+        lang = (m.group("info").strip().split() or [""])[0].lstrip(".{").rstrip("}")
+        blocks.append(Block(lang, text.count("\n", 0, m.start("body")) + 1,
+                            textwrap.dedent(m.group("body")), why.group("why") if why else None))
+    return blocks
+
+
+def run_python_blocks(page: Path) -> int:
+    """Run the ``python`` blocks of ``page`` in order in one namespace, in the current
+    folder; an error propagates with the page and its line in the traceback. Returns the
+    number of blocks run."""
+    namespace = {"__name__": "__main__"}
+    ran = 0
+    for block in code_blocks(page.read_text(encoding="utf-8")):
+        if block.lang not in ("python", "py") or block.not_run is not None:
+            continue
+        code = compile("\n" * (block.line - 1) + block.code, str(page), "exec")  # the page's line numbers
+        exec(code, namespace)
+        ran += 1
+    return ran
+
+
+def _page_id(page: Path) -> str:
+    return str(page.relative_to(ROOT))
+
+
+def _page_params():
+    for page in PAGES:
+        name = _page_id(page)
+        if not page.is_file() or not any(b.lang in ("python", "py") for b in code_blocks(page.read_text("utf-8"))):
+            continue
+        marks = [pytest.mark.slow] if name in SLOW_PAGES else []
+        yield pytest.param(page, id=name, marks=marks)
+
+
+@pytest.fixture
+def in_tmp_folder(tmp_path, monkeypatch):
+    """A fresh working folder, the Agg backend for figures, and every figure closed after."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    monkeypatch.chdir(tmp_path)
+    yield tmp_path
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
+@pytest.mark.parametrize("page", list(_page_params()))
+def test_python_examples_run(page, in_tmp_folder):
+    assert run_python_blocks(page) > 0
+
+
+def test_readme_example_runs_in_the_default_tier():
+    """The README's example is among the executed blocks, and not only in the slow tier."""
+    blocks = [b for b in code_blocks((ROOT / "README.md").read_text("utf-8")) if b.lang == "python"]
+    assert blocks and all(b.not_run is None for b in blocks)
+    assert blocks[0].code.startswith("import jaxgear\njaxgear.enable_compilation_cache()")
+    assert "README.md" not in SLOW_PAGES
+
+
+def test_slow_pages_exist():
+    assert all((ROOT / name).is_file() for name in SLOW_PAGES), "a page in SLOW_PAGES was moved"
+
+
+def test_a_removed_option_in_an_example_fails(tmp_path, monkeypatch):
+    """The runner fails on an example that passes an option that does not exist, at the
+    page's own line, and runs neither output blocks nor blocks marked not run."""
+    page = tmp_path / "page.md"
+    page.write_text(textwrap.dedent('''\
+        # A page
+
+        ```text
+        this is output, not code
+        ```
+
+        <!-- not run: one process of a cluster job -->
+        ```python
+        raise RuntimeError("a block marked not run was run")
+        ```
+
+        ```python
+        import jaxgear
+        grid = jaxgear.CellGrid.paper(counts=(4, 3, 5))
+        ```
+
+        !!! note
+            ```python
+            result = jaxgear.analyze_global(grid=grid, pilot=True)
+            ```
+        '''), encoding="utf-8")
+    assert [b.lang for b in code_blocks(page.read_text("utf-8"))] == ["text", "python", "python", "python"]
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(TypeError, match="pilot") as info:
+        run_python_blocks(page)
+    assert any(entry.path == page and entry.lineno + 1 == 19 for entry in info.traceback)
+    page.write_text(page.read_text("utf-8").replace(", pilot=True", ", progress=True, uncertainty=-1"))
+    with pytest.raises(ValueError, match="uncertainty"):
+        run_python_blocks(page)
+
+
+# --- every option of a jaxgear command in the documentation exists --------------------
+
+_COMMAND = re.compile(r"(?:^|[\s$;&|(])jaxgear\s+(params|analyze|shoot|sweep)\b(?P<rest>[^\n]*)")
+
+
+def _documented_options(pages=PAGES) -> dict[tuple[str, str], list[str]]:
+    """``{(command, --option): [page:line, ...]}`` for every ``jaxgear <command> ... --option``
+    in the shell and output blocks and the inline code of ``pages`` (the README and the pages)."""
+    found: dict[tuple[str, str], list[str]] = {}
+    for page in pages:
+        if not page.is_file():
+            continue
+        text = page.read_text(encoding="utf-8")
+        spans = [(b.line, b.code) for b in code_blocks(text) if b.lang in ("bash", "sh", "console", "text", "")]
+        inline = [(n + 1, code) for n, line in enumerate(text.split("\n")) for code in re.findall(r"`([^`\n]+)`", line)]
+        for first, code in spans + inline:
+            for offset, line in enumerate(code.replace("\\\n", " ").split("\n")):  # continued lines joined
+                for m in _COMMAND.finditer(line):
+                    rest = m.group("rest").split("#")[0]
+                    for option in re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", rest):
+                        found.setdefault((m.group(1), option), []).append(f"{page.name}:{first + offset}")
+    return found
+
+
+def _help_options(command: str) -> set[str]:
+    from jaxgear.cli import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit):
+        main([command, "--help"])
+    return set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", out.getvalue()))
+
+
+def _unknown_options(documented) -> dict[str, list[str]]:
+    known = {cmd: _help_options(cmd) for cmd in {cmd for cmd, _ in documented}}
+    return {f"jaxgear {cmd} {opt}": where for (cmd, opt), where in documented.items() if opt not in known[cmd]}
+
+
+def test_documented_command_options_exist():
+    documented = _documented_options()
+    assert ("analyze", "--out") in documented  # the collector sees the README's set-up line
+    assert ("sweep", "--values2") in documented  # and the other commands' (docs/howto/cli.md)
+    wrong = _unknown_options(documented)
+    assert not wrong, f"options that `jaxgear <command> --help` does not list: {wrong}"
+
+
+def test_a_removed_command_option_is_found(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("Run `jaxgear analyze --pilot 1024`, or:\n\n```bash\njaxgear shoot --random 8 \\\n"
+                    "    --damping 0.5 --out x   # --not-this-one\n```\n", encoding="utf-8")
+    assert _unknown_options(_documented_options([page])) == {
+        "jaxgear analyze --pilot": ["page.md:1"], "jaxgear shoot --damping": ["page.md:4"]}

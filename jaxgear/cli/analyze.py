@@ -53,7 +53,7 @@ def add_parser(sub) -> None:
     p.add_argument("--method", default=DEFAULT_METHOD, choices=tuple(METHODS),
                    help=f"{DEFAULT_METHOD} (default): integrate every cell centre until its attractor is recognised; "
                    "poincare-like: the paper's map (l periods, then the next crossing of x4 = 0, restarted at "
-                   "phase 0: it loses the forcing phase, see README); "
+                   "phase 0: it loses the forcing phase, see docs/methods/global-analysis.md); "
                    "stroboscopic: Hsu's simple cell mapping of the stroboscopic map (grid over x1..x4)")
     p.add_argument("--grid", type=parse_counts, default=None, metavar="N1,N2,N3[,N4]",
                    help="cells per axis (default 50,30,60; stroboscopic default 25,15,30,12; with --system the "

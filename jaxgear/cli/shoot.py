@@ -57,9 +57,9 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser(
         "shoot", help="periodic orbits by shooting: points, minimal period, Floquet multipliers, stability",
-        description="Shooting method (paper §4.1): damped Newton on P^k(x) - x = 0 for the stroboscopic map "
-        "of the reduced 2-DOF gear model (state x1..x4 at forcing phase 0), Jacobian by automatic "
-        "differentiation through the RK4 integrator. Prints every distinct orbit found, its minimal period, "
+        description="Shooting method (paper §4.1): Levenberg-Marquardt (optimistix) on P^k(x) - x = 0 for the "
+        "stroboscopic map of the reduced 2-DOF gear model (state x1..x4 at forcing phase 0), Jacobian by automatic "
+        "differentiation through the kink-aware RK4 integrator. Prints every distinct orbit found, its minimal period, "
         "Floquet multipliers, stability and how an unstable orbit is unstable (fold: real multiplier > 1; "
         "flip: real multiplier < -1; neimark-sacker: complex pair outside the unit circle).",
     )
