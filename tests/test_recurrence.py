@@ -1,12 +1,17 @@
-"""Attractors of every type by recurrences on a fine partition (jaxgear.analysis._recurrence).
+"""Attractors of every type by recurrences on a fine partition: the boxes
+(jaxgear.analysis._boxes), the candidates' clouds (jaxgear.analysis._cloud) and
+classify_by_recurrence (jaxgear.analysis._recurrence), a view of the direct method's lane
+pool, so the classifications below exercise the pool itself.
 
 References that do not come from the code: a Python dict for the box table, numpy floors
-for the box keys, hand-made clouds, and a brute-force long integration of the forced
-Duffing oscillator in numpy (its own RK4, another step) for the shares of a chaotic and a
-periodic attractor that coexist.
+for the box keys, hand-made clouds, and brute-force long integrations of the forced
+Duffing oscillator (in numpy, its own RK4 with another step; and long stroboscopic orbits)
+for the attractor each state ends on, compared state by state.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import jax.numpy as jnp
 import numpy as np
@@ -14,7 +19,7 @@ import pytest
 
 import jaxgear  # noqa: F401  (float64)
 from jaxgear._examples import DUFFING, DuffingParams
-from jaxgear.analysis import PoolOptions
+from jaxgear.analysis import PoolOptions, _boxes, _cloud
 from jaxgear.analysis import _recurrence as rec
 from jaxgear.integrate import RK4
 
@@ -24,7 +29,7 @@ from jaxgear.integrate import RK4
 def _insert_all(table, batches):
     dropped = 0
     for label, keys in batches:
-        table, d = rec.insert(table, jnp.asarray(keys, jnp.int64), label)
+        table, d = _boxes.insert(table, jnp.asarray(keys, jnp.int64), label)
         dropped += int(d)
     return table, dropped
 
@@ -41,12 +46,12 @@ def test_table_agrees_with_a_dict(capacity, n_keys, key_range):
     for lab, keys in batches:
         for k in keys:
             ref.setdefault(int(k), lab)
-    table, dropped = _insert_all(rec.empty_table(capacity), batches)
+    table, dropped = _insert_all(_boxes.empty_table(capacity), batches)
     assert dropped == 0
     absent = rng.integers(0, key_range, size=200)
     absent = absent[~np.isin(absent, pool)]
     probe = np.concatenate([pool, absent, [-1]])
-    got = np.asarray(rec.lookup(table, jnp.asarray(probe, jnp.int64)))
+    got = np.asarray(_boxes.lookup(table, jnp.asarray(probe, jnp.int64)))
     want = np.array([ref.get(int(k), -1) for k in probe])
     np.testing.assert_array_equal(got, want)
 
@@ -56,9 +61,9 @@ def test_table_overflow_is_counted():
     many, the others keep their labels and the dropped ones are absent."""
     keys = np.arange(1, 101, dtype=np.int64) * 7919
     labels = np.arange(100) % 7
-    table, dropped = rec.insert(rec.empty_table(64), jnp.asarray(keys), jnp.asarray(labels))
+    table, dropped = _boxes.insert(_boxes.empty_table(64), jnp.asarray(keys), jnp.asarray(labels))
     dropped = int(dropped)
-    got = np.asarray(rec.lookup(table, jnp.asarray(keys)))
+    got = np.asarray(_boxes.lookup(table, jnp.asarray(keys)))
     stored = got >= 0
     assert dropped >= 36
     assert stored.sum() == 100 - dropped
@@ -67,7 +72,7 @@ def test_table_overflow_is_counted():
 
 def test_table_capacity_must_be_a_power_of_two():
     with pytest.raises(ValueError, match="capacity=100"):
-        rec.empty_table(100)
+        _boxes.empty_table(100)
     with pytest.raises(ValueError, match="capacity"):
         rec.RecurrenceOptions(capacity=3000)
 
@@ -77,16 +82,16 @@ def test_table_capacity_must_be_a_power_of_two():
 
 def test_packed_keys_are_the_numpy_box_coordinates():
     """dim 4: the key unpacks into floor((y - lo) / width) computed in numpy; -1 outside."""
-    part = rec.partition_from_box([-25, -10, -10, -5], [25, 20, 50, 5], 100)
+    part = _boxes.partition_from_box([-25, -10, -10, -5], [25, 20, 50, 5], 100)
     rng = np.random.default_rng(0)
     Y = rng.uniform(-30, 60, (4, 500))
     Y[:, :3] = [[1e9, np.nan, -1e9]] * 4  # outside the index range, not finite
-    keys = np.asarray(rec.cell_keys(part, jnp.asarray(Y)))
+    keys = np.asarray(_boxes.cell_keys(part, jnp.asarray(Y)))
     lo, w = np.asarray(part.lo), np.asarray(part.width)
     idx = np.floor((Y - lo[:, None]) / w[:, None])
     assert np.all(keys[:3] == -1)
-    mask = (1 << rec.INDEX_BITS) - 1
-    dec = np.stack([(keys[3:] >> (rec.INDEX_BITS * d)) & mask for d in range(4)])
+    mask = (1 << _boxes.INDEX_BITS) - 1
+    dec = np.stack([(keys[3:] >> (_boxes.INDEX_BITS * d)) & mask for d in range(4)])
     np.testing.assert_array_equal(dec, idx[:, 3:].astype(np.int64))
     np.testing.assert_allclose(w, [0.5, 0.3, 0.6, 0.1])
 
@@ -95,14 +100,14 @@ def test_hashed_keys_separate_boxes_in_eight_dimensions():
     """dim 8 (the 3-planet model): 4,000 boxes, many of them neighbours that differ in one
     coordinate, each sampled twice inside: equal keys within a box, distinct across."""
     dim = 8
-    part = rec.partition_from_box(np.zeros(dim), np.ones(dim), 64)
+    part = _boxes.partition_from_box(np.zeros(dim), np.ones(dim), 64)
     rng = np.random.default_rng(1)
     boxes = np.unique(rng.integers(0, 4, (4000, dim)), axis=0)
     boxes = np.concatenate([boxes, boxes[:500] + np.eye(dim, dtype=np.int64)[rng.integers(0, dim, 500)]])
-    boxes = np.unique(boxes, axis=0) + (1 << (rec.INDEX_BITS - 1))
+    boxes = np.unique(boxes, axis=0) + (1 << (_boxes.INDEX_BITS - 1))
     lo, w = np.asarray(part.lo), np.asarray(part.width)
     pts = [lo + (boxes + rng.uniform(0.05, 0.95, boxes.shape)) * w for _ in range(2)]
-    k1, k2 = (np.asarray(rec.cell_keys(part, jnp.asarray(p.T))) for p in pts)
+    k1, k2 = (np.asarray(_boxes.cell_keys(part, jnp.asarray(p.T))) for p in pts)
     np.testing.assert_array_equal(k1, k2)
     assert np.all(k1 >= 0)
     assert len(np.unique(k1)) == len(boxes)
@@ -126,7 +131,7 @@ def test_track_hits_runs():
     n = max(len(s) for s, _ in seqs.values())
     for t in range(n):
         lab = jnp.asarray([s[t] if t < len(s) else -9 for s, _ in seqs.values()], jnp.int32)
-        a, h, m = rec.track_hits(lab, att, hits, misses, 2)
+        a, h, m = _boxes.track_hits(lab, att, hits, misses, 2)
         keep = lab == -9  # this sequence has ended
         att, hits, misses = (jnp.where(keep, x, y) for x, y in ((att, a), (hits, h), (misses, m)))
     assert list(zip(np.asarray(att).tolist(), np.asarray(hits).tolist())) == [want for _, want in seqs.values()]
@@ -135,7 +140,7 @@ def test_track_hits_runs():
 # --------------------------------------------------------------------------- clouds
 
 
-def _cloud(points):
+def _one_copy(points):
     """``(P, dim)`` -> ``(P, dim, 1)``."""
     return jnp.asarray(np.asarray(points)[:, :, None])
 
@@ -143,12 +148,12 @@ def _cloud(points):
 def test_recurrence_share_tells_attractors_from_transients():
     """An irrational rotation of a circle recurs (its second half lies in the first half's
     boxes); a drift along a line (a transient still moving on) does not."""
-    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    part = _boxes.partition_from_box([-1, -1], [1, 1], 40)
     t = np.arange(4000) * 2 * np.pi * (np.sqrt(5) - 1) / 2
     circle = np.column_stack([np.cos(t), np.sin(t)])
     line = np.column_stack([np.linspace(-1, 1, 4000), np.zeros(4000)])
-    assert float(rec.recurrence_share(part, _cloud(circle))) > 0.99
-    assert float(rec.recurrence_share(part, _cloud(line))) == 0.0
+    assert float(_cloud.recurrence_share(part, _one_copy(circle))) > 0.99
+    assert float(_cloud.recurrence_share(part, _one_copy(line))) == 0.0
 
 
 def test_near_periodic_sees_cycles_not_rotations():
@@ -157,7 +162,7 @@ def test_near_periodic_sees_cycles_not_rotations():
     more); the same cycle with noise that does not die out (three bands a third of a box
     wide: an attractor that repeats within a box but never converges, as a narrow-banded
     chaotic one) is not, nor the irrational rotation."""
-    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    part = _boxes.partition_from_box([-1, -1], [1, 1], 40)
     w = float(part.width[0])
     t = np.arange(600)
     cyc = np.array([[0.5, 0.1], [-0.3, 0.7], [0.2, -0.6]])[t % 3]
@@ -166,10 +171,10 @@ def test_near_periodic_sees_cycles_not_rotations():
     bands = cyc + np.random.default_rng(2).uniform(-w / 6, w / 6, (600, 2))
     th = t * 2 * np.pi * (np.sqrt(5) - 1) / 2
     rot = np.column_stack([np.cos(th), np.sin(th)])
-    assert bool(rec.near_periodic(part, _cloud(approach), 8))
-    assert bool(rec.near_periodic(part, _cloud(reached), 8))
-    assert not bool(rec.near_periodic(part, _cloud(bands), 8))
-    assert not bool(rec.near_periodic(part, _cloud(rot), 8))
+    assert bool(_cloud.near_periodic(part, _one_copy(approach), 8))
+    assert bool(_cloud.near_periodic(part, _one_copy(reached), 8))
+    assert not bool(_cloud.near_periodic(part, _one_copy(bands), 8))
+    assert not bool(_cloud.near_periodic(part, _one_copy(rot), 8))
 
 
 def test_near_cycle_lanes():
@@ -178,7 +183,7 @@ def test_near_cycle_lanes():
     on noisy bands around it whose newest errors exceed the older ones, one on the
     irrational rotation and one without history yet (NaN) are not."""
     M = 4
-    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    part = _boxes.partition_from_box([-1, -1], [1, 1], 40)
     w = float(part.width[0])
     t = np.arange(2 * M)  # periods back
     cyc = np.array([[0.5, 0.1], [-0.3, 0.7]])[t % 2]
@@ -188,7 +193,7 @@ def test_near_cycle_lanes():
     rot = np.column_stack([np.cos(2.4 * t), np.sin(2.4 * t)])
     young = np.full((2 * M, 2), np.nan)
     ring = jnp.asarray(np.stack([settling, leaving, noisy, rot, young], axis=-1))  # (2M, 2, 5)
-    assert np.asarray(rec.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False, False, False]
+    assert np.asarray(_cloud.near_cycle_lanes(ring, part.width, M)).tolist() == [True, False, False, False, False]
 
 
 def test_oldest_off_cycle_picks_the_oldest_lane_not_settling():
@@ -207,20 +212,20 @@ def test_oldest_off_cycle_picks_the_oldest_lane_not_settling():
     eligible = rng.random(L) < 0.6
     near = rng.random(L) < 0.5
     ring = np.where(near[None, None], settling[:, :, None], wander)
-    lane, found = rec.oldest_off_cycle(jnp.asarray(eligible), jnp.asarray(ages), lambda i: jnp.asarray(ring)[:, :, i],
+    lane, found = _cloud.oldest_off_cycle(jnp.asarray(eligible), jnp.asarray(ages), lambda i: jnp.asarray(ring)[:, :, i],
                                        width, M)
     ok = np.flatnonzero(eligible & ~near)
     assert bool(found) and int(lane) == ok[np.argmax(ages[ok])]
     # the CANDIDATE_POOL oldest eligible lanes settle; the only lane that does not is younger
-    K = rec.CANDIDATE_POOL
+    K = _cloud.CANDIDATE_POOL
     L2 = K + 8
     ages2 = np.arange(L2, dtype=np.int32)[::-1] + 100  # lane 0 oldest
     ring2 = np.repeat(settling[:, :, None], L2, axis=2)
     ring2[:, :, L2 - 1] = wander[:, :, 0]
-    lane, found = rec.oldest_off_cycle(jnp.ones(L2, bool), jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
+    lane, found = _cloud.oldest_off_cycle(jnp.ones(L2, bool), jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
                                        width, M)
     assert not bool(found)
-    lane, found = rec.oldest_off_cycle(jnp.arange(L2) >= 8, jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
+    lane, found = _cloud.oldest_off_cycle(jnp.arange(L2) >= 8, jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
                                        width, M)  # now it is among the pool's oldest eligible lanes
     assert bool(found) and int(lane) == L2 - 1
 
@@ -228,16 +233,16 @@ def test_oldest_off_cycle_picks_the_oldest_lane_not_settling():
 def test_overlap_shares_match_clouds_by_boxes():
     """Boxes of a circle registered as attractor 0 and of a smaller circle as attractor 1: a
     new sampling of the first circle lies in 0's boxes, a disjoint circle in none."""
-    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    part = _boxes.partition_from_box([-1, -1], [1, 1], 40)
     t = np.arange(3000) * 2 * np.pi * (np.sqrt(5) - 1) / 2
     ring = np.column_stack([np.cos(t), np.sin(t)])
-    table, _ = rec.insert(rec.empty_table(1024), rec.cell_keys(part, jnp.asarray(0.8 * ring.T)), 0)
-    table, _ = rec.insert(table, rec.cell_keys(part, jnp.asarray(0.3 * ring.T)), 1)
+    table, _ = _boxes.insert(_boxes.empty_table(1024), _boxes.cell_keys(part, jnp.asarray(0.8 * ring.T)), 0)
+    table, _ = _boxes.insert(table, _boxes.cell_keys(part, jnp.asarray(0.3 * ring.T)), 1)
     s = np.random.default_rng(4).uniform(0, 2 * np.pi, 500)
     again = jnp.asarray(0.8 * np.stack([np.cos(s), np.sin(s)]))
     other = jnp.asarray(0.55 * np.stack([np.cos(s), np.sin(s)]))
-    np.testing.assert_allclose(np.asarray(rec.overlap_shares(table, part, again, 2)), [1.0, 0.0])
-    np.testing.assert_allclose(np.asarray(rec.overlap_shares(table, part, other, 2)), [0.0, 0.0])
+    np.testing.assert_allclose(np.asarray(_cloud.overlap_shares(table, _boxes.cell_keys(part, again), 2)), [1.0, 0.0])
+    np.testing.assert_allclose(np.asarray(_cloud.overlap_shares(table, _boxes.cell_keys(part, other), 2)), [0.0, 0.0])
 
 
 # --------------------------------------------------------------------------- a chaotic and a periodic attractor
@@ -279,36 +284,65 @@ def _duffing_brute_force(X, periods, tail, steps=80):
     return periodic.astype(int), pts[-1]
 
 
+N_STATES = 200
+"""States of each classification below: one queue shape, so one compiled pool serves them all."""
+POOL = PoolOptions(lanes=N_STATES)
+OPTIONS = rec.RecurrenceOptions(resolution=100, cloud_periods=400)
+
+
+def _classify(params, X):
+    """:func:`classify_by_recurrence` of the Duffing states ``X (N_STATES, 2)`` (RK4, 64 steps a period)."""
+    return rec.classify_by_recurrence(DUFFING, DuffingParams(**params), X, options=OPTIONS, integrator=RK4(64),
+                                      pool=POOL)
+
+
+def _box_coords(partition, pts):
+    """The integer box coordinates of the points ``pts (m, dim)``, as tuples (numpy floors)."""
+    lo, w = np.asarray(partition.lo), np.asarray(partition.width)
+    return list(map(tuple, np.floor((pts - lo) / w).astype(np.int64)))
+
+
+def _near_boxes(partition, cloud):
+    """The boxes of the finite points of ``cloud (m, dim)`` and their neighbours (a finite
+    cloud covers an attractor only partly), as a set of coordinate tuples."""
+    cloud = cloud[np.all(np.isfinite(cloud), axis=1)]
+    steps = np.array(list(itertools.product((-1, 0, 1), repeat=cloud.shape[1])))
+    boxes = np.unique(np.array(_box_coords(partition, cloud)), axis=0)
+    return set(map(tuple, (boxes[:, None] + steps[None]).reshape(-1, cloud.shape[1])))
+
+
 def test_chaotic_and_periodic_attractors_coexist():
     """Both attractors are found (one P-1 cycle, one aperiodic attractor of boxes), every
-    state is decided, and the share of each agrees with a brute-force numpy integration
-    of the same random states within 3 binomial standard errors; the cycle's point is the
-    brute force's, and the brute force's chaotic end points lie in the aperiodic
-    attractor's boxes."""
-    rng = np.random.default_rng(7)
-    n = 200
-    X = rng.uniform(-2, 2, (n, 2))
-    opt = rec.RecurrenceOptions(resolution=100, cloud_periods=400)
-    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), X, options=opt, integrator=RK4(64),
-                                   pool=PoolOptions(lanes=n))
-    labels = np.asarray(r.labels)
+    state is decided in time, and state by state on the attractor a brute-force
+    numpy integration of the same random states ends on (at most 2 of the 200 may differ:
+    a state on the basin boundary may go either way under another step; none does today,
+    with 72 or 64 steps a period); the cycle's point is the brute force's, and the brute
+    force's chaotic end points lie in the boxes of the aperiodic attractor's cloud or next
+    to them (where few random states of the region do)."""
+    X = np.random.default_rng(7).uniform(-2, 2, (N_STATES, 2))
+    r = _classify(DUFF, X)
+    labels, used = np.asarray(r.labels), np.asarray(r.periods_used)
     periods = np.asarray(r.periods).tolist()
     assert sorted(periods) == [rec.APERIODIC, 1]
     assert np.all(labels >= 0)
+    # decided before the limit (a state decided by its own cloud is charged the cloud and its verification)
+    assert np.all((used > 0) & (used < POOL.max_periods + OPTIONS.cloud_periods + OPTIONS.verify_periods))
     chaotic = periods.index(rec.APERIODIC)
-    share = np.mean(labels == chaotic)
 
     ref, last = _duffing_brute_force(X, periods=250, tail=30, steps=72)
-    ref_share = np.mean(ref == 0)
-    se = np.sqrt(ref_share * (1 - ref_share) / n)
-    assert 0.2 < ref_share < 0.9  # both attractors have a sizeable basin
-    assert abs(share - ref_share) <= 3 * se
+    assert 0.2 < np.mean(ref == 0) < 0.9  # both attractors have a sizeable basin
+    differ = np.flatnonzero((labels == chaotic) != (ref == 0))
+    assert len(differ) <= 2, differ.tolist()
 
-    cycle = np.asarray(r.points)[periods.index(1), 0]
-    np.testing.assert_allclose(last[ref == 1], np.broadcast_to(cycle, last[ref == 1].shape), atol=1e-3)
-    on = np.asarray(rec.lookup(r.table, rec.cell_keys(r.partition, jnp.asarray(last[ref == 0].T))))
-    assert np.mean(on == chaotic) > 0.9
-    assert int(r.dropped_cells) == 0 and not bool(r.attractor_overflow)
+    points = np.asarray(r.points)
+    cycle = points[periods.index(1)]
+    assert np.all(np.isnan(cycle[1:]))  # one point: a P-1 cycle
+    np.testing.assert_allclose(last[ref == 1], np.broadcast_to(cycle[0], last[ref == 1].shape), atol=1e-3)
+    assert np.sum(np.all(np.isfinite(points[chaotic]), axis=1)) > 100
+    near = _near_boxes(r.partition, points[chaotic])  # a cloud of 1,600 points: the attractor in part
+    assert np.mean([b in near for b in _box_coords(r.partition, last[ref == 0])]) > 0.95
+    anywhere = np.random.default_rng(0).uniform(-2, 2, (2000, 2))  # the attractor is thin: few of these
+    assert np.mean([b in near for b in _box_coords(r.partition, anywhere)]) < 0.3
 
 
 def test_settled_lanes():
@@ -317,7 +351,7 @@ def test_settled_lanes():
     tiny circle (a tenth of a box wide: it comes back near itself without repeating) and
     one without history (NaN) have not."""
     M = 4
-    part = rec.partition_from_box([-1, -1], [1, 1], 40)
+    part = _boxes.partition_from_box([-1, -1], [1, 1], 40)
     w = float(part.width[0])
     t = np.arange(2 * M)
     cyc = np.array([[0.5, 0.1], [-0.3, 0.7], [0.2, -0.4]])[t % 3]
@@ -326,7 +360,7 @@ def test_settled_lanes():
     rot = 0.05 * w * np.column_stack([np.cos(2.4 * t), np.sin(2.4 * t)])
     young = np.full((2 * M, 2), np.nan)
     pts = jnp.asarray(np.stack([on, near, rot, young], axis=-1))
-    assert np.asarray(rec.settled_lanes(pts, part.width, M)).tolist() == [True, False, False, False]
+    assert np.asarray(_cloud.settled_lanes(pts, part.width, M)).tolist() == [True, False, False, False]
 
 
 # Just past its boundary crisis (about gamma = 0.31515 with RK4 at 64 steps a period) the
@@ -334,17 +368,24 @@ def test_settled_lanes():
 SADDLE = {**DUFF, "gamma": 0.315151}
 
 
-def _still_wandering(params, X, periods):
-    """Those of the states ``X (n, 2)`` still aperiodic after ``periods`` periods (by the
-    stroboscopic orbit: no repeat to 1e-6 with a period up to 8 over the last 24 points),
-    at their last point (on the chaotic set)."""
+def _orbit_ends(params, X, periods):
+    """The stroboscopic orbits of the states ``X (n, 2)`` over ``periods`` periods (RK4, 64
+    steps): per state the period its orbit ends on (the smallest ``k <= 8`` with a repeat to
+    1e-6 over the last 24 points; 0: still aperiodic), and its last point."""
     o = np.asarray(jaxgear.stroboscopic_orbit(DUFFING, DuffingParams(**params), X, n_points=periods,
                                               integrator=RK4(64)))
     tail = o[:, -24:]
-    periodic = np.zeros(len(X), bool)
-    for k in range(1, 9):
-        periodic |= np.max(np.abs(tail[:, k:] - tail[:, :-k]), axis=(1, 2)) < 1e-6
-    return o[~periodic, -1]
+    end = np.zeros(len(X), np.int64)
+    for k in range(8, 0, -1):
+        end = np.where(np.max(np.abs(tail[:, k:] - tail[:, :-k]), axis=(1, 2)) < 1e-6, k, end)
+    return end, o[:, -1]
+
+
+def _still_wandering(params, X, periods):
+    """Those of the states ``X (n, 2)`` still aperiodic after ``periods`` periods
+    (:func:`_orbit_ends`), at their last point (on the chaotic set)."""
+    end, last = _orbit_ends(params, X, periods)
+    return last[end == 0]
 
 
 def test_leaving_share_tells_a_saddle_from_an_attractor():
@@ -352,16 +393,16 @@ def test_leaving_share_tells_a_saddle_from_an_attractor():
     leaves. Points of the chaotic saddle (still wandering after 300 periods) mostly settle
     on a cycle within 2,000 periods: about 1 - exp(-2000 / 500); at least the share of
     those whose brute-force orbit of 2,000 periods ends on a cycle, less 3 binomial errors."""
-    part = rec.partition_from_box([-2, -2], [2, 2], 100)
+    part = _boxes.partition_from_box([-2, -2], [2, 2], 100)
     on_attractor = _still_wandering(DUFF, np.random.default_rng(1).uniform(-2, 2, (120, 2)), 300)[:64]
     assert len(on_attractor) == 64
-    share = rec.leaving_share(DUFFING, DuffingParams(**DUFF), RK4(64), part, jnp.asarray(on_attractor.T),
+    share = _cloud.leaving_share(DUFFING, DuffingParams(**DUFF), RK4(64), part, jnp.asarray(on_attractor.T),
                               periods=2000, max_period=8, bound=1e6)
     assert float(share) == 0.0
 
     on_saddle = _still_wandering(SADDLE, np.random.default_rng(2).uniform(-2, 2, (200, 2)), 300)[:64]
     assert len(on_saddle) >= 32
-    share = float(rec.leaving_share(DUFFING, DuffingParams(**SADDLE), RK4(64), part, jnp.asarray(on_saddle.T),
+    share = float(_cloud.leaving_share(DUFFING, DuffingParams(**SADDLE), RK4(64), part, jnp.asarray(on_saddle.T),
                                     periods=2000, max_period=8, bound=1e6))
     left = 1.0 - len(_still_wandering(SADDLE, on_saddle, 2000)) / len(on_saddle)
     se = np.sqrt(max(left * (1 - left), 0.05) / len(on_saddle))
@@ -369,19 +410,21 @@ def test_leaving_share_tells_a_saddle_from_an_attractor():
 
 
 def test_chaotic_saddle_is_no_attractor():
-    """The standalone classifier registers no aperiodic attractor for the chaotic saddle:
-    only cycles, which the states it decides end on (their periods those of the brute
-    force's ends, a long orbit of the same random states)."""
-    rng = np.random.default_rng(3)
-    n = 64
-    X = rng.uniform(-2, 2, (n, 2))
-    r = rec.classify_by_recurrence(DUFFING, DuffingParams(**SADDLE), X, integrator=RK4(64),
-                                   pool=PoolOptions(lanes=n), max_periods=3000, max_period=8)
-    periods = np.asarray(r.periods)
+    """Just past the crisis the pool registers no aperiodic attractor for the chaotic saddle,
+    only cycles; at least 90 % of the states are decided, and each decided state's cycle has
+    the period its brute-force orbit of 3,000 periods ends on (which of the two P-2 cycles is
+    not compared: a long transient on the saddle amplifies round-off, so two integrations of
+    one state may end on either)."""
+    X = np.random.default_rng(3).uniform(-2, 2, (N_STATES, 2))
+    r = _classify(SADDLE, X)
+    periods, labels = np.asarray(r.periods), np.asarray(r.labels)
     assert len(periods) and np.all(periods > 0), periods.tolist()
-    labels = np.asarray(r.labels)
-    assert np.mean(labels >= 0) >= 0.9
-    assert len(_still_wandering(SADDLE, X, 3000)) <= 0.1 * n  # the brute force: (nearly) all on cycles
+    decided = labels >= 0
+    assert np.mean(decided) >= 0.9
+    end, _ = _orbit_ends(SADDLE, X, 3000)
+    assert np.mean(end == 0) <= 0.1  # the brute force: (nearly) all on cycles
+    both = decided & (end > 0)
+    np.testing.assert_array_equal(periods[labels[both]], end[both])
 
 
 def test_bad_options_are_refused():
@@ -392,7 +435,7 @@ def test_bad_options_are_refused():
     with pytest.raises(ValueError, match="unknown option 'chunk'"):
         rec.classify_by_recurrence(DUFFING, DuffingParams(**DUFF), np.zeros((3, 2)), chunk=3)
     with pytest.raises(ValueError, match="resolution"):
-        rec.partition_from_box([0, 0], [1, 1], 0)
+        _boxes.partition_from_box([0, 0], [1, 1], 0)
 
 
 def test_bad_verification_options_are_refused():
@@ -407,8 +450,8 @@ def test_bad_verification_options_are_refused():
     with pytest.raises(ValueError, match="leave_share"):
         rec.RecurrenceOptions(leave_share=0.0)
     # a verification shorter than the cycle test's history runs that history instead
-    assert rec.verify_length(rec.RecurrenceOptions(verify_periods=20), 16) == 32
-    assert rec.verify_length(rec.RecurrenceOptions(), 16) == rec.RecurrenceOptions().verify_periods
+    assert _cloud.verify_length(rec.RecurrenceOptions(verify_periods=20), 16) == 32
+    assert _cloud.verify_length(rec.RecurrenceOptions(), 16) == rec.RecurrenceOptions().verify_periods
     assert Direct(recurrence=rec.RecurrenceOptions(verify_periods=0)).recurrence.verify_periods == 0
 
 
@@ -419,9 +462,10 @@ def test_bad_verification_options_are_refused():
 def test_gear_chaotic_band_every_state_decided():
     """The paper preset at b_sp = b_rp = 2 (inside the aperiodic band of the backlash
     diagram): every random state of the paper region is decided on one bounded aperiodic
-    attractor, within far fewer periods than the direct method's limit. Independently of
+    attractor, within far fewer periods than the direct method's limit (but for the state whose
+    cloud registered it, charged that cloud and its verification). Independently of
     the classifier, a long stroboscopic orbit from a labelled state neither repeats (no
-    P-k, k <= 16, to 1e-6) nor leaves the attractor's boxes."""
+    P-k, k <= 16, to 1e-6) nor leaves the boxes of the attractor's cloud (or their neighbours)."""
     from jaxgear import paper_params, stroboscopic_orbit
     from jaxgear._model import REDUCED
 
@@ -432,25 +476,27 @@ def test_gear_chaotic_band_every_state_decided():
     r = rec.classify_by_recurrence(REDUCED, params, X, pool=PoolOptions(lanes=n))
     labels = np.asarray(r.labels)
     used = np.asarray(r.periods_used)
+    near = _near_boxes(r.partition, np.asarray(r.points)[0])
     print(f"mean periods per state {used.mean():.1f} (median {np.median(used):.0f}, max {used.max()}), "
-          f"cloud lane-periods {int(r.cloud_work)}, boxes {np.asarray(r.cells).tolist()}")
+          f"boxes of the cloud and their neighbours {len(near)}")
     assert np.asarray(r.periods).tolist() == [rec.APERIODIC]
     assert np.all(labels == 0)
-    assert used.mean() < 128  # twice the paper preset's 64 periods per cell
+    # twice the paper preset's 64 periods per cell, but for the candidate(s) that registered the
+    # attractor: charged their cloud and its verification (600 + 2,000 periods)
+    assert np.median(used) < 128 and np.sum(used >= 128) <= 2
 
     orbit = np.asarray(stroboscopic_orbit(REDUCED, params, X[:4], n_points=600))[:, 300:]  # (4, 300, 4)
     assert np.all(np.abs(orbit) < 100)
     for k in range(1, 17):
         assert np.all(np.max(np.abs(orbit[:, k:] - orbit[:, :-k]), axis=(1, 2)) > 1e-6)
-    on = np.asarray(rec.lookup(r.table, rec.cell_keys(r.partition, jnp.asarray(orbit.reshape(-1, 4).T))))
-    assert np.mean(on == 0) > 0.9
+    assert np.mean([b in near for b in _box_coords(r.partition, orbit.reshape(-1, 4))]) > 0.9
 
 
 @pytest.mark.slow
 def test_three_planet_model_uses_hashed_boxes():
     """The 3-planet model (state dimension 8: hashed box keys) started from the reduced
     model's states on its symmetric subspace, b = 2: every state is decided on one
-    aperiodic attractor, whose boxes all fit in the table."""
+    aperiodic attractor, whose cloud spans more than 20 boxes."""
     from jaxgear import paper_params
     from jaxgear._model import nplanet_system, reduced_to_nplanet
 
@@ -461,4 +507,5 @@ def test_three_planet_model_uses_hashed_boxes():
                                    np.asarray(reduced_to_nplanet(X, 3)), pool=PoolOptions(lanes=n))
     assert np.asarray(r.periods).tolist() == [rec.APERIODIC]
     assert np.all(np.asarray(r.labels) == 0)
-    assert int(r.dropped_cells) == 0 and int(np.asarray(r.cells)[0]) > 20
+    kept = np.asarray(r.points)[0]
+    assert len(set(_box_coords(r.partition, kept[np.all(np.isfinite(kept), axis=1)]))) > 20

@@ -10,7 +10,9 @@
 - :mod:`._diagnostics` — warnings when a result looks unreliable;
 - :mod:`._compare` — agreement with direct integration on a sample of cells;
 - :mod:`._uncertainty` — :func:`label_uncertainty`, how far a result's labels can be trusted;
-- :mod:`._recurrence` — attractors of every type by recurrences on a fine partition;
+- :mod:`._recurrence` — attractors of every type by recurrences on a fine partition (the
+  method, and :func:`classify_by_recurrence`, a view of the lane pool); its boxes
+  (:mod:`._boxes`), candidate clouds (:mod:`._cloud`) and options (:mod:`._recurrence_options`);
 - :mod:`._fractal` — basin entropy and the uncertainty exponent of a basin map;
 - :mod:`._lanes`, :mod:`._placement`, :mod:`._pool` — the direct method's device-resident lane
   pool: its device program, where it runs, and its host driver.
@@ -31,7 +33,8 @@ from ._graph import analyze_cell_map
 from ._method import METHODS, AbstractGlobalMethod, Classification, method_from_dict, method_from_name
 from ._orbits import detect_period
 from ._pool import PoolOptions
-from ._recurrence import RecurrenceOptions, RecurrenceResult, classify_by_recurrence
+from ._recurrence import RecurrenceResult, classify_by_recurrence
+from ._recurrence_options import RecurrenceOptions
 from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult, LabelUncertainty
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 

@@ -32,11 +32,12 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
+from ._boxes import partition_of_states
 from ._lanes import Boxes
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import largest_multipliers, refine_orbits
 from ._pool import PoolOptions, run_pool, run_pools
-from ._recurrence import RecurrenceOptions, partition_of_states
+from ._recurrence_options import RecurrenceOptions
 from ._result import UNRESOLVED
 
 __all__ = ["Direct", "STABLE_BELOW"]

@@ -29,11 +29,11 @@ consecutive hits on one attractor (enough hits decide it); once per round the ol
 lane still undecided after ``transient`` periods, and not approaching a cycle (its
 repetition errors within a box and shrinking), is the candidate: a cloud of its
 trajectory is integrated, and when the cloud recurs in its own boxes it is an attractor
-(a new slot of its value's table, marked :func:`aperiodic_mark`, its cloud kept), or
+(a new slot of its value's table, a ``SlotKind.BOXES``, its cloud kept), or
 joins the attractor of boxes it overlaps; its boxes enter the table. A new set is
 verified first: a sample of its cloud's points is continued for thousands of periods, and
 when a clear share of them leaves it (settles on a cycle, escapes, reaches another known
-set) it is a chaotic saddle, a long transient (:func:`saddle_mark`): its boxes enter the
+set) it is a chaotic saddle, a long transient (``SlotKind.SADDLE``): its boxes enter the
 table so that the lanes wandering on it are no candidates again, but it labels no cell
 (they integrate on until they leave it, or time out).
 
@@ -49,6 +49,7 @@ The host side (the pilot, steering, placement on devices) is
 
 from __future__ import annotations
 
+import enum
 from typing import NamedTuple
 
 import equinox as eqx
@@ -57,32 +58,29 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import power_of_two_at_least
-from ._pool_options import PoolOptions
-from ._recurrence import (
+from ._boxes import CellTable, FinePartition, empty_table, insert, lookup, row_keys, track_hits
+from ._cloud import (
     CLOUD_STAGES,
-    CellTable,
-    FinePartition,
-    RecurrenceOptions,
     attractor_cloud,
-    empty_table,
-    insert,
+    escaped,
+    flat_cloud,
     leaving_share,
-    lookup,
     near_periodic,
     oldest_off_cycle,
+    overlap_shares,
     recurrence_share,
-    row_keys,
-    track_hits,
     verification_starts,
     verify_length,
 )
+from ._pool_options import PoolOptions
+from ._recurrence_options import RecurrenceOptions
+from ._result import SINK, UNRESOLVED
 
 __all__ = ["PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
-           "table_slots", "NOT_DONE", "aperiodic_mark", "saddle_mark"]
+           "table_slots", "NOT_DONE", "APERIODIC", "SlotKind", "slot_code", "slot_kind", "slot_period"]
 
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
-_SINK, _UNRESOLVED = -1, -2
 _ON_REPELLER = -4
 """A round's mark of a lane that shadows a repeller (never a label): it is neither
 decided nor registers a new attractor, and integrates on."""
@@ -104,24 +102,72 @@ class Boxes(eqx.Module):
     partition: FinePartition
 
 
-def aperiodic_mark(M: int) -> int:
-    """The period entry of a table slot that holds an attractor of boxes (no cycle of
-    period <= ``M``): ``M + 1``."""
-    return int(M) + 1
+APERIODIC = 0
+"""The period of an attractor of boxes (no cycle of period ``<= M``) in the attractor
+lists the pool takes (:func:`seed_tables`) and returns
+(:func:`~jaxgear.analysis._pool.run_pool`): ``(cloud (m, dim), APERIODIC)``."""
 
 
-def saddle_mark(M: int) -> int:
-    """The period entry of a table slot that holds a chaotic saddle: a set of boxes that
-    recurred like an attractor but whose points leave it (a long transient; see
-    :func:`~jaxgear.analysis._recurrence.leaving_share`): ``M + 2``. Its boxes keep the
-    lanes that visit them from being candidates again, and it never labels a cell (they
-    integrate on); the host drops it from the attractors."""
-    return int(M) + 2
+class SlotKind(enum.IntEnum):
+    """What a slot of a value's attractor table holds: the one vocabulary of the slot codes.
+
+    The pool stores one int32 code per slot (``att_k``), which carries a cycle's period
+    too; :func:`slot_code` writes it and :func:`slot_kind` / :func:`slot_period` read it,
+    on the device and on the host (nothing else spells a code).
+
+    - ``EMPTY`` (code 0): no attractor yet;
+    - ``CYCLE`` (code ``k``, ``1 <= k <= M``): a P-k attractor, its points in ``att_pts``;
+    - ``REPELLER`` (code ``-k``): an unstable P-k cycle; lanes that shadow it integrate on;
+    - ``BOXES`` (code ``M + 1``): an attractor of boxes (no cycle of period ``<= M``), its
+      cloud in ``att_cloud`` and its boxes in the box table;
+    - ``SADDLE`` (code ``M + 2``): a chaotic saddle, a set of boxes that recurred like an
+      attractor but whose points leave it (a long transient; see
+      :func:`~jaxgear.analysis._cloud.leaving_share`). Its boxes keep the lanes that visit
+      them from being candidates again, and it never labels a cell (they integrate on);
+      the host drops it from the attractors.
+    """
+
+    EMPTY = 0
+    CYCLE = 1
+    REPELLER = 2
+    BOXES = 3
+    SADDLE = 4
+
+
+def slot_code(kind: SlotKind, M: int, k: int = 0) -> int:
+    """The ``att_k`` code of a slot of ``kind`` (``k``: the period of a cycle or a repeller,
+    ``1 <= k <= M``, an int or a traced int32; ``M``: the pool's ``max_period``)."""
+    kind = SlotKind(kind)
+    if kind in (SlotKind.CYCLE, SlotKind.REPELLER):
+        if isinstance(k, (int, np.integer)) and not 1 <= k <= M:
+            raise ValueError(f"a {kind.name.lower()}'s period k={k} must be between 1 and max_period={M}.")
+        return k if kind == SlotKind.CYCLE else -k
+    return {SlotKind.EMPTY: 0, SlotKind.BOXES: int(M) + 1, SlotKind.SADDLE: int(M) + 2}[kind]
+
+
+def slot_kind(code, M: int):
+    """The :class:`SlotKind` of each code of ``code`` (a JAX or numpy int array, or an
+    int), as int32 values of the enum (``slot_kind(c, M) == SlotKind.SADDLE``)."""
+    xp = jnp if isinstance(code, jax.Array) else np
+    code = xp.asarray(code)
+    kind = xp.where(code == 0, SlotKind.EMPTY, xp.where(code < 0, SlotKind.REPELLER, SlotKind.CYCLE))
+    kind = xp.where(code == slot_code(SlotKind.BOXES, M), SlotKind.BOXES, kind)
+    kind = xp.where(code == slot_code(SlotKind.SADDLE, M), SlotKind.SADDLE, kind)
+    return kind.astype(xp.int32)
+
+
+def slot_period(code, M: int):
+    """The cycle period ``k`` of each code (a cycle's or a repeller's), 0 for the other kinds."""
+    xp = jnp if isinstance(code, jax.Array) else np
+    kind = slot_kind(code, M)
+    cycle = (kind == SlotKind.CYCLE) | (kind == SlotKind.REPELLER)
+    return xp.where(cycle, xp.abs(xp.asarray(code)), 0).astype(xp.int32)
 
 
 def _of_boxes(att_k, M: int):
     """Whether table slots ``att_k`` hold a set of boxes (an attractor or a saddle)."""
-    return (att_k == aperiodic_mark(M)) | (att_k == saddle_mark(M))
+    kind = slot_kind(att_k, M)
+    return (kind == SlotKind.BOXES) | (kind == SlotKind.SADDLE)
 
 
 class PoolState(NamedTuple):
@@ -140,7 +186,7 @@ class PoolState(NamedTuple):
     n_done: jax.Array  # () int32
     clock: jax.Array  # () int32
     att_pts: jax.Array  # (V, A, M, dim) attractor points in cycle order (NaN padded), per parameter row
-    att_k: jax.Array  # (V, A) int32 periods (0: empty slot; -k: a repeller, an unstable P-k cycle)
+    att_k: jax.Array  # (V, A) int32 slot codes (SlotKind: slot_code, slot_kind)
     n_att: jax.Array  # (V,) int32
     radius: jax.Array  # (V,) capture radius
     n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
@@ -165,24 +211,24 @@ def seed_tables(attractors, M: int, dim: int, Q: int = 1):
     """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,), clouds
     (V, A, Q, dim))`` (numpy) of ``V`` values, each holding its value's known attractors
     ``[(points (k, dim), k)]`` first (``A``: :func:`table_slots`): a P-k cycle; a cycle of
-    period ``-k``, a repeller (an unstable P-k cycle whose lanes integrate on); period 0, an
-    attractor of boxes given by its cloud (at most ``Q`` points kept)."""
+    period ``-k``, a repeller (an unstable P-k cycle whose lanes integrate on); period
+    :data:`APERIODIC`, an attractor of boxes given by its cloud (at most ``Q`` points kept)."""
     known = [[(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in att] for att in attractors]
     if any(not abs(k) <= M for kn in known for _, k in kn):
-        raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M}, 0: of boxes)")
+        raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M}, {APERIODIC}: of boxes)")
     A = table_slots(max(len(kn) for kn in known))
     V = len(known)
     pts = np.full((V, A, M, dim), np.nan)
-    ks = np.zeros((V, A), np.int32)
+    ks = np.full((V, A), slot_code(SlotKind.EMPTY, M), np.int32)
     clouds = np.full((V, A, Q, dim), np.nan)
     for v, kn in enumerate(known):
         for a, (p, k) in enumerate(kn):
-            if k == 0:
+            if k == APERIODIC:
                 clouds[v, a, :min(Q, len(p))] = p[np.linspace(0, len(p) - 1, min(Q, len(p))).astype(int)]
-                ks[v, a] = aperiodic_mark(M)
+                ks[v, a] = slot_code(SlotKind.BOXES, M)
             else:
                 pts[v, a, :abs(k)] = p[:abs(k)]
-                ks[v, a] = k
+                ks[v, a] = slot_code(SlotKind.CYCLE if k > 0 else SlotKind.REPELLER, M, abs(k))
     return pts, ks, np.array([len(kn) for kn in known], np.int32), clouds
 
 
@@ -240,7 +286,8 @@ def resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolStat
         V, A0, M, dim = s.att_pts.shape
         Q = s.att_cloud.shape[2]
         s = s._replace(att_pts=jnp.concatenate([s.att_pts, jnp.full((V, A - A0, M, dim), jnp.nan)], axis=1),
-                       att_k=jnp.concatenate([s.att_k, jnp.zeros((V, A - A0), jnp.int32)], axis=1),
+                       att_k=jnp.concatenate([s.att_k, jnp.full((V, A - A0), slot_code(SlotKind.EMPTY, M),
+                                                                 jnp.int32)], axis=1),
                        att_cloud=jnp.concatenate([s.att_cloud, jnp.full((V, A - A0, Q, dim), jnp.nan)], axis=1),
                        overflow=jnp.asarray(False))
     return s
@@ -302,7 +349,8 @@ def capture_radius(att_pts, att_k, capture: float | None):
     if capture is not None:
         return jnp.asarray(capture, jnp.float64)
     A, M, _ = att_pts.shape
-    valid = (jnp.arange(M, dtype=jnp.int32)[None] < att_k[:, None]) & (att_k <= M)[:, None]  # (A, M): cycles only
+    cycle = slot_kind(att_k, M) == SlotKind.CYCLE
+    valid = (jnp.arange(M, dtype=jnp.int32)[None] < slot_period(att_k, M)[:, None]) & cycle[:, None]  # (A, M)
     pts = jnp.where(valid[..., None], att_pts, 0.0)
     scale = 1.0 + jnp.max(jnp.where(valid[..., None], jnp.abs(pts), 0.0))
     d = jnp.sqrt(jnp.sum((pts[:, None, :, None] - pts[None, :, None, :]) ** 2, axis=-1))  # (A, A, M, M)
@@ -323,8 +371,7 @@ class _Lanes(NamedTuple):
 def _lane_status(o: PoolOptions, s: PoolState) -> _Lanes:
     M = o.max_period
     busy = s.cell >= 0
-    norms = jnp.sqrt(_sqdist(s.Y, 0.0))
-    esc = busy & (~jnp.isfinite(norms) | (norms > o.escape_bound))
+    esc = busy & escaped(s.Y, o.escape_bound)
     ks = jnp.arange(1, M + 1, dtype=jnp.int32)
     per = jnp.min(jnp.where(s.streak >= (ks + 1)[:, None], ks[:, None], M + 1), axis=0).astype(jnp.int32)
     live = busy & ~esc
@@ -360,9 +407,8 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
     lanes. A repeller's slot (period ``-k``) marks its lanes ``_ON_REPELLER`` instead:
     they integrate on (an attractor's slot still takes them)."""
     P = s.att_pts[v, a]  # (M, dim)
-    repeller = s.att_k[v, a] < 0
-    cycle = ~_of_boxes(s.att_k[v, a], o.max_period)  # a set of boxes is matched by its boxes
-    k = jnp.where(cycle, jnp.abs(s.att_k[v, a]), 0)
+    repeller = slot_kind(s.att_k[v, a], o.max_period) == SlotKind.REPELLER
+    k = slot_period(s.att_k[v, a], o.max_period)  # 0 for a set of boxes: it is matched by its boxes
     valid = jnp.arange(o.max_period, dtype=jnp.int32) < k
     dn = jnp.where(valid[:, None], jnp.sqrt(_sqdist(s.Y[None], P[:, :, None])), jnp.inf)  # (M, L)
     m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
@@ -422,7 +468,7 @@ def _register_new(o: PoolOptions, s: PoolState, lanes: _Lanes, label, radius):
         def add(c):
             att_pts, att_k, n_att, radius, label = c
             slot = n_att[v]
-            att_pts, att_k = att_pts.at[v, slot].set(pts0), att_k.at[v, slot].set(k0)
+            att_pts, att_k = att_pts.at[v, slot].set(pts0), att_k.at[v, slot].set(slot_code(SlotKind.CYCLE, M, k0))
             scale0 = 1.0 + jnp.max(jnp.where(valid0[:, None], jnp.abs(pts0), 0.0))
             d0 = jnp.where(valid0[:, None], _sqdist(s.Y[None], pts0[:, :, None]), jnp.inf)  # (M, L)
             joins = new_v & (lanes.per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
@@ -462,8 +508,8 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
     """The round's candidate for a new attractor of boxes (at most one in the pool): the
     oldest live undecided lane past the transient (and as long since its last try), in no
     run of box hits, not recurring and not approaching a cycle (among the oldest such lanes,
-    :func:`~jaxgear.analysis._recurrence.oldest_off_cycle`). Its cloud
-    (:func:`~jaxgear.analysis._recurrence.attractor_cloud`, staged, stopped on a cycle or
+    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`). Its cloud
+    (:func:`~jaxgear.analysis._cloud.attractor_cloud`, staged, stopped on a cycle or
     an escape) is accepted when it recurs in its own boxes; it then joins the attractor of
     boxes (or the saddle) of its value that it overlaps, or takes a new slot; its boxes
     enter the table and the lane takes the attractor's label (its cloud's periods are
@@ -471,14 +517,14 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
 
     A new set is verified first (``verify_periods > 0``): ``verify_lanes`` of its cloud's
     points are continued ``verify_periods`` periods
-    (:func:`~jaxgear.analysis._recurrence.leaving_share`); when at least ``leave_share``
+    (:func:`~jaxgear.analysis._cloud.leaving_share`); when at least ``leave_share``
     of them settle on a cycle, escape or reach another known set, it is a chaotic saddle
-    (a long transient, not an attractor): its slot is marked :func:`saddle_mark`, its
+    (a long transient, not an attractor): its slot is a ``SlotKind.SADDLE``, its
     boxes enter the table (lanes visiting them are no candidates again) and the lane
     integrates on."""
     opt, part = boxes.options, boxes.partition
     M, V = o.max_period, s.att_k.shape[0]
-    mark, saddle = aperiodic_mark(M), saddle_mark(M)
+    mark, saddle = slot_code(SlotKind.BOXES, M), slot_code(SlotKind.SADDLE, M)
     eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
                 & (s.age - s.tried >= opt.transient) & (s.hits == 0))
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
@@ -490,17 +536,15 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         P, A, Q = opt.cloud_periods, s.att_k.shape[1], s.att_cloud.shape[2]
 
         def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
-            flat = jnp.moveaxis(pts, 1, 0).reshape(pts.shape[1], -1)
-            return near_periodic(part, pts, M) | ~jnp.all(jnp.sqrt(_sqdist(flat, 0.0)) <= o.escape_bound)
+            return near_periodic(part, pts, M) | jnp.any(escaped(flat_cloud(pts), o.escape_bound))
 
         cloud, ran = attractor_cloud(system, p0, integrator, s.Y[:, l0], periods=P, lanes=opt.cloud_lanes,
                                      key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds), stages=CLOUD_STAGES,
                                      stop=stop)
         ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (recurrence_share(part, cloud) >= opt.accept_share)
-        second = jnp.moveaxis(cloud[P // 2:], 1, 0).reshape(cloud.shape[1], -1)  # (dim, m)
-        rows = jnp.full(second.shape[1], v0, jnp.int32)
-        box_label = lookup(s.table, row_keys(part, second, rows, V))
-        over = jnp.mean((box_label[None] == jnp.arange(A, dtype=jnp.int32)[:, None]).astype(jnp.float64), axis=1)
+        second = flat_cloud(cloud[P // 2:])  # (dim, m)
+        second_keys = row_keys(part, second, jnp.full(second.shape[1], v0, jnp.int32), V)
+        over = overlap_shares(s.table, second_keys, A)
         over = jnp.where(_of_boxes(s.att_k[v0], M), over, 0.0)  # only sets of boxes absorb clouds
         best = jnp.argmax(over).astype(jnp.int32)
         joins = over[best] >= opt.overlap_share
@@ -508,7 +552,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         if opt.verify_periods:
             def leaves(_):
                 def elsewhere(pts):  # (2M, dim, K): every last point in a known set's boxes
-                    flat = jnp.moveaxis(pts, 1, 0).reshape(pts.shape[1], -1)
+                    flat = flat_cloud(pts)
                     lab = lookup(s.table, row_keys(part, flat, jnp.full(flat.shape[1], v0, jnp.int32), V))
                     return jnp.all(lab.reshape(pts.shape[0], -1) >= 0, axis=0)
 
@@ -524,7 +568,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         new = ok & ~joins & room
         taken = ok & (joins | room)
         attractor = taken & ~transient & ~(joins & (s.att_k[v0, best] == saddle))  # the lane is labelled
-        keys = jnp.where(taken, row_keys(part, second, rows, V), -1)
+        keys = jnp.where(taken, second_keys, -1)
         table, dropped = insert(s.table, keys, slot)
         charged = ran + jnp.where(new, verify_length(opt, M) if opt.verify_periods else 0, 0)
         s = s._replace(
@@ -551,13 +595,13 @@ def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: P
     att_pts, att_k, n_att, radius, label, overflow = _register_new(o, s, lanes, label, radius)
     s = s._replace(att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius, overflow=overflow)
     if boxes is not None:
-        on_saddle = s.att_k[s.row, jnp.maximum(s.hit_att, 0)] == saddle_mark(o.max_period)  # integrates on
+        on_saddle = slot_kind(s.att_k[s.row, jnp.maximum(s.hit_att, 0)], o.max_period) == SlotKind.SADDLE
         hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
         label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
         s, label = _candidate(system, params, integrator, o, boxes, s, lanes, label)
     unres = lanes.live & (label < 0) & (s.age >= o.max_periods)
     decided = lanes.esc | (label >= 0) | unres
-    value = jnp.where(lanes.esc, _SINK, jnp.where(unres, _UNRESOLVED, label)).astype(jnp.int32)
+    value = jnp.where(lanes.esc, SINK, jnp.where(unres, UNRESOLVED, label)).astype(jnp.int32)
     target = jnp.where(decided, s.cell, s.labels.shape[0])  # dropped
     s = s._replace(labels=s.labels.at[target].set(value, mode="drop"), used=s.used.at[target].set(s.age, mode="drop"),
                    n_done=s.n_done + jnp.sum(decided, dtype=jnp.int32), rounds=s.rounds + 1)

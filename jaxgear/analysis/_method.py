@@ -21,7 +21,7 @@ from .._cells import CellGrid
 from .._checks import check_int, check_number
 from .._model import REDUCED
 from ..integrate import AbstractIntegrator, default_integrator, integrator_from_dict
-from ._recurrence import RecurrenceOptions
+from ._recurrence_options import RecurrenceOptions
 
 __all__ = ["AbstractGlobalMethod", "Classification", "METHODS", "method_from_dict", "method_from_name",
            "register_method"]

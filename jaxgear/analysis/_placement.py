@@ -33,7 +33,7 @@ from jax.sharding import PartitionSpec as P
 from .._batching import pad_rows, power_of_two_at_least
 from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
 from .._matching import same_attractor
-from ._lanes import init_pool, resize, run_rounds, table_slots
+from ._lanes import SlotKind, init_pool, resize, run_rounds, slot_code, slot_kind, table_slots
 from ._pool_options import PoolOptions
 
 __all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS", "queue_length"]
@@ -235,7 +235,7 @@ def _exchange(blocks, local: dict, me: int, P: int, D: int) -> dict:
     lab = np.full((D, longest), -9, np.int64)
     use = np.zeros((D, longest), np.int64)
     pts = np.full((D, V, A, M, dim), np.nan)
-    ks = np.zeros((D, V, A), np.int32)
+    ks = np.full((D, V, A), slot_code(SlotKind.EMPTY, M), np.int32)
     ns = np.zeros((D, V), np.int32)
     cl = np.full((D, V, A, Q, dim), np.nan)
     for i, r in local.items():
@@ -274,7 +274,6 @@ def _merge(n0, blocks, merge_tol: float, partition=None):
     module). Cycles are the same by their points, attractors of boxes by their boxes."""
     V, _, M, dim = blocks[0][1][2].shape
     Q = blocks[0][1][5].shape[2]
-    mark = M + 1
     luts = [np.tile(np.arange(r[2].shape[1], dtype=np.int64), (V, 1)) for _, r in blocks]
     tables: list[list] = []
     for v in range(V):
@@ -288,11 +287,15 @@ def _merge(n0, blocks, merge_tol: float, partition=None):
             offset += len(lab)
         for _, b, a in sorted(cands):
             pts, k, cloud = blocks[b][1][2][v, a], int(blocks[b][1][3][v, a]), blocks[b][1][5][v, a]
-            if k == mark:
-                same = [g for g, (_, kk, c) in enumerate(reps) if kk == mark and same_boxes(partition, cloud, c)]
-            else:  # (a repeller, kk < 0, is never the same)
+            kind = slot_kind(k, M)
+            if kind == SlotKind.BOXES:
+                same = [g for g, (_, kk, c) in enumerate(reps)
+                        if slot_kind(kk, M) == SlotKind.BOXES and same_boxes(partition, cloud, c)]
+            elif kind == SlotKind.CYCLE:
                 same = [g for g, (p, kk, _) in enumerate(reps)
-                        if 0 < kk < mark and same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
+                        if slot_kind(kk, M) == SlotKind.CYCLE and same_attractor(pts[:k], k, p[:kk], kk, merge_tol)]
+            else:  # a repeller or a chaotic saddle is never the same
+                same = []
             if same:
                 luts[b][v, a] = same[0]
             else:
@@ -301,7 +304,7 @@ def _merge(n0, blocks, merge_tol: float, partition=None):
         tables.append(reps)
     A = table_slots(max(len(t) for t in tables))
     pts = np.full((V, A, M, dim), np.nan)
-    ks = np.zeros((V, A), np.int32)
+    ks = np.full((V, A), slot_code(SlotKind.EMPTY, M), np.int32)
     clouds = np.full((V, A, Q, dim), np.nan)
     for v, reps in enumerate(tables):
         for a, (p, k, c) in enumerate(reps):

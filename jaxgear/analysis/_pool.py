@@ -26,7 +26,7 @@ import numpy as np
 
 from .._batching import progress_bar
 from ..integrate import stack_params
-from ._lanes import Boxes, aperiodic_mark, saddle_mark, seed_tables
+from ._lanes import APERIODIC, Boxes, SlotKind, seed_tables, slot_kind, slot_period
 from ._placement import OneDevice, queue_length, run_blocks
 from ._pool_options import PoolOptions
 
@@ -92,7 +92,7 @@ def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *,
     returned cycles with its period ``-k``; a period ``0`` gives an attractor of boxes by
     its cloud ``(m, dim)``. ``boxes``: the detection of attractors of boxes (quasi-periodic,
     chaotic; :class:`~jaxgear.analysis._lanes.Boxes`), or ``None``: cycles only. Attractors
-    of boxes are returned as ``(cloud (m, dim), 0)``.
+    of boxes are returned as ``(cloud (m, dim), 0)`` (:data:`~jaxgear.analysis._lanes.APERIODIC`).
     """
     return run_pools(system, [params], [X], integrator, options, boxes=boxes, attractors=[attractors],
                      progress=progress, label=label)[0]
@@ -158,21 +158,23 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
 
 
 def _attractors(att, v: int, M: int):
-    """Value ``v``'s table as ``[(points, k)]``: a cycle's ``k`` points, an attractor of
-    boxes' cloud (its finite points) with period 0; a chaotic saddle's slot
-    (:func:`saddle_mark`, which labels no cell) is left out. Also the label of each slot
+    """Value ``v``'s table as ``[(points, k)]``: a cycle's ``k`` points (a repeller's with
+    period ``-k``), an attractor of boxes' cloud (its finite points) with period
+    :data:`~jaxgear.analysis._lanes.APERIODIC`; a chaotic saddle's slot
+    (``SlotKind.SADDLE``, which labels no cell) is left out. Also the label of each slot
     in that list ``(A,)`` (-1 for a saddle)."""
     att_pts, att_k, n_att, clouds = (np.asarray(a) for a in att)
+    kinds, periods = slot_kind(att_k[v], M), slot_period(att_k[v], M)
     out = []
     lut = np.full(max(att_k.shape[1], 1), -1, np.int64)
     for a in range(int(n_att[v])):
-        k = int(att_k[v, a])
-        if k == saddle_mark(M):
+        if kinds[a] == SlotKind.SADDLE:
             continue
         lut[a] = len(out)
-        if k == aperiodic_mark(M):
+        if kinds[a] == SlotKind.BOXES:
             cloud = clouds[v, a]
-            out.append((cloud[np.all(np.isfinite(cloud), axis=1)], 0))
+            out.append((cloud[np.all(np.isfinite(cloud), axis=1)], APERIODIC))
         else:
-            out.append((att_pts[v, a, : abs(k)], k))
+            k = int(periods[a])
+            out.append((att_pts[v, a, :k], k if kinds[a] == SlotKind.CYCLE else -k))
     return out, lut

@@ -1,5 +1,5 @@
 """The lane pool's options: one small module that the pool (:mod:`jaxgear.analysis._lanes`)
-and the standalone recurrence classifier (:mod:`jaxgear.analysis._recurrence`) both read."""
+and its recurrence view (:func:`~jaxgear.analysis.classify_by_recurrence`) read."""
 
 from __future__ import annotations
 
