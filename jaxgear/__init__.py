@@ -76,6 +76,7 @@ from ._lyapunov import (
     lyapunov_spectrum as lyapunov_spectrum,
     classify_attractor as classify_attractor,
     kaplan_yorke as kaplan_yorke,
+    ensemble_spectrum as ensemble_spectrum,
 )
 from .analysis import (
     AbstractGlobalMethod as AbstractGlobalMethod,

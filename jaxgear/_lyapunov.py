@@ -34,6 +34,7 @@ from ._system import ForcedSystem, check_state_shape, check_system
 from .integrate import AbstractIntegrator, resolve_integrator
 
 __all__ = ["AttractorType", "LyapunovSpectrum", "LyapunovOptions", "lyapunov_spectrum", "classify_attractor", "kaplan_yorke",
+           "ensemble_spectrum",
            "birkhoff_weights", "DEFAULT_ZERO_TOL"]
 
 DEFAULT_ZERO_TOL = 1e-6
@@ -298,6 +299,46 @@ def lyapunov_spectrum(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
         stretch_exponents=est.reshape(*lead, stretches, k), kaplan_yorke=kaplan_yorke(lam).reshape(lead),
         final_state=final.reshape(*lead, system.dim), status=status.reshape(lead), periods=periods,
         transient=transient, weighted=opts.weighted)
+
+
+def ensemble_spectrum(spectrum: LyapunovSpectrum, groups: ArrayLike) -> LyapunovSpectrum:
+    """The spectra of many starts on the same attractors pooled, one per attractor: lane
+    ``j`` of ``spectrum`` (batch ``(n,)``) lies on attractor ``groups[j]`` (``0..G-1``).
+
+    The exponents of a group are the mean over its converged lanes; their error is the
+    spread between those independent lanes, ``std / sqrt(lanes)`` (a group of one lane
+    keeps that lane's error from its stretches). ``stretch_exponents`` holds the group's
+    mean per stretch, ``final_state`` its first converged lane's; a group without a
+    converged lane is ``DIVERGED`` with NaN exponents. Returns a spectrum of batch ``(G,)``."""
+    groups = np.asarray(groups, np.int64)
+    G = int(groups.max(initial=-1)) + 1
+    ok = (np.asarray(spectrum.status) == int(Status.CONVERGED)) & np.all(np.isfinite(spectrum.exponents), axis=-1)
+    members = [np.flatnonzero((groups == g) & ok) for g in range(G)]
+
+    def pooled(values, errors=None):
+        values = np.asarray(values)
+        mean = np.full((G,) + values.shape[1:], np.nan)
+        err = np.full_like(mean, np.nan)
+        for g, lanes in enumerate(members):
+            if lanes.size:
+                mean[g] = values[lanes].mean(axis=0)
+                if errors is not None:
+                    err[g] = (values[lanes].std(axis=0, ddof=1) / np.sqrt(lanes.size) if lanes.size > 1
+                              else np.asarray(errors)[lanes[0]])
+        return mean, err
+
+    lam, err = pooled(spectrum.exponents, spectrum.errors)
+    per_time, err_time = pooled(spectrum.per_time, spectrum.errors_per_time)
+    final = np.full((G, np.asarray(spectrum.final_state).shape[-1]), np.nan)
+    for g, lanes in enumerate(members):
+        if lanes.size:
+            final[g] = np.asarray(spectrum.final_state)[lanes[0]]
+    status = np.array([int(Status.CONVERGED) if lanes.size else int(Status.DIVERGED) for lanes in members], np.int32)
+    return LyapunovSpectrum(
+        exponents=jnp.asarray(lam), per_time=jnp.asarray(per_time), errors=jnp.asarray(err),
+        errors_per_time=jnp.asarray(err_time), stretch_exponents=jnp.asarray(pooled(spectrum.stretch_exponents)[0]),
+        kaplan_yorke=kaplan_yorke(jnp.asarray(lam)), final_state=jnp.asarray(final), status=jnp.asarray(status),
+        periods=spectrum.periods, transient=spectrum.transient, weighted=spectrum.weighted)
 
 
 def classify_attractor(spectrum: LyapunovSpectrum, period: int | ArrayLike | None = None, *,

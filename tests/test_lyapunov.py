@@ -342,3 +342,51 @@ def test_weakly_chaotic_gear_attractor_is_never_called_a_torus():
                                          jaxgear.integrate.default_integrator(), [None] * len(starts))
     assert np.all(kinds == int(AttractorType.CHAOTIC)), kinds
     assert all(lam[0] > 3 * err[0] > 0 for lam, err, _ in spectra)
+
+
+def _ueda_cloud(start, n: int = 128, every: int = 3) -> np.ndarray:
+    """``n`` points of the Ueda attractor, ``every`` periods apart (scipy)."""
+    pts = [np.asarray(start, float)]
+    for _ in range(n * every - 1):
+        pts.append(_ueda_period(pts[-1]))
+    return np.array(pts[::every])
+
+
+def test_ensemble_exponents_pool_independent_starts(ueda_start):
+    """An attractor without a period gets exponents averaged over starts spread over its
+    cloud: the printed error is the spread between them (an ensemble of lanes, several
+    times smaller than one start's error from its stretches), the phase-space
+    contraction per period holds for the pooled exponents, and the pooled value lies
+    within three of its errors of the mean of many independent single starts."""
+    from jaxgear.analysis._global import LYAPUNOV_LANES, attractor_exponents
+
+    p = DuffingParams(delta=UEDA["delta"], alpha=0.0, beta=1.0, gamma=UEDA["gamma"], omega=1.0)
+    cloud = _ueda_cloud(ueda_start, n=LYAPUNOV_LANES)
+    integrator = jaxgear.RK4(120)
+    kinds, [(lam, err, _)] = attractor_exponents(DUFFING, p, [(cloud, 0)], integrator, [None])
+    assert kinds[0] == int(AttractorType.CHAOTIC)
+    single = lyapunov_spectrum(DUFFING, p, cloud[:1], periods=200, transient=0, stretches=4, integrator=integrator)
+    assert err[0] < float(single.errors[0, 0]) / 2.5  # 32 starts: about sqrt(32 / 4) times smaller
+    assert err[0] <= 0.03 * lam[0]  # (Ueda's attractor stretches unevenly: 2-3 % from 32 starts of 200 periods)
+    np.testing.assert_allclose(lam.sum(), -UEDA["delta"] * 2 * np.pi, rtol=1e-3)  # (to RK4(120)'s accuracy)
+    others = lyapunov_spectrum(DUFFING, p, _ueda_cloud(cloud[-1], n=64, every=2), periods=400, transient=0,
+                               stretches=4, integrator=integrator)
+    ref = np.asarray(others.exponents)[:, 0]
+    assert abs(lam[0] - ref.mean()) <= 3 * np.hypot(err[0], ref.std(ddof=1) / np.sqrt(len(ref)))
+
+
+@pytest.mark.slow
+def test_ensemble_exponent_of_ueda_matches_scipy_within_its_error(ueda_start):
+    """The pooled largest exponent of the Ueda attractor against independent scipy twin
+    trajectories (64 chains of 250 periods): within 3 combined errors, a printed error of
+    at most 3 %."""
+    from jaxgear.analysis._global import attractor_exponents
+
+    p = DuffingParams(delta=UEDA["delta"], alpha=0.0, beta=1.0, gamma=UEDA["gamma"], omega=1.0)
+    cloud = _ueda_cloud(ueda_start)
+    kinds, [(lam, err, _)] = attractor_exponents(DUFFING, p, [(cloud, 0)], jaxgear.integrate.default_integrator(),
+                                                 [None])
+    ref = _twin_chains(cloud[1::2][:64], 0, 250)
+    ref_mean, ref_err = ref.mean(), ref.std(ddof=1) / np.sqrt(len(ref))
+    assert kinds[0] == int(AttractorType.CHAOTIC) and err[0] <= 0.03 * lam[0]
+    assert abs(lam[0] - ref_mean) <= 3 * np.hypot(err[0], ref_err)
