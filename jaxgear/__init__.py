@@ -160,6 +160,14 @@ from .design import (
     mesh_force_rms as mesh_force_rms,
     transmission_error_rms as transmission_error_rms,
 )
+from ._contact import (
+    gear_view as gear_view,
+    GearView as GearView,
+    MeshView as MeshView,
+    ContactRegime as ContactRegime,
+    MeshSpec as MeshSpec,
+    GearViewOptions as GearViewOptions,
+)
 from ._io import load as load
 from ._cache import enable_compilation_cache as enable_compilation_cache
 

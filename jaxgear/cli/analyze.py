@@ -166,7 +166,7 @@ def _run_checked(args) -> int:
     method.check(REDUCED, grid)
 
     head = f"preset {args.preset}, Omega={float(params.Omega):.4g}"
-    return _run_on(args, REDUCED, params, grid, method, head)
+    return _run_on(args, REDUCED, params, grid, method, head, gear_set)
 
 
 def _run_user(args, user) -> int:
@@ -184,9 +184,9 @@ def _run_user(args, user) -> int:
     return _run_on(args, system, user.params, grid, method, f"system {user.spec} ({system.name})")
 
 
-def _run_on(args, system, params, grid, method, head: str) -> int:
+def _run_on(args, system, params, grid, method, head: str, gear_set=None) -> int:
     """Run the checked analysis and write ``--out`` (``head`` describes the system in the
-    first line printed)."""
+    first line printed; ``gear_set``: the preset's physical set, for the mesh lines in µm)."""
     if args.distributed:
         from .._devices import process_index
 
@@ -196,16 +196,16 @@ def _run_on(args, system, params, grid, method, head: str) -> int:
 
             args.no_figures, args.quiet = True, True
             with contextlib.redirect_stdout(io.StringIO()):
-                _analyze(args, system, params, grid, method, None)
+                _analyze(args, system, params, grid, method, None, gear_set)
             return 0
     with OutputFolder(args.out, OWNED) as out:  # --out held by this run from here on
         print(f"jaxgear analyze: {args.method}, {grid.n_cells} cells, {head}")
-        written = _analyze(args, system, params, grid, method, out)
+        written = _analyze(args, system, params, grid, method, out, gear_set)
     print(f"\nwrote {', '.join(written)} to {args.out}/")
     return 0
 
 
-def _analyze(args, system, params, grid, method, out: Path | None) -> list[str]:
+def _analyze(args, system, params, grid, method, out: Path | None, gear_set=None) -> list[str]:
     """The analysis, its report and its files (written into the staging folder ``out``,
     none when ``out`` is ``None``: a process of a multi-process run other than 0)."""
     import numpy as np
@@ -218,6 +218,7 @@ def _analyze(args, system, params, grid, method, out: Path | None) -> list[str]:
     result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
     print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
     print(with_uncertainty_line(result.table(), result))
+    _print_meshes(result, system, params, gear_set)
     written = []
     if out is not None:
         result.save(out / "result.nc")
@@ -238,6 +239,26 @@ def _analyze(args, system, params, grid, method, out: Path | None) -> list[str]:
             print(f"  found only by direct integration: P-{d['period']} at {np.round(d['point'], 4).tolist()} "
                   f"({d['cells']} of the sampled cells)")
     return written
+
+
+def _print_meshes(result, system, params, gear_set) -> None:
+    """One line per attractor and mesh: contact regime, RMS transmission error and dynamic
+    factor (:func:`jaxgear.gear_view`; in µm with the preset's gear set). Nothing for a
+    system without switching functions; one line saying why for a system whose switching
+    functions are not pairs ``X - b, X + b``."""
+    from .._contact import gear_view
+
+    if not result.attractors or system.switching is None:  # no switching functions: no meshes
+        return
+    print("\nmeshes (jaxgear.gear_view" + (", physical units" if gear_set is not None else "") + "):")
+    for a in result.attractors:
+        try:
+            view = gear_view(system, params, a, gear_set)
+        except ValueError as exc:  # a user system whose switching functions are not meshes
+            print(f"  not shown: {exc}")
+            return
+        for line in view.lines():
+            print(f"  {line}")
 
 
 def _figures(result, out) -> list[str]:

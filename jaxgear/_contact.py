@@ -1,0 +1,712 @@
+"""The gear view of an attractor: mesh contact states, dynamic transmission error, mesh
+forces and spectra, mesh by mesh.
+
+What a gear engineer asks of every coexisting motion found by the global analysis
+(paper §4.2) is not its stroboscopic point but what the teeth do: for each mesh, how much
+of the time its drive flanks touch, how much it spends in the backlash gap and on the back
+flanks (model document §2.2: drive-flank contact ``X > b``, gap ``|X| <= b``, back-flank
+contact ``X < -b``), how often it loses contact and strikes the back flank, the dynamic
+transmission error ``X`` (the mesh deflection net of the static error, model document §2.1)
+and the dynamic mesh force (§2.4) with its dynamic factor, and the harmonics of the
+transmission error.
+
+A mesh is a pair of the system's switching functions (:class:`~jaxgear.ForcedSystem`
+``switching``) ``(X - b, X + b)``: the drive-flank and the back-flank surface of paper
+eq. (3). The built-in gear models declare theirs; a user system declares its own (in
+consecutive pairs, or any pairs through :class:`MeshSpec`). The deflection is their mean
+and the half backlash half their difference, so nothing of a mesh is written twice; the
+mesh forces of the gear models are :func:`~jaxgear.mesh_forces`.
+
+A P-k attractor is sampled over exactly its ``k`` forcing periods from its stroboscopic
+point; an aperiodic one (period 0) over a long run from a point of its cloud, cut into
+stretches whose spread gives the error of every share and rate. Contact changes are located
+inside a sample interval by bisection on the integrator's own step from the sample before
+(a step split at the kinks it meets), so shares are as accurate as the integration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import functools
+import math
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import check_int, check_number, with_changes
+from ._codec import array_field, custom_field, items_field, result_type
+from ._format import format_table
+from ._gearset import GearSet
+from ._io import save_result
+from ._model import nplanet_switching, reduced_switching
+from ._params import GearParams, params_to_dict
+from ._poincare import sample_trajectory, stroboscopic_map
+from ._system import ForcedSystem, check_system
+from ._version import __version__
+from .analysis import Attractor
+from .design import mesh_forces
+from .integrate import AbstractIntegrator, KinkAwareRK4, integrator_from_dict
+
+__all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view"]
+
+
+class ContactRegime(enum.IntEnum):
+    """How a mesh's teeth move over an attractor (the classic impact regimes of a gear pair
+    with backlash).
+
+    ``NO_IMPACT``: the contact state never changes (normally the drive flanks stay in
+    contact all the time); ``SINGLE_SIDED``: the mesh loses contact and re-engages on the
+    drive flank, never touching the back flank; ``DOUBLE_SIDED``: it reaches the back flank.
+    """
+
+    NO_IMPACT = 0
+    SINGLE_SIDED = 1
+    DOUBLE_SIDED = 2
+
+    @property
+    def text(self) -> str:
+        """``"no impact"``, ``"single-sided impact"`` or ``"double-sided impact"``."""
+        return _REGIME_TEXT[self]
+
+
+_REGIME_TEXT = {ContactRegime.NO_IMPACT: "no impact", ContactRegime.SINGLE_SIDED: "single-sided impact",
+                ContactRegime.DOUBLE_SIDED: "double-sided impact"}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MeshSpec:
+    """Which switching functions of a system are meshes, their names and their force.
+
+    Attributes:
+        pairs: ``((drive, back), ...)``: indices into ``system.switching(t, x, params)`` of the
+            drive-flank function ``X - b`` and the back-flank function ``X + b`` of each mesh;
+            ``None``: the gear models' own meshes, for any other system consecutive pairs
+            ``(0, 1), (2, 3), ...``.
+        names: one name per mesh; ``None``: ``"sun-planet"``, ``"ring-planet"`` for the reduced
+            gear model (``"sun-planet 1"``, ... for the N-planet model), ``"mesh 1"``, ... otherwise.
+        force: ``force(t, x, params) -> (n_meshes,)`` the dynamic mesh forces, in the system's
+            force unit; ``None``: :func:`~jaxgear.mesh_forces` for the gear models, no force
+            otherwise (force columns then NaN).
+        static_force: the static force of each mesh under the same mean load (a number for
+            all meshes or one per mesh), the denominator of the dynamic factor; ``None``: the
+            gear models' ``f_D / N`` (the sun torque shared by ``N`` planets, model document §4).
+    """
+
+    pairs: tuple[tuple[int, int], ...] | None = None
+    names: tuple[str, ...] | None = None
+    force: Callable[[Any, Any, Any], Any] | None = None
+    static_force: float | tuple[float, ...] | None = None
+
+    def __post_init__(self):
+        if self.pairs is not None:
+            try:
+                pairs = tuple((int(a), int(b)) for a, b in self.pairs)
+                ok = all(float(a) == int(a) and float(b) == int(b) for a, b in self.pairs)
+            except (TypeError, ValueError):
+                ok = False
+            if not ok or not pairs or min(min(p) for p in pairs) < 0:
+                raise ValueError(f"MeshSpec.pairs={self.pairs!r} must be a non-empty tuple of (drive, back) pairs "
+                                 "of indices >= 0 into the system's switching functions.")
+            object.__setattr__(self, "pairs", pairs)
+        if self.names is not None:
+            if isinstance(self.names, str) or not all(isinstance(n, str) for n in self.names):
+                raise ValueError(f"MeshSpec.names={self.names!r} must be a tuple of strings, one per mesh.")
+            object.__setattr__(self, "names", tuple(self.names))
+            if self.pairs is not None and len(self.names) != len(self.pairs):
+                raise ValueError(f"MeshSpec.names has {len(self.names)} names for {len(self.pairs)} pairs.")
+        if self.force is not None and not callable(self.force):
+            raise ValueError("MeshSpec.force must be callable force(t, x, params) -> (n_meshes,) or None.")
+        if self.static_force is not None:
+            a = np.atleast_1d(np.asarray(self.static_force, dtype=float))
+            if a.ndim != 1 or not np.all(np.isfinite(a)) or not np.all(a > 0):
+                raise ValueError(f"MeshSpec.static_force={self.static_force!r} must be a positive number or one "
+                                 "positive number per mesh.")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GearViewOptions:
+    """Options of :func:`gear_view`.
+
+    Attributes:
+        samples_per_period: samples of the trajectory per forcing period (>= 16); the
+            default integrator takes one step per sample.
+        transient: forcing periods integrated from the attractor's point before sampling
+            (rounded up to a multiple of ``k`` for a P-k); 0 starts on the point itself.
+        stretches, stretch_periods: an aperiodic attractor is followed for ``stretches``
+            stretches of ``stretch_periods`` forcing periods each; the error of a share or a
+            rate is the standard error of its mean over the stretches.
+        max_order: the spectrum is kept up to this multiple of the mesh (forcing) frequency
+            (at most half of ``samples_per_period``).
+        bisections: bisection steps that locate each contact change inside its sample
+            interval (the interval shrinks by ``2**bisections``).
+        integrator: ``None``: :class:`~jaxgear.KinkAwareRK4` with ``samples_per_period``
+            steps per period; any integrator object otherwise (its ``crossing_stepper``
+            locates the contact changes).
+    """
+
+    samples_per_period: int = 256
+    transient: int = 0
+    stretches: int = 8
+    stretch_periods: int = 25
+    max_order: float = 10.0
+    bisections: int = 48
+    integrator: AbstractIntegrator | None = None
+
+    def __post_init__(self):
+        check_int(self.samples_per_period, "samples_per_period", 16)
+        check_int(self.transient, "transient", 0)
+        check_int(self.stretches, "stretches", 2)
+        check_int(self.stretch_periods, "stretch_periods", 1)
+        check_int(self.bisections, "bisections", 1, 60)
+        check_number(self.max_order, "max_order", 0.0, self.samples_per_period / 2, strict_min=True)
+        if self.integrator is not None and not isinstance(self.integrator, AbstractIntegrator):
+            raise ValueError(f"integrator={self.integrator!r} must be an integrator object (jaxgear.KinkAwareRK4(...)) "
+                             "or None.")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MeshView:
+    """One mesh over one attractor (an item of :attr:`GearView.meshes`).
+
+    Shares are fractions of the time (they sum to 1); rates are per forcing period; for
+    an aperiodic attractor the ``*_error`` fields are the standard errors over the
+    stretches (0 for a P-k, whose values are exact for its sampled orbit). Transmission
+    errors and forces are in the units of :attr:`GearView.length_unit` and
+    :attr:`GearView.force_unit`.
+
+    Attributes:
+        name: the mesh's name.
+        regime: its :class:`ContactRegime` (stored as its code).
+        drive_share, gap_share, back_share: time shares in drive-flank contact
+            (``X > b``), in the gap (``|X| <= b``) and in back-flank contact (``X < -b``).
+        losses_per_period: contact losses (``X`` falling through ``b``) per forcing period.
+        impacts_per_period: back-flank impacts (``X`` falling through ``-b``) per period.
+        te_mean, te_rms, te_ptp: the dynamic transmission error ``X``: mean, RMS about
+            the mean, peak-to-peak.
+        force_mean, force_max, force_min: the dynamic mesh force (NaN without a force).
+        static_force: the static force of the same torque; ``dynamic_factor`` is
+            ``force_max / static_force``.
+        orders: ``(n,)`` frequencies of the spectrum in multiples of the mesh frequency
+            (``j / k`` for a P-k: its exact harmonics); ``amplitudes``: ``(n,)`` the
+            one-sided amplitude of ``X`` at each (order 0: the mean).
+    """
+
+    name: str
+    regime: ContactRegime
+    drive_share: float
+    gap_share: float
+    back_share: float
+    drive_share_error: float = 0.0
+    gap_share_error: float = 0.0
+    back_share_error: float = 0.0
+    losses_per_period: float = 0.0
+    losses_error: float = 0.0
+    impacts_per_period: float = 0.0
+    impacts_error: float = 0.0
+    te_mean: float = float("nan")
+    te_rms: float = float("nan")
+    te_ptp: float = float("nan")
+    force_mean: float = float("nan")
+    force_max: float = float("nan")
+    force_min: float = float("nan")
+    static_force: float = float("nan")
+    dynamic_factor: float = float("nan")
+    orders: np.ndarray = array_field(("order",), default_factory=lambda: np.zeros(0))
+    amplitudes: np.ndarray = array_field(("order",), default_factory=lambda: np.zeros(0))
+
+
+@result_type
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GearView:
+    """Result of :func:`gear_view`: every mesh over one attractor.
+
+    Attributes:
+        attractor_id, label, period: the attractor (its id in its result, ``"P-k"`` or the
+            aperiodic type, ``k``; 0 for an aperiodic one).
+        meshes: one :class:`MeshView` per mesh.
+        start: ``(dim,)`` the state at forcing phase 0 the sampling started from.
+        periods_covered: forcing periods the statistics cover (``k``, or the long run).
+        stretches: 1 for a P-k, the number of stretches of an aperiodic run.
+        samples_per_period: samples per forcing period.
+        length_unit, force_unit: ``"um"`` and ``"N"`` with a :class:`~jaxgear.GearSet`;
+            ``"b_c"`` and ``"k_msp b_c"`` for the dimensionless gear models (model document
+            §3); ``"state unit"`` and ``"force unit"`` for a user system.
+        length_scale, force_scale: the unit values of the dimensionless model in
+            ``length_unit`` and ``force_unit`` (1 without a gear set).
+        mesh_frequency_hz: the mesh frequency in Hz with a gear set (NaN otherwise): an
+            order times it is a frequency in Hz.
+        integrator: the integrator that sampled the attractor.
+        system, params (dict), version.
+    """
+
+    attractor_id: int
+    label: str
+    period: int
+    meshes: tuple[MeshView, ...] = items_field("mesh")
+    start: np.ndarray = array_field(("state",))
+    periods_covered: int = 0
+    stretches: int = 1
+    samples_per_period: int = 0
+    length_unit: str = ""
+    force_unit: str = ""
+    length_scale: float = 1.0
+    force_scale: float = 1.0
+    mesh_frequency_hz: float = float("nan")
+    integrator: AbstractIntegrator = custom_field(lambda i: i.to_dict(), integrator_from_dict,
+                                                  default_factory=KinkAwareRK4)
+    system: str = ""
+    params: dict = dataclasses.field(default_factory=dict)
+    version: str = ""
+
+    def mesh(self, name: str) -> MeshView:
+        """The :class:`MeshView` called ``name``."""
+        for m in self.meshes:
+            if m.name == name:
+                return m
+        raise ValueError(f"no mesh {name!r}; the meshes are {', '.join(m.name for m in self.meshes)}.")
+
+    def frequencies_hz(self, name: str) -> np.ndarray:
+        """The spectrum's frequencies of mesh ``name`` in Hz (NaN without a gear set)."""
+        return np.asarray(self.mesh(name).orders) * self.mesh_frequency_hz
+
+    def lines(self) -> list[str]:
+        """One line per mesh: regime, RMS transmission error and dynamic factor."""
+        out = []
+        for m in self.meshes:
+            df = "-" if not math.isfinite(m.dynamic_factor) else f"{m.dynamic_factor:.3f}"
+            out.append(f"attractor {self.attractor_id} ({self.label}), {m.name}: {m.regime.text}, "
+                       f"RMS TE {_num(m.te_rms)} {self.length_unit}, dynamic factor {df}")
+        return out
+
+    def table(self) -> str:
+        """Printable table: one row per mesh (shares in %, rates per forcing period)."""
+        rows = []
+        err = self.stretches > 1
+
+        def pc(v, e):
+            return f"{100 * v:.3f}" + (f" +- {100 * e:.3f}" if err else "")
+
+        def rate(v, e):
+            return f"{v:.4g}" + (f" +- {e:.2g}" if err else "")
+
+        for m in self.meshes:
+            rows.append((m.name, m.regime.text, pc(m.drive_share, m.drive_share_error),
+                         pc(m.gap_share, m.gap_share_error), pc(m.back_share, m.back_share_error),
+                         rate(m.losses_per_period, m.losses_error), rate(m.impacts_per_period, m.impacts_error),
+                         _num(m.te_mean), _num(m.te_rms), _num(m.te_ptp), _num(m.force_mean), _num(m.force_max),
+                         _num(m.force_min), _num(m.dynamic_factor), _dominant(m)))
+        head = ("mesh", "regime", "drive %", "gap %", "back %", "losses/T", "impacts/T",
+                f"TE mean [{self.length_unit}]", "TE rms", "TE p-p", f"F mean [{self.force_unit}]", "F max",
+                "F min", "dyn. factor", "strongest order")
+        over = (f"over {self.periods_covered} forcing periods" if self.stretches == 1 else
+                f"over {self.periods_covered} forcing periods in {self.stretches} stretches (+- standard error)")
+        return f"attractor {self.attractor_id} ({self.label}), {over}\n" + format_table(rows, head)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able description."""
+        meshes = []
+        for m in self.meshes:
+            d = {f.name: getattr(m, f.name) for f in dataclasses.fields(m)}
+            d.update(regime=m.regime.text, orders=np.asarray(m.orders).tolist(),
+                     amplitudes=np.asarray(m.amplitudes).tolist())
+            meshes.append(d)
+        return dict(attractor_id=self.attractor_id, label=self.label, period=self.period, meshes=meshes,
+                    start=np.asarray(self.start).tolist(), periods_covered=self.periods_covered,
+                    stretches=self.stretches, length_unit=self.length_unit, force_unit=self.force_unit,
+                    mesh_frequency_hz=self.mesh_frequency_hz, system=self.system, params=self.params,
+                    version=self.version)
+
+    def _attrs(self) -> dict:
+        return dict(title="jaxgear gear view of an attractor",
+                    units=f"transmission error in {self.length_unit}, force in {self.force_unit}")
+
+    def save(self, path):
+        """Write to netCDF atomically; reload with :func:`jaxgear.load`."""
+        return save_result(self, path)
+
+
+def _num(v: float) -> str:
+    return "-" if not math.isfinite(v) else f"{v:.4g}"
+
+
+def _dominant(m: MeshView) -> str:
+    """The strongest non-zero order of the spectrum and its amplitude."""
+    orders, amps = np.asarray(m.orders), np.asarray(m.amplitudes)
+    keep = orders > 0
+    if not np.any(keep):
+        return "-"
+    j = int(np.argmax(np.where(keep, amps, -np.inf)))
+    return f"{orders[j]:.4g}x: {amps[j]:.3g}"
+
+
+# ----------------------------------------------------------------------- the meshes
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    names: tuple[str, ...]
+    pairs: tuple[tuple[int, int], ...]
+    forces: Callable[[Any, Any, Any], Any] | None  # (params, ts (m,), xs (m, dim)) -> (m, n_meshes)
+    static: np.ndarray  # (n_meshes,), NaN where unknown
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _gear_forces(N: int, reduced: bool, params, ts, xs):
+    """The gear models' mesh forces (:func:`~jaxgear.mesh_forces`) at the samples, one
+    column per mesh (sun-planet meshes first): ``(m, n_meshes)``."""
+    f = mesh_forces(params, (ts, xs))
+    if reduced:
+        return jnp.stack([f.sp, f.rp], axis=1)
+    return jnp.concatenate([jnp.reshape(f.sp, (len(ts), N)), jnp.reshape(f.rp, (len(ts), N))], axis=1)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _user_forces(force, params, ts, xs):
+    """A user's ``force(t, x, params)`` at the samples: ``(m, n_meshes)``."""
+    return jax.vmap(lambda t, x: jnp.reshape(force(t, x, params), (-1,)))(ts, xs)
+
+
+def _layout(system: ForcedSystem, params, x0, meshes: MeshSpec | None) -> _Layout:
+    if meshes is not None and not isinstance(meshes, MeshSpec):
+        raise ValueError(f"meshes={meshes!r} must be a jaxgear.MeshSpec or None.")
+    spec = meshes or MeshSpec()
+    if system.switching is None:
+        raise ValueError(f"{system.name}: the gear view reads each mesh from the system's switching functions "
+                         "(ForcedSystem(switching=...), a pair X - b, X + b per mesh); this system declares none.")
+    n_sw = int(np.shape(system.switching(0.0, jnp.asarray(x0), params))[0])
+    gear = isinstance(params, GearParams) and system.switching in (reduced_switching, nplanet_switching)
+    names: tuple[str, ...]
+    if gear and system.switching is reduced_switching:
+        N, reduced = 1, True
+        pairs, names = ((0, 1), (2, 3)), ("sun-planet", "ring-planet")
+    elif gear:
+        N, reduced = n_sw // 4, False
+        pairs = tuple((i, N + i) for i in range(N)) + tuple((2 * N + i, 3 * N + i) for i in range(N))
+        names = tuple(f"sun-planet {i + 1}" for i in range(N)) + tuple(f"ring-planet {i + 1}" for i in range(N))
+    else:
+        if spec.pairs is None and n_sw % 2:
+            raise ValueError(f"meshes: {system.name} has {n_sw} switching functions, not pairs (X - b, X + b); "
+                             "say which are meshes with MeshSpec(pairs=((drive, back), ...)).")
+        pairs = tuple((2 * i, 2 * i + 1) for i in range(n_sw // 2))
+        names = tuple(f"mesh {i + 1}" for i in range(len(pairs)))
+    if spec.pairs is not None:
+        pairs = spec.pairs
+        if spec.names is None and len(names) != len(pairs):
+            names = tuple(f"mesh {i + 1}" for i in range(len(pairs)))
+    if spec.names is not None:
+        if len(spec.names) != len(pairs):
+            raise ValueError(f"meshes: {len(spec.names)} names for {len(pairs)} meshes.")
+        names = spec.names
+    bad = [p for p in pairs if max(p) >= n_sw or p[0] == p[1]]
+    if bad:
+        raise ValueError(f"meshes: the pair(s) {bad} do not name two different switching functions of "
+                         f"{system.name} (it has {n_sw}: indices 0..{n_sw - 1}).")
+    n = len(pairs)
+    forces = None
+    if spec.force is not None:
+        forces = functools.partial(_user_forces, spec.force)
+        got = np.shape(spec.force(0.0, jnp.asarray(x0), params))
+        if int(np.prod(got)) != n:
+            raise ValueError(f"meshes: MeshSpec.force returns shape {got}; it must return one force per mesh ({n}).")
+    elif gear and spec.pairs is None:
+        forces = functools.partial(_gear_forces, N, reduced)
+    static = np.full(n, np.nan)
+    if spec.static_force is not None:
+        s = np.atleast_1d(np.asarray(spec.static_force, dtype=float))
+        if s.size not in (1, n):
+            raise ValueError(f"meshes: MeshSpec.static_force has {s.size} values for {n} meshes.")
+        static = np.broadcast_to(s, (n,)).copy()
+    elif gear:
+        static = np.full(n, float(np.mean(np.asarray(params.f_D))) / int(params.N))
+    return _Layout(names, pairs, forces, static)
+
+
+# ----------------------------------------------------------------------- kernels
+@functools.partial(jax.jit, static_argnums=0)
+def _switching_at(system, params, ts, xs):
+    """``system.switching`` at every sample: ``(m, n_switching)``."""
+    return jax.vmap(system.switching, in_axes=(0, 0, None))(ts, xs, params)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def _locate(system, stepper, n_iter, params, t, Y, H, which, positive):
+    """Time ``tau`` in ``[0, H]`` after ``t`` where switching function ``which`` of the
+    trajectory through ``Y (dim, n)`` at ``t`` changes sign (from ``positive``), by
+    bisection on one step of ``stepper`` of length ``tau`` from the sample (a step split at
+    the kinks it crosses): ``(n,)``."""
+    def side(tau):
+        Z = stepper.step(system, params, t, Y, tau)
+        S = jax.vmap(system.switching, in_axes=(0, 1, None))(t + tau, Z, params)
+        return jnp.take_along_axis(S, which[:, None], axis=1)[:, 0] > 0
+
+    def body(_, c):
+        lo, hi = c
+        mid = 0.5 * (lo + hi)
+        same = side(mid) == positive
+        return jnp.where(same, mid, lo), jnp.where(same, hi, mid)
+
+    lo, hi = jax.lax.fori_loop(0, n_iter, body, (jnp.zeros_like(H), H))
+    return 0.5 * (lo + hi)
+
+
+@dataclasses.dataclass
+class _Stretch:
+    """Per-mesh sums of one sampled stretch of the trajectory."""
+
+    drive: np.ndarray  # time in drive contact (n,)
+    back: np.ndarray  # time in back contact (n,)
+    losses: np.ndarray  # counts (n,)
+    impacts: np.ndarray
+    duration: float
+    periods: int
+    te: np.ndarray  # (m, n) deflection at the samples (end point left out)
+    te_end: np.ndarray  # (n,) at the end point
+    force: np.ndarray | None  # (m, n)
+    force_end: np.ndarray | None
+
+
+def _stretch(system, params, layout: _Layout, stepper, n_iter: int, ts, xs, periods: int) -> _Stretch:
+    ts = jnp.asarray(ts)
+    xs = jnp.asarray(xs)
+    S = np.asarray(_switching_at(system, params, ts, xs))
+    if not np.all(np.isfinite(S)):
+        raise ValueError(f"{system.name}: the trajectory from the attractor's point is not finite (it blew up); "
+                         "check the attractor and the parameters.")
+    tsn = np.asarray(ts)
+    H = np.diff(tsn)
+    used = sorted({i for p in layout.pairs for i in p})
+    pos = S > 0
+    change = pos[1:] != pos[:-1]  # (m, n_sw)
+    j_idx, w_idx = np.nonzero(change[:, used])
+    w_idx = np.asarray(used, dtype=np.int64)[w_idx]
+    tau = np.zeros(0)
+    if len(j_idx):
+        n = len(j_idx)
+        size = max(8, 1 << (n - 1).bit_length())  # padded to a power of two: few compiled shapes
+        jj = np.concatenate([j_idx, np.full(size - n, j_idx[0])])
+        ww = np.concatenate([w_idx, np.full(size - n, w_idx[0])])
+        tau = np.asarray(_locate(system, stepper, n_iter, params, jnp.asarray(tsn[jj]), jnp.asarray(xs)[jj].T,
+                                 jnp.asarray(H[jj]), jnp.asarray(ww.astype(np.int32)),
+                                 jnp.asarray(pos[jj, ww])))[:n]
+    # time on the positive side of every used function: whole intervals, corrected where it changes
+    positive_time = np.sum(np.where(pos[:-1] & ~change, H[:, None], 0.0), axis=0)
+    np.add.at(positive_time, w_idx, np.where(pos[j_idx, w_idx], tau, H[j_idx] - tau))
+    falls = np.zeros(S.shape[1])
+    np.add.at(falls, w_idx, pos[j_idx, w_idx].astype(float))
+    drive_i = np.array([p[0] for p in layout.pairs])
+    back_i = np.array([p[1] for p in layout.pairs])
+    duration = float(tsn[-1] - tsn[0])
+    te = 0.5 * (S[:, drive_i] + S[:, back_i])
+    force = force_end = None
+    if layout.forces is not None:
+        F = np.asarray(layout.forces(params, ts, xs))
+        force, force_end = F[:-1], F[-1]
+    return _Stretch(drive=positive_time[drive_i], back=duration - positive_time[back_i], losses=falls[drive_i],
+                    impacts=falls[back_i], duration=duration, periods=periods, te=te[:-1], te_end=te[-1],
+                    force=force, force_end=force_end)
+
+
+def _extreme(y: np.ndarray, periodic: bool, sign: float) -> np.ndarray:
+    """Largest (``sign=1``) or smallest (``-1``) value of each column of samples ``y (m, n)``,
+    refined by the parabola through the extreme sample and its neighbours (wrapping round
+    for a periodic signal)."""
+    z = sign * y
+    m = len(z)
+    j = np.argmax(z, axis=0)
+    cols = np.arange(z.shape[1])
+    if periodic:
+        a, b = z[(j - 1) % m, cols], z[(j + 1) % m, cols]
+        inside = np.ones_like(j, dtype=bool)
+    else:
+        a, b = z[np.clip(j - 1, 0, m - 1), cols], z[np.clip(j + 1, 0, m - 1), cols]
+        inside = (j > 0) & (j < m - 1)
+    c = z[j, cols]
+    curv = a - 2 * c + b
+    ok = inside & (curv < 0)
+    refined = c - np.where(ok, (b - a) ** 2 / (8 * np.where(ok, curv, -1.0)), 0.0)
+    return sign * refined
+
+
+def _spectrum(te: np.ndarray, k: int, s: int, max_order: float, window: bool):
+    """One-sided amplitude spectrum of samples ``te (k s, n)`` covering ``k`` forcing periods:
+    orders ``j / k`` of the forcing frequency up to ``max_order``; ``window``: a Hann window
+    (an aperiodic stretch), none for exactly ``k`` periods of a P-k (exact harmonics)."""
+    n_s = te.shape[0]
+    if window:
+        w = np.hanning(n_s + 1)[:-1]
+        mean = np.mean(te, axis=0)
+        X = np.fft.rfft((te - mean) * w[:, None], axis=0) * (2.0 / np.sum(w))
+        X[0] = mean
+    else:
+        X = np.fft.rfft(te, axis=0) / n_s
+        X[1:] *= 2.0
+        if n_s % 2 == 0:
+            X[-1] /= 2.0  # the Nyquist bin is not doubled
+    orders = np.arange(X.shape[0]) / k
+    keep = orders <= max_order + 1e-12
+    return orders[keep], np.abs(X[keep])
+
+
+# ----------------------------------------------------------------------- the view
+def gear_view(system: ForcedSystem, params, attractor: Attractor, gear_set: GearSet | None = None, *,
+              meshes: MeshSpec | None = None, options: GearViewOptions | None = None, **changes) -> GearView:
+    """Contact states, dynamic transmission error, mesh forces and spectra of every mesh
+    over one attractor (see the module; model document §2.2-§2.4).
+
+    A P-k attractor (``attractor.period = k >= 1``) is sampled over exactly its ``k``
+    forcing periods from ``attractor.points[0]`` (a stroboscopic point, phase 0); an
+    aperiodic one (period 0) over ``stretches x stretch_periods`` periods from the first
+    point of its cloud. For every mesh the times of drive-flank contact, gap and
+    back-flank contact are summed between contact changes located by bisection inside
+    their sample intervals, and contact losses and back-flank impacts are counted.
+
+    Args:
+        system: a :class:`~jaxgear.ForcedSystem` with switching functions (the gear models,
+            or a user system declaring a pair ``X - b, X + b`` per mesh).
+        params: its parameters (:class:`~jaxgear.GearParams` for the gear models).
+        attractor: a :class:`~jaxgear.Attractor` of a :class:`~jaxgear.GlobalResult` of this
+            system and these parameters (``result.attractors[i]``).
+        gear_set: the :class:`~jaxgear.GearSet` the dimensionless gear parameters come
+            from: transmission errors in µm (``b_c``), forces in N (``k_msp b_c``),
+            frequencies in Hz (``Omega omega_n / 2 pi``); ``None``: dimensionless.
+        meshes: a :class:`MeshSpec` (which switching functions are meshes, their names and
+            force); ``None``: the gear models' meshes, consecutive pairs for another system.
+        options: a :class:`GearViewOptions`; ``**changes``: fields of it to change.
+
+    Returns:
+        a :class:`GearView`. Every argument is checked before any integration
+        (``ValueError`` naming it).
+    """
+    opts = with_changes(options, GearViewOptions, changes)
+    if not isinstance(system, ForcedSystem):
+        raise ValueError(f"system={system!r} must be a jaxgear.ForcedSystem.")
+    if not isinstance(attractor, Attractor):
+        raise ValueError(f"attractor={type(attractor).__name__} must be a jaxgear.Attractor "
+                         "(an item of GlobalResult.attractors).")
+    points = np.asarray(attractor.points, dtype=float)
+    if points.ndim != 2 or points.shape[0] < 1 or points.shape[1] != system.dim:
+        raise ValueError(f"attractor: its points have shape {points.shape}; the gear view needs at least one point "
+                         f"of the {system.dim} coordinates of {system.name}.")
+    if not np.all(np.isfinite(points[0])):
+        raise ValueError("attractor: its first point is not finite.")
+    k = check_int(attractor.period, "attractor.period", 0)
+    if gear_set is not None:
+        if not isinstance(gear_set, GearSet):
+            raise ValueError(f"gear_set={type(gear_set).__name__} must be a jaxgear.GearSet or None.")
+        if not isinstance(params, GearParams):
+            raise ValueError("gear_set: physical units need the gear models' GearParams; this system's parameters "
+                             f"are {type(params).__name__} (leave gear_set=None).")
+    x0 = points[0]
+    check_system(system, params, x0, batched=False)
+    layout = _layout(system, params, x0, meshes)
+    s = int(opts.samples_per_period)
+    integrator = opts.integrator or KinkAwareRK4(s)
+    stepper = integrator.crossing_stepper
+
+    x = jnp.asarray(x0)
+    if opts.transient:
+        skip = opts.transient if k == 0 else -(-opts.transient // k) * k
+        x = stroboscopic_map(system, params, x, periods=skip, integrator=integrator)
+    start = np.asarray(x)
+    if k > 0:
+        ts, xs = sample_trajectory(system, params, x, periods=k, samples_per_period=s, integrator=integrator)
+        parts = [_stretch(system, params, layout, stepper, opts.bisections, ts, xs, k)]
+    else:
+        parts = []
+        for _ in range(opts.stretches):
+            ts, xs = sample_trajectory(system, params, x, periods=opts.stretch_periods, samples_per_period=s,
+                                       integrator=integrator)
+            parts.append(_stretch(system, params, layout, stepper, opts.bisections, ts, xs, opts.stretch_periods))
+            x = xs[-1]
+    views = _mesh_views(layout, parts, periodic=k > 0, k=k if k > 0 else opts.stretch_periods, s=s, opts=opts,
+                        scales=_scales(gear_set, params))
+    length_unit, force_unit, length_scale, force_scale, hz = _units(system, params, gear_set)
+    label = attractor.label
+    return GearView(attractor_id=int(attractor.id), label=label, period=k, meshes=views, start=start,
+                    periods_covered=sum(p.periods for p in parts), stretches=len(parts), samples_per_period=s,
+                    length_unit=length_unit, force_unit=force_unit, length_scale=length_scale,
+                    force_scale=force_scale, mesh_frequency_hz=hz if gear_set is not None else float("nan"),
+                    integrator=integrator, system=system.name, params=params_to_dict(params), version=__version__)
+
+
+def _scales(gear_set, params) -> tuple[float, float]:
+    """(length, force) unit values of the dimensionless gear model in µm and N."""
+    if gear_set is None:
+        return 1.0, 1.0
+    k_ref = float(np.ravel(np.asarray(gear_set.k_sp_mean, dtype=float))[0])
+    return float(gear_set.b_c), k_ref * float(gear_set.b_c) * 1e-6
+
+
+def _units(system, params, gear_set):
+    if gear_set is not None:
+        length, force = _scales(gear_set, params)
+        omega_n = gear_set.derived()["omega_n"]
+        return "um", "N", length, force, float(np.asarray(params.Omega)) * omega_n / (2 * math.pi)
+    if isinstance(params, GearParams):
+        return "b_c", "k_msp b_c", 1.0, 1.0, float("nan")
+    return "state unit", "force unit", 1.0, 1.0, float("nan")
+
+
+def _mean_error(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over the stretches (axis 0) and its standard error (0 for one stretch)."""
+    n = values.shape[0]
+    mean = np.mean(values, axis=0)
+    if n < 2:
+        return mean, np.zeros_like(mean)
+    return mean, np.std(values, axis=0, ddof=1) / np.sqrt(n)
+
+
+def _mesh_views(layout: _Layout, parts: list[_Stretch], *, periodic: bool, k: int, s: int, opts: GearViewOptions,
+                scales) -> tuple[MeshView, ...]:
+    length, force_scale = scales
+    drive, drive_e = _mean_error(np.array([p.drive / p.duration for p in parts]))
+    back, back_e = _mean_error(np.array([p.back / p.duration for p in parts]))
+    gap, gap_e = _mean_error(np.array([(p.duration - p.drive - p.back) / p.duration for p in parts]))
+    losses, losses_e = _mean_error(np.array([p.losses / p.periods for p in parts]))
+    impacts, impacts_e = _mean_error(np.array([p.impacts / p.periods for p in parts]))
+    te_all = np.concatenate([p.te for p in parts]) * length
+    if periodic:
+        te_hi, te_lo = _extreme(te_all, True, 1.0), _extreme(te_all, True, -1.0)
+    else:
+        full = [np.concatenate([p.te, p.te_end[None]]) * length for p in parts]
+        te_hi = np.max([_extreme(f, False, 1.0) for f in full], axis=0)
+        te_lo = np.min([_extreme(f, False, -1.0) for f in full], axis=0)
+    te_mean = np.mean(te_all, axis=0)
+    te_rms = np.sqrt(np.mean((te_all - te_mean) ** 2, axis=0))
+    n = len(layout.pairs)
+    if parts[0].force is not None:
+        f_all = np.concatenate([p.force for p in parts]) * force_scale
+        if periodic:
+            f_hi, f_lo = _extreme(f_all, True, 1.0), _extreme(f_all, True, -1.0)
+        else:
+            full = [np.concatenate([p.force, p.force_end[None]]) * force_scale for p in parts]
+            f_hi = np.max([_extreme(f, False, 1.0) for f in full], axis=0)
+            f_lo = np.min([_extreme(f, False, -1.0) for f in full], axis=0)
+        f_mean = np.mean(f_all, axis=0)
+    else:
+        f_hi = f_lo = f_mean = np.full(n, np.nan)
+    static = layout.static * force_scale
+    if periodic:
+        orders, amps = _spectrum(parts[0].te * length, k, s, opts.max_order, window=False)
+    else:
+        spectra = [_spectrum(p.te * length, k, s, opts.max_order, window=True) for p in parts]
+        orders = spectra[0][0]
+        amps = np.sqrt(np.mean([a ** 2 for _, a in spectra], axis=0))
+    out = []
+    for i, name in enumerate(layout.names):
+        # the contact state changes only through a fall through b or -b (a contact loss or a
+        # back-flank impact): without either it holds one state throughout
+        regime = (ContactRegime.DOUBLE_SIDED if impacts[i] > 0 else
+                  ContactRegime.SINGLE_SIDED if losses[i] > 0 else ContactRegime.NO_IMPACT)
+        out.append(MeshView(
+            name=name, regime=regime, drive_share=float(drive[i]), gap_share=float(gap[i]),
+            back_share=float(back[i]), drive_share_error=float(drive_e[i]), gap_share_error=float(gap_e[i]),
+            back_share_error=float(back_e[i]), losses_per_period=float(losses[i]), losses_error=float(losses_e[i]),
+            impacts_per_period=float(impacts[i]), impacts_error=float(impacts_e[i]), te_mean=float(te_mean[i]),
+            te_rms=float(te_rms[i]), te_ptp=float(te_hi[i] - te_lo[i]), force_mean=float(f_mean[i]),
+            force_max=float(f_hi[i]), force_min=float(f_lo[i]), static_force=float(static[i]),
+            dynamic_factor=float(f_hi[i] / static[i]) if np.isfinite(static[i]) else float("nan"),
+            orders=np.asarray(orders, dtype=float), amplitudes=np.asarray(amps[:, i], dtype=float)))
+    return tuple(out)

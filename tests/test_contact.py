@@ -1,0 +1,249 @@
+"""The gear view of an attractor (jaxgear/_contact.py): contact shares, impacts, dynamic
+transmission error, mesh force and spectrum, checked against answers that do not come from
+the code: the closed form of the linear forced oscillator, an event-located integration
+by scipy, and a DFT over a longer window."""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import jaxgear as jg
+import jaxgear._contact as contact
+from jaxgear._contact import ContactRegime, GearView, GearViewOptions, MeshSpec, gear_view
+from jaxgear.analysis import Attractor
+
+# the single spur pair of jaxgear.SPUR_PAIR, declared as a user system with one mesh:
+# switching functions x - b (drive flank) and x + b (back flank)
+SPUR = jg.ForcedSystem(vector_field=jg.SPUR_PAIR.vector_field, period=jg.SPUR_PAIR.period, state_names=("x", "v"),
+                       section_index=1, name="spur-mesh", switching=lambda t, x, p: jnp.stack([x[0] - p.b, x[0] + p.b]))
+
+
+def spur_force(t, x, p):
+    """The mesh force of the spur pair: stiffness through the backlash plus damping."""
+    return jnp.reshape((1.0 + p.kappa * jnp.sin(p.Omega * t)) * jg.backlash(x[0], p.b) + 2.0 * p.zeta * x[1], (1,))
+
+
+def attractor(points, period, id=0):
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    return Attractor(id=id, period=period, points=points, section_points=np.zeros((0, points.shape[1])))
+
+
+# a P-2 with double-sided impacts (small backlash, large excitation): its stroboscopic
+# points from an adaptive integration (rtol 1e-12) over 100 periods
+P2_PARAMS = jg.SpurPairParams(zeta=0.05, kappa=0.0, b=0.1, f_m=0.1, e_amp=0.3, Omega=1.8)
+P2_POINTS = [[0.164390327329, -0.311488197674], [0.030744445103, -1.12295573442]]
+
+
+@pytest.fixture(scope="module")
+def p2_view():
+    return gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), meshes=MeshSpec(force=spur_force, static_force=0.1))
+
+
+def event_reference(p, x, periods):
+    """Contact shares and falls through +-b per period by scipy with located events: the
+    spur pair integrated piece by piece (drive flank, gap, back flank), every change of
+    piece an event (DOP853, rtol 1e-12)."""
+    b = float(p.b)
+    W, z, fm, e, kap = (float(v) for v in (p.Omega, p.zeta, p.f_m, p.e_amp, p.kappa))
+    T = 2 * math.pi / W
+
+    def piece(side):
+        def f(t, y):
+            d = y[0] - b if side == 1 else (y[0] + b if side == -1 else 0.0)
+            return [y[1], fm + e * W * W * math.sin(W * t) - 2 * z * y[1] - (1 + kap * math.sin(W * t)) * d]
+        return f
+
+    def event(level, direction):
+        g = lambda t, y: y[0] - level  # noqa: E731
+        g.terminal, g.direction = True, direction
+        return g
+
+    t, t_end, x = 0.0, periods * T, np.asarray(x, dtype=float)
+    side = 1 if x[0] > b else (-1 if x[0] < -b else 0)
+    time = {1: 0.0, 0: 0.0, -1: 0.0}
+    losses = impacts = 0
+    while t < t_end:
+        events = {1: [event(b, -1)], 0: [event(b, 1), event(-b, -1)], -1: [event(-b, 1)]}[side]
+        sol = solve_ivp(piece(side), (t, t_end), x, events=events, rtol=1e-12, atol=1e-13, method="DOP853")
+        time[side] += sol.t[-1] - t
+        if sol.status == 1:
+            if side == 1:
+                side, losses = 0, losses + 1
+            elif side == -1:
+                side = 0
+            elif len(sol.t_events[0]):
+                side = 1
+            else:
+                side, impacts = -1, impacts + 1
+        t, x = sol.t[-1], sol.y[:, -1]
+    return {k: v / t_end for k, v in time.items()}, losses / periods, impacts / periods
+
+
+def test_static_load_above_the_dynamic_amplitude_is_the_linear_oscillator():
+    """(a) Zero stiffness variation and a static deflection larger than the dynamic
+    amplitude: the mesh never leaves the drive flank and is the forced linear oscillator
+    x'' + 2 zeta x' + (x - b) = f_m + e Omega^2 sin(Omega t), whose steady state is
+    x = b + f_m + A sin(Omega t - phi), A = e Omega^2 / sqrt((1 - Omega^2)^2 + (2 zeta Omega)^2),
+    and whose mesh force f_m + A sqrt(1 + (2 zeta Omega)^2) sin(...) peaks at the dynamic factor."""
+    z, W, e, fm, b = 0.05, 0.8, 0.1, 1.0, 0.1
+    p = jg.SpurPairParams(zeta=z, kappa=0.0, b=b, f_m=fm, e_amp=e, Omega=W)
+    A = e * W**2 / math.hypot(1 - W**2, 2 * z * W)
+    phi = math.atan2(2 * z * W, 1 - W**2)
+    x0 = [b + fm - A * math.sin(phi), A * W * math.cos(phi)]
+    view = gear_view(SPUR, p, attractor(x0, 1), meshes=MeshSpec(force=spur_force, static_force=fm))
+    (m,) = view.meshes
+    assert m.regime is ContactRegime.NO_IMPACT and m.regime.text == "no impact"
+    assert (m.drive_share, m.gap_share, m.back_share) == (1.0, 0.0, 0.0)
+    assert m.losses_per_period == 0 and m.impacts_per_period == 0
+    assert m.te_mean == pytest.approx(b + fm, abs=1e-8)
+    assert m.te_rms == pytest.approx(A / math.sqrt(2), rel=1e-7)
+    assert m.te_ptp == pytest.approx(2 * A, rel=1e-7)
+    assert m.force_mean == pytest.approx(fm, abs=1e-8)
+    assert m.force_max == pytest.approx(fm + A * math.hypot(1, 2 * z * W), rel=1e-7)
+    assert m.dynamic_factor == pytest.approx(1 + A * math.hypot(1, 2 * z * W) / fm, rel=1e-7)
+    one = np.argmin(np.abs(m.orders - 1.0))
+    assert m.orders[one] == 1.0 and m.amplitudes[one] == pytest.approx(A, rel=1e-7)
+    assert view.length_unit == "state unit" and math.isnan(view.mesh_frequency_hz)
+
+
+def test_double_sided_motion_matches_an_event_located_integration(p2_view):
+    """(b) Contact shares and impacts per period equal those of scipy's event-located
+    integration from the same start to 1e-6."""
+    (m,) = p2_view.meshes
+    shares, losses, impacts = event_reference(P2_PARAMS, p2_view.start, 2)
+    assert m.regime is ContactRegime.DOUBLE_SIDED
+    assert m.drive_share == pytest.approx(shares[1], abs=1e-6)
+    assert m.gap_share == pytest.approx(shares[0], abs=1e-6)
+    assert m.back_share == pytest.approx(shares[-1], abs=1e-6)
+    assert (m.losses_per_period, m.impacts_per_period) == (losses, impacts) == (1.0, 0.5)
+
+
+def test_shares_sum_to_one_and_a_pk_spectrum_has_only_its_harmonics(p2_view):
+    """(c) The three shares partition the time; the P-2's spectrum equals a DFT over three
+    times its period, which holds energy only at multiples of 1/2 of the forcing frequency."""
+    (m,) = p2_view.meshes
+    assert min(m.drive_share, m.gap_share, m.back_share) > 0
+    assert m.drive_share + m.gap_share + m.back_share == pytest.approx(1.0, abs=1e-14)
+    assert np.allclose(np.diff(m.orders), 0.5)
+    s = p2_view.samples_per_period
+    _, xs = jg.sample_trajectory(SPUR, P2_PARAMS, p2_view.start, periods=6, samples_per_period=s,
+                                 integrator=p2_view.integrator)
+    x = np.asarray(xs)[:-1, 0]
+    X = np.abs(np.fft.rfft(x)) / len(x)
+    X[1:] *= 2
+    harmonic = np.arange(len(X)) % 3 == 0  # bin j of 6 periods is order j / 6
+    assert np.max(X[~harmonic]) < 1e-7 * np.max(X)
+    assert m.amplitudes[1] > 0.1  # the subharmonic 1/2 is there
+    n = len(m.orders)
+    assert np.allclose(X[harmonic][:n], m.amplitudes, rtol=1e-6, atol=1e-9)
+
+
+def test_aperiodic_run_of_the_gear_model_reads_design_forces_and_units():
+    """An aperiodic attractor is followed over stretches (errors from their spread); the
+    transmission error and mesh forces of the gear model are those of jaxgear.mesh_forces and
+    jaxgear.transmission_error on the same samples; a GearSet gives um, N and Hz."""
+    gs = jg.paper_gear_set()
+    p = gs.to_params()
+    a = attractor([1.0, 0.5, 3.0, 0.0], 0)
+    view = gear_view(jg.REDUCED, p, a, gs, stretches=2, stretch_periods=2, samples_per_period=64)
+    assert [m.name for m in view.meshes] == ["sun-planet", "ring-planet"]
+    assert (view.length_unit, view.force_unit, view.stretches, view.periods_covered) == ("um", "N", 2, 4)
+    _, xs = jg.sample_trajectory(jg.REDUCED, p, a.points[0], periods=4, samples_per_period=64,
+                                 integrator=view.integrator)
+    ts = np.arange(4 * 64) * (2 * np.pi / float(p.Omega)) / 64 % (2 * np.pi / float(p.Omega))
+    orbit = (jnp.asarray(ts), xs[:-1])
+    f = jg.mesh_forces(p, orbit)
+    k_ref, b_c = 0.8256e9, 10.0
+    for m, g, mesh in zip(view.meshes, (f.sp, f.rp), ("sp", "rp")):
+        te = np.asarray(jg.transmission_error(p, orbit, mesh)) * b_c
+        assert m.te_mean == pytest.approx(np.mean(te), rel=1e-9, abs=1e-9)
+        assert m.force_mean == pytest.approx(np.mean(g) * k_ref * b_c * 1e-6, rel=1e-9)
+        assert m.static_force == pytest.approx(float(p.f_D) / 3 * k_ref * b_c * 1e-6)
+        assert m.drive_share + m.gap_share + m.back_share == pytest.approx(1.0, abs=1e-12)
+        assert np.allclose(np.diff(m.orders), 0.5)  # stretches of 2 periods
+    assert view.mesh_frequency_hz == pytest.approx(gs.derived()["mesh_frequency_hz"], rel=1e-12)
+    assert "sun-planet" in view.table() and "um" in view.lines()[0]
+
+
+def test_save_load_round_trip(p2_view, tmp_path):
+    path = p2_view.save(tmp_path / "view.nc")
+    back = jg.load(path)
+    assert isinstance(back, GearView)
+    assert back.meshes[0].regime is ContactRegime.DOUBLE_SIDED
+    for field in ("attractor_id", "label", "period", "periods_covered", "length_unit", "system", "params",
+                  "integrator"):
+        assert getattr(back, field) == getattr(p2_view, field), field
+    np.testing.assert_array_equal(back.start, p2_view.start)
+    for a, b in zip(back.meshes, p2_view.meshes):
+        np.testing.assert_array_equal(a.amplitudes, b.amplitudes)
+        assert (a.name, a.drive_share, a.impacts_per_period, a.dynamic_factor) == \
+            (b.name, b.drive_share, b.impacts_per_period, b.dynamic_factor)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: gear_view(jg.SPUR_PAIR, P2_PARAMS, attractor(P2_POINTS, 2)), "switching"),
+    (lambda: gear_view("spur", P2_PARAMS, attractor(P2_POINTS, 2)), "system="),
+    (lambda: gear_view(SPUR, P2_PARAMS, P2_POINTS), "attractor="),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor([[0.1, 0.2, 0.3]], 1)), "attractor"),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), jg.paper_gear_set()), "gear_set"),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), meshes=MeshSpec(pairs=((0, 2),))), "meshes"),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), meshes={"pairs": ((0, 1),)}), "meshes="),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), samples_per_period=4), "samples_per_period"),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), max_order=1000.0), "max_order"),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2), stepz=3), "stepz"),
+    (lambda: gear_view(SPUR, P2_PARAMS, attractor(P2_POINTS, 2),
+                       meshes=MeshSpec(force=lambda t, x, p: jnp.zeros(2))), "meshes"),
+    (lambda: MeshSpec(static_force=-1.0), "static_force"),
+    (lambda: GearViewOptions(stretches=1), "stretches"),
+])
+def test_bad_input_is_refused_before_any_integration(call, name, monkeypatch):
+    """(d) Every bad argument raises ValueError naming it, before anything is integrated."""
+    def no_work(*a, **k):
+        raise AssertionError("integrated before the arguments were checked")
+
+    monkeypatch.setattr(contact, "sample_trajectory", no_work)
+    monkeypatch.setattr(contact, "stroboscopic_map", no_work)
+    with pytest.raises(ValueError, match=name):
+        call()
+
+
+class _Result:
+    """What ``jaxgear analyze`` hands to its mesh lines: the attractors of a result."""
+
+    def __init__(self, attractors):
+        self.attractors = attractors
+
+
+def test_analyze_prints_one_line_per_attractor_and_mesh(capsys):
+    from jaxgear.cli.analyze import _print_meshes
+
+    _print_meshes(_Result([attractor(P2_POINTS, 2)]), SPUR, P2_PARAMS, None)
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0] == "meshes (jaxgear.gear_view):"
+    assert lines[1].startswith("  attractor 0 (P-2), mesh 1: double-sided impact, RMS TE ")
+    assert lines[1].endswith("state unit, dynamic factor -")  # a user system without a force
+    _print_meshes(_Result([attractor([0.1, 0.2], 1)]), jg.DUFFING, jg.DuffingParams(), None)
+    assert capsys.readouterr().out == ""  # no switching functions: no meshes
+    odd = jg.ForcedSystem(vector_field=SPUR.vector_field, period=SPUR.period, state_names=("x", "v"),
+                          switching=lambda t, x, p: jnp.stack([x[0] - p.b]))
+    _print_meshes(_Result([attractor(P2_POINTS, 2)]), odd, P2_PARAMS, None)
+    assert "not shown: meshes:" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_analyze_paper_preset_prints_meshes_in_micrometres(tmp_path, capsys):
+    from jaxgear.cli import main
+
+    rc = main(["analyze", "--grid", "5,3,6", "--quiet", "--no-figures", "--uncertainty-samples", "0",
+               "--out", str(tmp_path / "out")])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "meshes (jaxgear.gear_view, physical units):" in text
+    lines = [s for s in text.splitlines() if "RMS TE" in s]
+    assert lines and all(" um, dynamic factor " in s for s in lines)
+    assert any("sun-planet" in s for s in lines) and any("ring-planet" in s for s in lines)
