@@ -472,11 +472,11 @@ def params_from_dict(type_name: str, d: dict):
     (rebuild it with ``MyParams(**values)``).
 
     Raises:
-        ValueError: the values are not a dict of numbers and lists of numbers, or do not
-            fit the named package class.
+        ValueError: the values are not plain data (numbers, texts, lists of them), or do
+            not fit the named package class.
     """
-    if not isinstance(d, dict) or not all(isinstance(k, str) and _is_number_tree(v) for k, v in d.items()):
-        raise ValueError("saved parameters must be a dict of numbers or lists of numbers.")
+    if not isinstance(d, dict) or not all(isinstance(k, str) and _is_value_tree(v) for k, v in d.items()):
+        raise ValueError("saved parameters must be a dict of numbers, texts or lists of them.")
     cls = PARAMS_TYPES.get(str(type_name))
     if cls is None:
         return dict(d)
@@ -486,7 +486,8 @@ def params_from_dict(type_name: str, d: dict):
         raise ValueError(f"saved parameters do not fit {cls.__name__}: {exc}") from None
 
 
-def _is_number_tree(v) -> bool:
+def _is_value_tree(v) -> bool:
+    """Plain data: numbers, texts (a mesh shape's name), ``None`` and lists of them."""
     if isinstance(v, (list, tuple)):
-        return all(_is_number_tree(x) for x in v)
-    return isinstance(v, (int, float)) and not isinstance(v, bool) or v is None
+        return all(_is_value_tree(x) for x in v)
+    return isinstance(v, (int, float, str)) and not isinstance(v, bool) or v is None
