@@ -26,6 +26,8 @@ from IPython.display import display
 import jaxgear as jg
 from jaxgear import plotting
 
+jg.enable_compilation_cache()  # a restarted kernel loads the compiled programs instead of compiling them again
+
 counts = (50, 30, 60) if FULL else (10, 6, 12)
 
 # %% [markdown]

@@ -43,6 +43,8 @@ from IPython.display import display
 import jaxgear as jg
 from jaxgear import plotting
 
+jg.enable_compilation_cache()  # a restarted kernel loads the compiled programs instead of compiling them again
+
 p = jg.paper_params()
 n_box = 128 if FULL else 32  # seeds in the box around the paper's P-1 guess
 n_ball = 64 if FULL else 16  # seeds per radius in the convergence study

@@ -25,6 +25,8 @@ import numpy as np
 
 import jaxgear as jg
 
+jg.enable_compilation_cache()  # a restarted kernel loads the compiled programs instead of compiling them again
+
 # %% [markdown]
 # ## The gear set in physical units
 #

@@ -40,6 +40,8 @@ import numpy as np
 
 import jaxgear as jg
 
+jg.enable_compilation_cache()  # a restarted kernel loads the compiled programs instead of compiling them again
+
 steps = 150 if FULL else 40
 settle = 2000 if FULL else 600
 

@@ -31,6 +31,8 @@ from IPython.display import display
 import jaxgear as jg
 from jaxgear import plotting
 
+jg.enable_compilation_cache()  # a restarted kernel loads the compiled programs instead of compiling them again
+
 n = 60 if FULL else 20  # cells per axis
 
 

@@ -35,6 +35,8 @@ from IPython.display import display
 import jaxgear as jg
 from jaxgear import REDUCED, AttractorType, basin_entropy, classify_attractor, lyapunov_spectrum, plotting
 
+jg.enable_compilation_cache()  # a restarted kernel loads the compiled programs instead of compiling them again
+
 grid = jg.CellGrid.paper((25, 15, 30) if FULL else (5, 3, 6))  # region D on the section x4 = 0
 backlash = np.linspace(1.0, 3.5, 12) if FULL else np.array([2.0, 3.0])
 

@@ -86,12 +86,14 @@ p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
 grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
 method = jg.Direct(integrator=jg.RK4(64), max_period=4)
 if "direct" in what:
+    pools.clear()
     r = jg.analyze_global(jg.DUFFING, p, grid, method, progress=False)
     out["direct_labels"] = np.asarray(r.labels)
     out["direct_shares"] = np.array([a.share for a in r.attractors])
     out["direct_points"] = np.concatenate([a.points for a in r.attractors])
     out["direct_jobs"] = pooled()
 if "sweep" in what:
+    pools.clear()
     s = jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.4], grid, method=method, progress=False)
     out["sweep_labels"], out["sweep_shares"], out["sweep_points"] = s.labels, s.shares, s.points
     out["sweep_jobs"] = pooled()
@@ -115,6 +117,7 @@ if "shoot" in what:
     out["shoot_status"] = np.asarray(f.shots[1].status)
     out["shoot_shards"] = spanned()
 if "gear" in what:
+    pools.clear()
     g = jg.analyze_global(jg.REDUCED, jg.paper_params(), jg.CellGrid.paper((6, 4, 8)), progress=False, uncertainty=0)
     out["gear_labels"] = np.asarray(g.labels)
     out["gear_shares"] = np.array([a.share for a in g.attractors])
@@ -184,41 +187,61 @@ def assert_same(one: dict, two: dict, what: str):
     assert {k.split("_")[0] for k in one} == set(what.split(","))
 
 
+SECTIONS = "direct,sweep,sharded,shoot,gear,cellmap,bifurcation,gearmaps"
+"""Every section of the script (it runs them in this order; each resets the spies it reads)."""
+
+
+@pytest.fixture(scope="module")
+def device_runs(tmp_path_factory):
+    """The arrays of every section with one and with two forced host devices: one fresh
+    process per device count, shared by the four tests below (the sections of a process
+    share the programs it compiles). Each test reads its own sections."""
+    tmp = tmp_path_factory.mktemp("devices")
+    runs = {}
+
+    def get(devices: int, what: str) -> dict:
+        if devices not in runs:
+            runs[devices] = run_on_devices(tmp, devices, SECTIONS)
+        return {k: v for k, v in runs[devices].items() if k.split("_")[0] in what.split(",")}
+
+    return get
+
+
 @pytest.mark.slow
-def test_two_devices_give_the_one_device_results(tmp_path):
+def test_two_devices_give_the_one_device_results(device_runs):
     """The direct analysis (cells) and a basin sweep (values x cells) on two forced host
     devices, one lane pool each: the labels, shares and orbits of one device."""
     what = "direct,sweep"
-    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+    assert_same(device_runs(1, what), device_runs(2, what), what)
 
 
 @pytest.mark.slow
-def test_two_devices_run_one_sharded_pool(tmp_path):
+def test_two_devices_run_one_sharded_pool(device_runs):
     """The direct analysis on two forced host devices runs both devices' pools in one
     shard_map program (its state spans both devices; no one-device pool, no other thread
     runs pool rounds), the shorter block padded: the labels, shares and orbits of one
     device."""
     what = "sharded"
-    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+    assert_same(device_runs(1, what), device_runs(2, what), what)
 
 
 @pytest.mark.slow
-def test_two_devices_shard_the_stateless_maps(tmp_path):
+def test_two_devices_shard_the_stateless_maps(device_runs):
     """Shooting (seeds), the stroboscopic cell map (its cell images and the analysis) and
     an independent bifurcation diagram (values x starts), each batch sharded over two
     forced host devices by one shard_map (its output spans both): the arrays of one
     device, bit for bit."""
     what = "shoot,cellmap,bifurcation"
-    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+    assert_same(device_runs(1, what), device_runs(2, what), what)
 
 
 @pytest.mark.slow
-def test_two_devices_with_the_compiled_kernel(tmp_path):
+def test_two_devices_with_the_compiled_kernel(device_runs):
     """The gear model through the compiled CPU kernel (an XLA FFI custom call) on two
     devices, in the direct method's pools and inside shard_map (a bifurcation diagram, the
     Poincaré-like cell images): the labels and orbits of one device."""
     what = "gear,gearmaps"
-    assert_same(run_on_devices(tmp_path, 1, what), run_on_devices(tmp_path, 2, what), what)
+    assert_same(device_runs(1, what), device_runs(2, what), what)
 
 
 # ----------------------------------------------------------------- several processes
@@ -272,8 +295,17 @@ def _kill(proc) -> None:
     proc.communicate()
 
 
+@pytest.fixture(scope="module")
+def one_process_sweep(tmp_path_factory) -> Path:
+    """The basin sweep's file as one process writes it (the reference of the two tests
+    below, run once)."""
+    out = tmp_path_factory.mktemp("one-process") / "one"
+    _finish(_start(out, 1))
+    return out / "basins.nc"
+
+
 @pytest.mark.slow
-def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
+def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path, one_process_sweep):
     """A basin sweep as two JAX processes (each takes every other value; process 0 writes
     the file): one of them killed (SIGKILL) after its first value, the job stopped, the
     same command rerun: the finished values are kept and the file equals that of one
@@ -283,7 +315,6 @@ def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
 
     from test_sweep import _assert_same_file
 
-    _finish(_start(tmp_path / "one", 1))
     run = tmp_path / "two"
     procs = _start(run, 2)
     t0 = time.time()
@@ -302,17 +333,16 @@ def test_two_processes_killed_and_rerun_write_the_one_process_file(tmp_path):
     stamps = {n: (run / "parts" / n).stat().st_mtime_ns for n in kept}
     _finish(_start(run, 2))
     assert all((run / "parts" / n).stat().st_mtime_ns == t for n, t in stamps.items())  # not recomputed
-    _assert_same_file(tmp_path / "one" / "basins.nc", run / "basins.nc")
+    _assert_same_file(one_process_sweep, run / "basins.nc")
 
 
 @pytest.mark.slow
-def test_two_processes_write_the_one_process_file(tmp_path):
+def test_two_processes_write_the_one_process_file(tmp_path, one_process_sweep):
     """An uninterrupted basin sweep as two JAX processes writes the file of one process."""
     from test_sweep import _assert_same_file
 
-    _finish(_start(tmp_path / "one", 1))
     _finish(_start(tmp_path / "two", 2))
-    _assert_same_file(tmp_path / "one" / "basins.nc", tmp_path / "two" / "basins.nc")
+    _assert_same_file(one_process_sweep, tmp_path / "two" / "basins.nc")
 
 
 ANALYSIS_SCRIPT = r'''

@@ -1,7 +1,7 @@
 """The notebooks: each runs top to bottom on its reduced setting (FULL = False), writes
-nothing into the repository, and matches its paired script. The runs are ``slow`` (the
-four heaviest, and the three whose calls test modules check): ``python -m pytest -m slow
-tests/test_notebooks.py``; the default suite checks the pairing and where each writes.
+nothing into the repository, and matches its paired script. The runs are ``slow``, every
+one of them: ``python -m pytest -m slow tests/test_notebooks.py``; the default suite checks
+the pairing and where each writes.
 
 Key numbers are asserted inside the notebooks; a failing assert fails the test. Each
 notebooks/<name>.ipynb (stored without outputs) is paired by jupytext with
@@ -22,26 +22,10 @@ ROOT = Path(__file__).parent.parent
 NOTEBOOK_DIR = ROOT / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 IDS = [p.stem for p in NOTEBOOKS]
-HEAVY = {"01_global_analysis", "02_shooting_and_floquet", "04_custom_gear_set", "05_design"}
-"""Notebooks that take minutes each on the 2-core CI machine even at their reduced size:
-run by ``pytest -m slow`` (with the other heavier checks)."""
-COVERED = {
-    # the sweeps (bifurcation diagram up/down, basin sweep, parameter map, basin map, resume):
-    # tests/test_sweep.py and tests/test_basin_map.py check each call on the Duffing oscillator
-    "03_sweeps",
-    # a user system (NamedTuple Duffing, the spur pair with backlash; global analysis, shooting,
-    # the small-forcing linear limit, a bad system's error): tests/test_any_system.py checks
-    # the same calls on the same parameters, tests/test_design.py the gradient of an RMS
-    "06_any_forced_system",
-    # attractor types (a chaotic Duffing beside its cycle, a torus, the gear's chaotic band,
-    # basin entropy): tests/test_attractors.py, tests/test_sweep_attractors.py and
-    # tests/test_fractal.py check the same calls
-    "07_attractors",
-}
-"""Notebooks whose calls test modules already check (named above): run by ``pytest -m slow``
-too, so that the default suite stays within five minutes on two cores."""
-RUNS = [pytest.param(p, id=p.stem, marks=pytest.mark.slow) if p.stem in HEAVY | COVERED
-        else pytest.param(p, id=p.stem) for p in NOTEBOOKS]
+RUNS = [pytest.param(p, id=p.stem, marks=pytest.mark.slow) for p in NOTEBOOKS]
+"""Every notebook runs in ``pytest -m slow``: each takes a minute or more on the 2-core CI
+machine even at its reduced size, and its asserts are checks that no other test makes, so
+none is left out."""
 
 
 def _listing(folder: Path) -> set[Path]:

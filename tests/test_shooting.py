@@ -558,28 +558,43 @@ def test_cli_period_and_periods_make_one_and_the_same_search_call(monkeypatch):
     assert o1.transient > 0 and x1.shape == (8, 4)  # random seeds get the transient (--period once ran without)
 
 
+@pytest.fixture(scope="module")
+def shoot_period_1():
+    """``jaxgear shoot --period 1`` on :data:`SHOOT_ARGV` (its JSON), run once for the two
+    slow tests below."""
+    return _cli_json(["shoot", "--period", "1"] + SHOOT_ARGV)
+
+
+@pytest.fixture(scope="module")
+def shoot_periods_1_2():
+    """``jaxgear shoot --periods 1-2`` on :data:`SHOOT_ARGV` (its JSON), run once for the two
+    slow tests below."""
+    return _cli_json(["shoot", "--periods", "1-2"] + SHOOT_ARGV)
+
+
 @pytest.mark.slow
-def test_cli_shoot_one_period_is_the_periods_search_of_that_period():
-    # one search: --period 1 and --periods 1-1 from the same seeds converge from the same seeds
-    # to the same P-1, the unstable (flip) orbit of region D (--period once ran without the
-    # transient, with another solver, and converged from none of them)
-    one = _cli_json(["shoot", "--period", "1"] + SHOOT_ARGV)
-    out = _cli_json(["shoot", "--periods", "1-1"] + SHOOT_ARGV)
+def test_cli_shoot_one_period_is_the_periods_search_of_that_period(shoot_period_1, shoot_periods_1_2):
+    # one search: --period 1 converges from the same seeds to the same P-1, the unstable (flip)
+    # orbit of region D, as the P^1 part of --periods 1-2 (--period once ran without the
+    # transient, with another solver, and converged from none of them). That --period K and
+    # --periods K-K make the same call is checked without running it by
+    # test_cli_period_and_periods_make_one_and_the_same_search_call.
+    one, out = shoot_period_1, shoot_periods_1_2
     _assert_periodic_by_reintegration(one, jg.default_integrator(100))
     assert one["settings"]["periods_tried"] == [1] and one["convergence"]["1"] == out["convergence"]["1"]
-    assert one["settings"]["search"] == out["settings"]["search"]
+    assert one["settings"]["search"] == dict(out["settings"]["search"], periods=[1])
     assert one["convergence"]["1"]["runs"] == 8 and one["convergence"]["1"]["converged"] >= 1
-    assert len(one["orbits"]) == len(out["orbits"]) == 1
+    assert len(one["orbits"]) == 1
     p1 = one["orbits"][0]
     assert p1["period"] == 1 and not p1["stable"] and p1["instability"] == "flip" and p1["multipliers"][0][0] < -1
-    np.testing.assert_allclose(out["orbits"][0]["points"], p1["points"], atol=1e-9)
+    np.testing.assert_allclose(next(o for o in out["orbits"] if o["period"] == 1)["points"], p1["points"], atol=1e-9)
     assert len(one["checks"]) == 1 and all(v["consistent"] for v in one["checks"].values())
 
 
 @pytest.mark.slow
-def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
+def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2(shoot_periods_1_2):
     # P^1 and P^2 searched together reach the unstable P-1 (flip) and the P-2 born from it
-    out = _cli_json(["shoot", "--periods", "1-2"] + SHOOT_ARGV)
+    out = shoot_periods_1_2
     assert out["settings"]["periods_tried"] == [1, 2]
     _assert_periodic_by_reintegration(out, jg.default_integrator(100))
     periods = sorted(o["period"] for o in out["orbits"])
@@ -590,10 +605,6 @@ def test_cli_shoot_periods_search_finds_the_unstable_p1_and_p2():
     assert c["1"]["runs"] == 8 and c["1"]["converged"] >= 1 and c["2"]["converged"] >= 1
     # each orbit checked by direct integration, consistent with its multipliers
     assert len(out["checks"]) == len(out["orbits"]) and all(v["consistent"] for v in out["checks"].values())
-    one = _cli_json(["shoot", "--period", "1"] + SHOOT_ARGV)
-    assert one["convergence"]["1"] == c["1"]
-    assert one["settings"]["search"] == dict(out["settings"]["search"], periods=[1])
-    np.testing.assert_allclose(one["orbits"][0]["points"], p1["points"], atol=1e-9)
 
 
 @pytest.mark.slow
