@@ -143,7 +143,7 @@ def _fail_writing(monkeypatch, make_error):
     raises ``make_error(path)``."""
     import jaxgear.cli.analyze as analyze_cli
 
-    def write(args, system, params, grid, method, out):
+    def write(args, system, params, grid, method, out, gear_set=None):
         tmp = out / ".jaxgear-tmp-result.nc.k3j9x0ab"  # as an atomic write names its temporary file
         tmp.write_text("half")
         raise make_error(tmp)
@@ -234,7 +234,7 @@ def test_a_second_run_on_a_held_out_is_refused_before_work(command, tmp_path, ca
 def test_a_link_as_out_keeps_the_link_and_fills_its_target(tmp_path, capsys, monkeypatch):
     import jaxgear.cli.analyze as analyze_cli
 
-    def write(args, system, params, grid, method, out):
+    def write(args, system, params, grid, method, out, gear_set=None):
         (out / "result.nc").write_text("new")
         return ["result.nc"]
 
