@@ -658,6 +658,18 @@ def _mean_error(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, np.std(values, axis=0, ddof=1) / np.sqrt(n)
 
 
+def _samples_and_range(stretches, periodic: bool, scale):
+    """The samples of every stretch ``(samples, end sample)`` together, times ``scale``, and
+    their largest and smallest values per mesh (a closed orbit's samples wrap round; an
+    open stretch's end sample closes it)."""
+    every = np.concatenate([v for v, _ in stretches]) * scale
+    if periodic:
+        return every, _extreme(every, True, 1.0), _extreme(every, True, -1.0)
+    full = [np.concatenate([v, end[None]]) * scale for v, end in stretches]
+    return (every, np.max([_extreme(f, False, 1.0) for f in full], axis=0),
+            np.min([_extreme(f, False, -1.0) for f in full], axis=0))
+
+
 def _mesh_views(layout: _Layout, parts: list[_Stretch], *, periodic: bool, k: int, s: int, opts: GearViewOptions,
                 scales) -> tuple[MeshView, ...]:
     length, force_scale = scales
@@ -666,24 +678,12 @@ def _mesh_views(layout: _Layout, parts: list[_Stretch], *, periodic: bool, k: in
     gap, gap_e = _mean_error(np.array([(p.duration - p.drive - p.back) / p.duration for p in parts]))
     losses, losses_e = _mean_error(np.array([p.losses / p.periods for p in parts]))
     impacts, impacts_e = _mean_error(np.array([p.impacts / p.periods for p in parts]))
-    te_all = np.concatenate([p.te for p in parts]) * length
-    if periodic:
-        te_hi, te_lo = _extreme(te_all, True, 1.0), _extreme(te_all, True, -1.0)
-    else:
-        full = [np.concatenate([p.te, p.te_end[None]]) * length for p in parts]
-        te_hi = np.max([_extreme(f, False, 1.0) for f in full], axis=0)
-        te_lo = np.min([_extreme(f, False, -1.0) for f in full], axis=0)
+    te_all, te_hi, te_lo = _samples_and_range([(p.te, p.te_end) for p in parts], periodic, length)
     te_mean = np.mean(te_all, axis=0)
     te_rms = np.sqrt(np.mean((te_all - te_mean) ** 2, axis=0))
     n = len(layout.pairs)
     if parts[0].force is not None:
-        f_all = np.concatenate([p.force for p in parts]) * force_scale
-        if periodic:
-            f_hi, f_lo = _extreme(f_all, True, 1.0), _extreme(f_all, True, -1.0)
-        else:
-            full = [np.concatenate([p.force, p.force_end[None]]) * force_scale for p in parts]
-            f_hi = np.max([_extreme(f, False, 1.0) for f in full], axis=0)
-            f_lo = np.min([_extreme(f, False, -1.0) for f in full], axis=0)
+        f_all, f_hi, f_lo = _samples_and_range([(p.force, p.force_end) for p in parts], periodic, force_scale)
         f_mean = np.mean(f_all, axis=0)
     else:
         f_hi = f_lo = f_mean = np.full(n, np.nan)
