@@ -162,6 +162,7 @@ from .design import (
 )
 from ._contact import (
     gear_view as gear_view,
+    gear_views as gear_views,
     GearView as GearView,
     MeshView as MeshView,
     ContactRegime as ContactRegime,

@@ -44,14 +44,14 @@ from ._gearset import GearSet
 from ._io import save_result
 from ._model import nplanet_switching, reduced_switching
 from ._params import GearParams, params_to_dict
-from ._poincare import sample_trajectory, stroboscopic_map
+from ._poincare import sample_trajectory, stroboscopic_map, stroboscopic_orbit
 from ._system import ForcedSystem, check_system
 from ._version import __version__
 from .analysis import Attractor
 from .design import mesh_forces
 from .integrate import AbstractIntegrator, KinkAwareRK4, integrator_from_dict
 
-__all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view"]
+__all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view", "gear_views"]
 
 
 class ContactRegime(enum.IntEnum):
@@ -467,45 +467,82 @@ class _Stretch:
     force_end: np.ndarray | None
 
 
-def _stretch(system, params, layout: _Layout, stepper, n_iter: int, ts, xs, periods: int) -> _Stretch:
-    ts = jnp.asarray(ts)
-    xs = jnp.asarray(xs)
-    S = np.asarray(_switching_at(system, params, ts, xs))
-    if not np.all(np.isfinite(S)):
+ROWS_MIN = 8
+"""Rows of every batch of the gear view (at least; more in powers of two): the samples,
+switching functions, forces and contact changes of every attractor go through one
+compiled shape each for most analyses."""
+
+
+def _padded(n: int, least: int = ROWS_MIN) -> int:
+    return max(least, 1 << max(n - 1, 0).bit_length())
+
+
+def _pad_rows(a: np.ndarray, size: int) -> np.ndarray:
+    """``a`` with its first row repeated to ``size`` rows (padding lanes stay finite)."""
+    return np.concatenate([a, np.repeat(a[:1], size - len(a), axis=0)]) if size > len(a) else a
+
+
+def _stretches(system, params, layout: _Layout, stepper, n_iter: int,
+               pieces: list[tuple[np.ndarray, np.ndarray, int]]) -> list[_Stretch]:
+    """The sums of every sampled stretch ``(times (m,), states (m, dim), periods)`` of
+    ``pieces``: the switching functions and forces of all samples in one batch, every
+    contact change of every stretch located in one bisection (:func:`_locate`)."""
+    sizes = [len(ts) for ts, _, _ in pieces]
+    T_all = np.concatenate([ts for ts, _, _ in pieces])
+    X_all = np.concatenate([xs for _, xs, _ in pieces])
+    n_all = len(T_all)
+    rows = _padded(n_all, 256)
+    Tp, Xp = jnp.asarray(_pad_rows(T_all, rows)), jnp.asarray(_pad_rows(X_all, rows))
+    S_all = np.asarray(_switching_at(system, params, Tp, Xp))[:n_all]
+    if not np.all(np.isfinite(S_all)):
         raise ValueError(f"{system.name}: the trajectory from the attractor's point is not finite (it blew up); "
                          "check the attractor and the parameters.")
-    tsn = np.asarray(ts)
-    H = np.diff(tsn)
+    F_all = None if layout.forces is None else np.asarray(layout.forces(params, Tp, Xp))[:n_all]
     used = sorted({i for p in layout.pairs for i in p})
-    pos = S > 0
-    change = pos[1:] != pos[:-1]  # (m, n_sw)
-    j_idx, w_idx = np.nonzero(change[:, used])
-    w_idx = np.asarray(used, dtype=np.int64)[w_idx]
-    tau = np.zeros(0)
-    if len(j_idx):
-        n = len(j_idx)
-        size = max(8, 1 << (n - 1).bit_length())  # padded to a power of two: few compiled shapes
-        jj = np.concatenate([j_idx, np.full(size - n, j_idx[0])])
-        ww = np.concatenate([w_idx, np.full(size - n, w_idx[0])])
-        tau = np.asarray(_locate(system, stepper, n_iter, params, jnp.asarray(tsn[jj]), jnp.asarray(xs)[jj].T,
-                                 jnp.asarray(H[jj]), jnp.asarray(ww.astype(np.int32)),
-                                 jnp.asarray(pos[jj, ww])))[:n]
-    # time on the positive side of every used function: whole intervals, corrected where it changes
-    positive_time = np.sum(np.where(pos[:-1] & ~change, H[:, None], 0.0), axis=0)
-    np.add.at(positive_time, w_idx, np.where(pos[j_idx, w_idx], tau, H[j_idx] - tau))
-    falls = np.zeros(S.shape[1])
-    np.add.at(falls, w_idx, pos[j_idx, w_idx].astype(float))
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    found = []  # per piece: (global sample index, function) of each contact change
+    for a, b in zip(offsets[:-1], offsets[1:]):
+        pos = S_all[a:b] > 0
+        change = pos[1:] != pos[:-1]
+        j_idx, w_idx = np.nonzero(change[:, used])
+        found.append((a + j_idx, np.asarray(used, dtype=np.int64)[w_idx]))
+    jj = np.concatenate([j for j, _ in found])
+    ww = np.concatenate([w for _, w in found])
+    tau_all = np.zeros(0)
+    if len(jj):
+        n = len(jj)
+        size = _padded(n)
+        jp, wp = _pad_rows(jj, size), _pad_rows(ww, size)
+        H = T_all[jp + 1] - T_all[jp]
+        tau_all = np.asarray(_locate(system, stepper, n_iter, params, jnp.asarray(T_all[jp]), jnp.asarray(X_all[jp]).T,
+                                     jnp.asarray(H), jnp.asarray(wp.astype(np.int32)),
+                                     jnp.asarray(S_all[jp, wp] > 0)))[:n]
     drive_i = np.array([p[0] for p in layout.pairs])
     back_i = np.array([p[1] for p in layout.pairs])
-    duration = float(tsn[-1] - tsn[0])
-    te = 0.5 * (S[:, drive_i] + S[:, back_i])
-    force = force_end = None
-    if layout.forces is not None:
-        F = np.asarray(layout.forces(params, ts, xs))
-        force, force_end = F[:-1], F[-1]
-    return _Stretch(drive=positive_time[drive_i], back=duration - positive_time[back_i], losses=falls[drive_i],
-                    impacts=falls[back_i], duration=duration, periods=periods, te=te[:-1], te_end=te[-1],
-                    force=force, force_end=force_end)
+    out, first = [], 0
+    for (ts, _, periods), (a, b), (j_glob, w_idx) in zip(pieces, zip(offsets[:-1], offsets[1:]), found):
+        S = S_all[a:b]
+        tau = tau_all[first:first + len(j_glob)]
+        first += len(j_glob)
+        j_idx = j_glob - a
+        H = np.diff(ts)
+        pos = S > 0
+        change = pos[1:] != pos[:-1]
+        # time on the positive side of every used function: whole intervals, corrected where it changes
+        positive_time = np.sum(np.where(pos[:-1] & ~change, H[:, None], 0.0), axis=0)
+        np.add.at(positive_time, w_idx, np.where(pos[j_idx, w_idx], tau, H[j_idx] - tau))
+        falls = np.zeros(S.shape[1])
+        np.add.at(falls, w_idx, pos[j_idx, w_idx].astype(float))
+        duration = float(ts[-1] - ts[0])
+        te = 0.5 * (S[:, drive_i] + S[:, back_i])
+        force = force_end = None
+        if F_all is not None:
+            F = F_all[a:b]
+            force, force_end = F[:-1], F[-1]
+        out.append(_Stretch(drive=positive_time[drive_i], back=duration - positive_time[back_i],
+                            losses=falls[drive_i], impacts=falls[back_i], duration=duration, periods=periods,
+                            te=te[:-1], te_end=te[-1], force=force, force_end=force_end))
+    return out
 
 
 def _extreme(y: np.ndarray, periodic: bool, sign: float) -> np.ndarray:
@@ -556,7 +593,7 @@ def gear_view(system: ForcedSystem, params, attractor: Attractor, gear_set: Gear
     over one attractor (see the module; model document §2.2-§2.4).
 
     A P-k attractor (``attractor.period = k >= 1``) is sampled over exactly its ``k``
-    forcing periods from ``attractor.points[0]`` (a stroboscopic point, phase 0); an
+    forcing periods, one period from each of its stroboscopic points (phase 0); an
     aperiodic one (period 0) over ``stretches x stretch_periods`` periods from the first
     point of its cloud. For every mesh the times of drive-flank contact, gap and
     back-flank contact are summed between contact changes located by bisection inside
@@ -577,11 +614,86 @@ def gear_view(system: ForcedSystem, params, attractor: Attractor, gear_set: Gear
 
     Returns:
         a :class:`GearView`. Every argument is checked before any integration
-        (``ValueError`` naming it).
+        (``ValueError`` naming it). :func:`gear_views` does several attractors at once.
     """
+    return gear_views(system, params, [attractor], gear_set, meshes=meshes, options=options, **changes)[0]
+
+
+def gear_views(system: ForcedSystem, params, attractors, gear_set: GearSet | None = None, *,
+               meshes: MeshSpec | None = None, options: GearViewOptions | None = None,
+               **changes) -> list[GearView]:
+    """:func:`gear_view` of every attractor of ``attractors`` (a sequence of
+    :class:`~jaxgear.Attractor`, e.g. ``result.attractors``), in one batch: the samples of
+    all cycles in one integration, of all aperiodic attractors in one per stretch, and
+    every contact change in one bisection, so a process compiles each program once
+    whatever the attractors' periods. Returns one :class:`GearView` per attractor, in
+    order; each equals :func:`gear_view` of that attractor alone to round-off."""
     opts = with_changes(options, GearViewOptions, changes)
     if not isinstance(system, ForcedSystem):
         raise ValueError(f"system={system!r} must be a jaxgear.ForcedSystem.")
+    attractors = list(attractors)
+    if not attractors:
+        return []
+    ks = [_check_attractor(system, a) for a in attractors]
+    if gear_set is not None:
+        if not isinstance(gear_set, GearSet):
+            raise ValueError(f"gear_set={type(gear_set).__name__} must be a jaxgear.GearSet or None.")
+        if not isinstance(params, GearParams):
+            raise ValueError("gear_set: physical units need the gear models' GearParams; this system's parameters "
+                             f"are {type(params).__name__} (leave gear_set=None).")
+    first = np.asarray(attractors[0].points, dtype=float)[0]
+    check_system(system, params, first, batched=False)
+    layout = _layout(system, params, first, meshes)
+    s = int(opts.samples_per_period)
+    integrator = opts.integrator or KinkAwareRK4(s)
+    starts = [_start(system, params, a, k, opts, integrator) for a, k in zip(attractors, ks)]
+    pieces: list[list[tuple[np.ndarray, np.ndarray, int]]] = [[] for _ in attractors]
+    cyc = [i for i, k in enumerate(ks) if k > 0]
+    if cyc:
+        # one period from every point of every cycle, one batch; a cycle's stretch is its k
+        # periods end to end (each ends on the next point to the cycle's residual)
+        X = np.concatenate([starts[i] for i in cyc])
+        ts, xs = sample_trajectory(system, params, _pad_rows(X, _padded(len(X))), periods=1,
+                                   samples_per_period=s, integrator=integrator)
+        ts, xs = np.asarray(ts), np.asarray(xs)
+        T = float(ts[-1] - ts[0])
+        row = 0
+        for i in cyc:
+            k = ks[i]
+            t = np.concatenate([ts[:-1] + j * T for j in range(k)] + [ts[-1:] + (k - 1) * T])
+            x = np.concatenate([xs[row + j, :-1] for j in range(k)] + [xs[row + k - 1, -1:]])
+            pieces[i].append((t, x, k))
+            row += k
+    aper = [i for i, k in enumerate(ks) if k == 0]
+    if aper:
+        X = np.stack([starts[i][0] for i in aper])
+        for _ in range(opts.stretches):
+            ts, xs = sample_trajectory(system, params, _pad_rows(X, _padded(len(X))), periods=opts.stretch_periods,
+                                       samples_per_period=s, integrator=integrator)
+            ts, xs = np.asarray(ts), np.asarray(xs)
+            for r, i in enumerate(aper):
+                pieces[i].append((ts, xs[r], opts.stretch_periods))
+            X = xs[: len(aper), -1]
+    flat = [p for ps in pieces for p in ps]
+    parts = _stretches(system, params, layout, integrator.crossing_stepper, opts.bisections, flat)
+    length_unit, force_unit, length_scale, force_scale, hz = _units(system, params, gear_set)
+    views, at = [], 0
+    for a, k, start, ps in zip(attractors, ks, starts, pieces):
+        mine = parts[at:at + len(ps)]
+        at += len(ps)
+        meshes_ = _mesh_views(layout, mine, periodic=k > 0, k=k if k > 0 else opts.stretch_periods, s=s, opts=opts,
+                              scales=_scales(gear_set, params))
+        views.append(GearView(
+            attractor_id=int(a.id), label=a.label, period=k, meshes=meshes_, start=np.asarray(start[0]),
+            periods_covered=sum(p.periods for p in mine), stretches=len(mine), samples_per_period=s,
+            length_unit=length_unit, force_unit=force_unit, length_scale=length_scale, force_scale=force_scale,
+            mesh_frequency_hz=hz if gear_set is not None else float("nan"), integrator=integrator,
+            system=system.name, params=params_to_dict(params), version=__version__))
+    return views
+
+
+def _check_attractor(system: ForcedSystem, attractor) -> int:
+    """The attractor's period ``k`` after checking its type and points."""
     if not isinstance(attractor, Attractor):
         raise ValueError(f"attractor={type(attractor).__name__} must be a jaxgear.Attractor "
                          "(an item of GlobalResult.attractors).")
@@ -591,44 +703,27 @@ def gear_view(system: ForcedSystem, params, attractor: Attractor, gear_set: Gear
                          f"of the {system.dim} coordinates of {system.name}.")
     if not np.all(np.isfinite(points[0])):
         raise ValueError("attractor: its first point is not finite.")
-    k = check_int(attractor.period, "attractor.period", 0)
-    if gear_set is not None:
-        if not isinstance(gear_set, GearSet):
-            raise ValueError(f"gear_set={type(gear_set).__name__} must be a jaxgear.GearSet or None.")
-        if not isinstance(params, GearParams):
-            raise ValueError("gear_set: physical units need the gear models' GearParams; this system's parameters "
-                             f"are {type(params).__name__} (leave gear_set=None).")
-    x0 = points[0]
-    check_system(system, params, x0, batched=False)
-    layout = _layout(system, params, x0, meshes)
-    s = int(opts.samples_per_period)
-    integrator = opts.integrator or KinkAwareRK4(s)
-    stepper = integrator.crossing_stepper
+    return check_int(attractor.period, "attractor.period", 0)
 
-    x = jnp.asarray(x0)
-    if opts.transient:
-        skip = opts.transient if k == 0 else -(-opts.transient // k) * k
-        x = stroboscopic_map(system, params, x, periods=skip, integrator=integrator)
-    start = np.asarray(x)
-    if k > 0:
-        ts, xs = sample_trajectory(system, params, x, periods=k, samples_per_period=s, integrator=integrator)
-        parts = [_stretch(system, params, layout, stepper, opts.bisections, ts, xs, k)]
-    else:
-        parts = []
-        for _ in range(opts.stretches):
-            ts, xs = sample_trajectory(system, params, x, periods=opts.stretch_periods, samples_per_period=s,
-                                       integrator=integrator)
-            parts.append(_stretch(system, params, layout, stepper, opts.bisections, ts, xs, opts.stretch_periods))
-            x = xs[-1]
-    views = _mesh_views(layout, parts, periodic=k > 0, k=k if k > 0 else opts.stretch_periods, s=s, opts=opts,
-                        scales=_scales(gear_set, params))
-    length_unit, force_unit, length_scale, force_scale, hz = _units(system, params, gear_set)
-    label = attractor.label
-    return GearView(attractor_id=int(attractor.id), label=label, period=k, meshes=views, start=start,
-                    periods_covered=sum(p.periods for p in parts), stretches=len(parts), samples_per_period=s,
-                    length_unit=length_unit, force_unit=force_unit, length_scale=length_scale,
-                    force_scale=force_scale, mesh_frequency_hz=hz if gear_set is not None else float("nan"),
-                    integrator=integrator, system=system.name, params=params_to_dict(params), version=__version__)
+
+def _start(system, params, attractor, k: int, opts: GearViewOptions, integrator) -> np.ndarray:
+    """Where the sampling starts: ``(k, dim)`` the cycle's points for a P-k (after
+    ``opts.transient`` periods, rounded up to a multiple of ``k``; the iterates of the
+    first point where the attractor holds fewer than ``k`` finite points), ``(1, dim)`` a
+    point of the cloud for an aperiodic attractor."""
+    points = np.asarray(attractor.points, dtype=float)
+    x = points[0]
+    if k == 0 and not opts.transient:
+        return x[None]
+    if k > 0 and not opts.transient and len(points) == k and np.all(np.isfinite(points)):
+        return points
+    skip = opts.transient if k == 0 else -(-opts.transient // k) * k
+    if skip:
+        x = stroboscopic_map(system, params, jnp.asarray(x), periods=skip, integrator=integrator)
+    if k == 0:
+        return np.asarray(x)[None]
+    rest = stroboscopic_orbit(system, params, x, n_points=k - 1, integrator=integrator) if k > 1 else None
+    return np.concatenate([np.asarray(x)[None]] + ([] if rest is None else [np.asarray(rest)]))
 
 
 def _scales(gear_set, params) -> tuple[float, float]:

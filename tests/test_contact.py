@@ -143,6 +143,33 @@ def test_shares_sum_to_one_and_a_pk_spectrum_has_only_its_harmonics(p2_view):
     assert np.allclose(X[harmonic][:n], m.amplitudes, rtol=1e-6, atol=1e-9)
 
 
+def test_views_of_several_attractors_equal_views_of_each_and_compile_once(p2_view):
+    """gear_views of attractors of different periods equals gear_view of each (to
+    round-off) and compiles one sampling program and one bisection for all of them: a
+    second P-k of a new period adds no program (a per-attractor loop traces one sampling
+    program per period)."""
+    from tests.conftest import count_compilations
+
+    spec = MeshSpec(force=spur_force, static_force=0.1)
+    p1 = attractor(P2_POINTS[:1], 1, id=1)  # one point of the P-2 taken as a P-1: any stretch will do here
+    p2 = attractor(P2_POINTS, 2, id=0)
+    p2_rot = attractor(P2_POINTS[::-1], 2, id=2)
+    jg.gear_views(SPUR, P2_PARAMS, [p2], meshes=spec)  # warm: the programs of one P-2
+    with count_compilations("_sample_kernel") as sampling, count_compilations("_locate") as bisection:
+        views = jg.gear_views(SPUR, P2_PARAMS, [p1, p2, p2_rot], meshes=spec)
+    assert sampling == [], "a new period compiled a new sampling program"
+    assert len(bisection) <= 1, bisection
+    assert [v.attractor_id for v in views] == [1, 0, 2]
+    one = gear_view(SPUR, P2_PARAMS, p1, meshes=spec)
+    for got, ref in ((views[0], one), (views[1], p2_view), (views[2], p2_view)):
+        for m, r in zip(got.meshes, ref.meshes):
+            assert m.regime == r.regime
+            for field in ("drive_share", "gap_share", "back_share", "losses_per_period", "impacts_per_period",
+                          "te_rms", "te_ptp", "force_max"):
+                assert getattr(m, field) == pytest.approx(getattr(r, field), rel=1e-9, abs=1e-12), field
+    assert views[1].period == 2 and views[0].period == 1
+
+
 def test_aperiodic_run_of_the_gear_model_reads_design_forces_and_units():
     """An aperiodic attractor is followed over stretches (errors from their spread); the
     transmission error and mesh forces of the gear model are those of jaxgear.mesh_forces and

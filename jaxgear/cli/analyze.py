@@ -243,20 +243,20 @@ def _analyze(args, system, params, grid, method, out: Path | None, gear_set=None
 
 def _print_meshes(result, system, params, gear_set) -> None:
     """One line per attractor and mesh: contact regime, RMS transmission error and dynamic
-    factor (:func:`jaxgear.gear_view`; in µm with the preset's gear set). Nothing for a
-    system without switching functions; one line saying why for a system whose switching
-    functions are not pairs ``X - b, X + b``."""
-    from .._contact import gear_view
+    factor (:func:`jaxgear.gear_views`, every attractor in one batch; in µm with the
+    preset's gear set). Nothing for a system without switching functions; one line saying
+    why for a system whose switching functions are not pairs ``X - b, X + b``."""
+    from .._contact import gear_views
 
     if not result.attractors or system.switching is None:  # no switching functions: no meshes
         return
     print("\nmeshes (jaxgear.gear_view" + (", physical units" if gear_set is not None else "") + "):")
-    for a in result.attractors:
-        try:
-            view = gear_view(system, params, a, gear_set)
-        except ValueError as exc:  # a user system whose switching functions are not meshes
-            print(f"  not shown: {exc}")
-            return
+    try:
+        views = gear_views(system, params, result.attractors, gear_set)
+    except ValueError as exc:  # a user system whose switching functions are not meshes
+        print(f"  not shown: {exc}")
+        return
+    for view in views:
         for line in view.lines():
             print(f"  {line}")
 
