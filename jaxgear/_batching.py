@@ -13,11 +13,18 @@ from collections.abc import Iterator
 
 import numpy as np
 
-__all__ = ["DEFAULT_CHUNK_CELLS", "chunks", "equal_chunk_size", "pad_rows", "progress_bar"]
+__all__ = ["DEFAULT_CHUNK_CELLS", "SMALL_BATCH", "chunks", "equal_chunk_size", "pad_rows", "progress_bar"]
 
 DEFAULT_CHUNK_CELLS = 131072
 """Cells (or trajectories) integrated in one batch by default. On a 2-core CPU batches
 below ~65,000 lanes run single-threaded in XLA's loops, about twice slower per lane."""
+
+
+SMALL_BATCH = 64
+"""Lanes of every small batch of the pure-JAX step: the cycles' one-period Jacobians,
+their samples and their located crossings (section points, contact changes) run on
+batches padded to a power of two of at least this many lanes, so one process traces the
+step once for all of them (a traced step is reused wherever its shapes recur)."""
 
 
 def chunks(n: int, size: int) -> Iterator[tuple[int, int]]:

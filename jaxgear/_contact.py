@@ -44,12 +44,13 @@ from ._gearset import GearSet
 from ._io import save_result
 from ._model import nplanet_switching, reduced_switching
 from ._params import GearParams, params_to_dict
-from ._poincare import sample_trajectory, stroboscopic_map, stroboscopic_orbit
+from ._batching import SMALL_BATCH, power_of_two_at_least
+from ._poincare import LOCATE_BISECTIONS, locate_sign_changes, sample_trajectory, stroboscopic_map, stroboscopic_orbit
 from ._system import ForcedSystem, check_system
 from ._version import __version__
 from .analysis import Attractor
 from .design import mesh_forces
-from .integrate import AbstractIntegrator, KinkAwareRK4, integrator_from_dict
+from .integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, KinkAwareRK4, integrator_from_dict
 
 __all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view", "gear_views"]
 
@@ -133,7 +134,9 @@ class GearViewOptions:
 
     Attributes:
         samples_per_period: samples of the trajectory per forcing period (>= 16); the
-            default integrator takes one step per sample.
+            default integrator takes one step per sample. The default is the default
+            integrator's steps per period, so the samples and contact changes of the gear
+            view reuse the analysis's compiled programs.
         transient: forcing periods integrated from the attractor's point before sampling
             (rounded up to a multiple of ``k`` for a P-k); 0 starts on the point itself.
         stretches, stretch_periods: an aperiodic attractor is followed for ``stretches``
@@ -148,12 +151,12 @@ class GearViewOptions:
             locates the contact changes).
     """
 
-    samples_per_period: int = 256
+    samples_per_period: int = DEFAULT_STEPS_PER_PERIOD
     transient: int = 0
     stretches: int = 8
     stretch_periods: int = 25
     max_order: float = 10.0
-    bisections: int = 48
+    bisections: int = LOCATE_BISECTIONS
     integrator: AbstractIntegrator | None = None
 
     def __post_init__(self):
@@ -430,27 +433,6 @@ def _switching_at(system, params, ts, xs):
     return jax.vmap(system.switching, in_axes=(0, 0, None))(ts, xs, params)
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _locate(system, stepper, n_iter, params, t, Y, H, which, positive):
-    """Time ``tau`` in ``[0, H]`` after ``t`` where switching function ``which`` of the
-    trajectory through ``Y (dim, n)`` at ``t`` changes sign (from ``positive``), by
-    bisection on one step of ``stepper`` of length ``tau`` from the sample (a step split at
-    the kinks it crosses): ``(n,)``."""
-    def side(tau):
-        Z = stepper.step(system, params, t, Y, tau)
-        S = jax.vmap(system.switching, in_axes=(0, 1, None))(t + tau, Z, params)
-        return jnp.take_along_axis(S, which[:, None], axis=1)[:, 0] > 0
-
-    def body(_, c):
-        lo, hi = c
-        mid = 0.5 * (lo + hi)
-        same = side(mid) == positive
-        return jnp.where(same, mid, lo), jnp.where(same, hi, mid)
-
-    lo, hi = jax.lax.fori_loop(0, n_iter, body, (jnp.zeros_like(H), H))
-    return 0.5 * (lo + hi)
-
-
 @dataclasses.dataclass
 class _Stretch:
     """Per-mesh sums of one sampled stretch of the trajectory."""
@@ -467,14 +449,11 @@ class _Stretch:
     force_end: np.ndarray | None
 
 
-ROWS_MIN = 8
-"""Rows of every batch of the gear view (at least; more in powers of two): the samples,
-switching functions, forces and contact changes of every attractor go through one
-compiled shape each for most analyses."""
-
-
-def _padded(n: int, least: int = ROWS_MIN) -> int:
-    return max(least, 1 << max(n - 1, 0).bit_length())
+def _padded(n: int, least: int = SMALL_BATCH) -> int:
+    """Rows of a batch of the gear view: a power of two, at least ``least`` (the cycles'
+    samples and the contact changes of every attractor share the compiled programs of the
+    analysis's section points, :data:`~jaxgear._batching.SMALL_BATCH`)."""
+    return power_of_two_at_least(n, least)
 
 
 def _pad_rows(a: np.ndarray, size: int) -> np.ndarray:
@@ -486,7 +465,8 @@ def _stretches(system, params, layout: _Layout, stepper, n_iter: int,
                pieces: list[tuple[np.ndarray, np.ndarray, int]]) -> list[_Stretch]:
     """The sums of every sampled stretch ``(times (m,), states (m, dim), periods)`` of
     ``pieces``: the switching functions and forces of all samples in one batch, every
-    contact change of every stretch located in one bisection (:func:`_locate`)."""
+    contact change of every stretch located in one bisection
+    (:func:`~jaxgear._poincare.locate_sign_changes`)."""
     sizes = [len(ts) for ts, _, _ in pieces]
     T_all = np.concatenate([ts for ts, _, _ in pieces])
     X_all = np.concatenate([xs for _, xs, _ in pieces])
@@ -514,9 +494,9 @@ def _stretches(system, params, layout: _Layout, stepper, n_iter: int,
         size = _padded(n)
         jp, wp = _pad_rows(jj, size), _pad_rows(ww, size)
         H = T_all[jp + 1] - T_all[jp]
-        tau_all = np.asarray(_locate(system, stepper, n_iter, params, jnp.asarray(T_all[jp]), jnp.asarray(X_all[jp]).T,
-                                     jnp.asarray(H), jnp.asarray(wp.astype(np.int32)),
-                                     jnp.asarray(S_all[jp, wp] > 0)))[:n]
+        tau_all = np.asarray(locate_sign_changes(system, stepper, n_iter, params, jnp.asarray(T_all[jp]),
+                                                 jnp.asarray(X_all[jp]).T, jnp.asarray(H),
+                                                 jnp.asarray(wp.astype(np.int32)), jnp.asarray(S_all[jp, wp] > 0))[0])[:n]
     drive_i = np.array([p[0] for p in layout.pairs])
     back_i = np.array([p[1] for p in layout.pairs])
     out, first = [], 0

@@ -15,6 +15,7 @@ of value does not recompile), an integrator object (default
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import equinox as eqx
@@ -22,13 +23,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from ._batching import SMALL_BATCH
 from ._checks import check_choice, check_int, check_number
 from ._status import Status
 from ._system import ForcedSystem, check_state_shape
 from .integrate import AbstractIntegrator, batch_field, resolve_integrator
 
 __all__ = ["stroboscopic_map", "stroboscopic_orbit", "section_map", "SectionHit", "sample_trajectory",
-           "section_kernel", "check_periods"]
+           "section_kernel", "check_periods", "locate_sign_changes", "LOCATE_BISECTIONS"]
 
 
 def check_periods(periods, name: str = "periods", minimum: int = 1) -> int:
@@ -256,3 +258,55 @@ def sample_trajectory(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
     integrator = resolve_integrator(integrator)
     return _sample_kernel(system, params, jnp.asarray(x0, jnp.float64), jnp.asarray(t0, jnp.float64),
                           periods, samples_per_period, integrator)
+
+
+LOCATE_BISECTIONS = 48
+"""Bisection steps of :func:`locate_sign_changes` by default: the bracket shrinks by
+``2**48``, to round-off of a step's length."""
+
+
+def surfaces(system, params, t, Z):
+    """The functions whose sign changes :func:`locate_sign_changes` locates, at the lanes
+    ``Z (dim, n)`` at times ``t (n,)``: the system's switching functions (none without
+    them), then the coordinates (a section ``x_i = 0`` is function ``n_switching + i``):
+    ``(n, n_switching + dim)``."""
+    S = (jax.vmap(system.switching, in_axes=(0, 1, None))(t, Z, params) if system.switching is not None
+         else jnp.zeros((Z.shape[1], 0), Z.dtype))
+    return jnp.concatenate([S, Z.T], axis=1)
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1, 2))
+def locate_sign_changes(system, stepper, n_iter, params, t, Y, H, which, positive):
+    """Where function ``which`` of :func:`surfaces` changes sign inside a step: the time
+    ``tau`` in ``[0, H]`` after ``t`` and the state there, for the trajectories through
+    ``Y (dim, n)`` at ``t (n,)``, by ``n_iter`` bisections on one step of ``stepper`` of
+    length ``tau`` from the start (a kink-aware step is split at the kinks it crosses, so
+    the located state is as accurate as the integration). ``positive (n,)``: the
+    function's sign at the start. Returns ``tau (n,)`` and the states ``(dim, n)``.
+
+    The lanes run in chunks of :data:`~jaxgear._batching.SMALL_BATCH` (``n`` a multiple
+    of it): the step is traced once for every caller (contact changes of the gear view,
+    section points of the cycles)."""
+    n = Y.shape[1]
+    W = min(n, SMALL_BATCH)
+
+    def chunk(c):
+        t, Y, H, which, positive = c
+
+        def side(tau):
+            Z = stepper.step(system, params, t, Y, tau)
+            return jnp.take_along_axis(surfaces(system, params, t + tau, Z), which[:, None], axis=1)[:, 0] > 0
+
+        def body(_, b):
+            lo, hi = b
+            mid = 0.5 * (lo + hi)
+            same = side(mid) == positive
+            return jnp.where(same, mid, lo), jnp.where(same, hi, mid)
+
+        lo, hi = jax.lax.fori_loop(0, n_iter, body, (jnp.zeros_like(H), H))
+        tau = 0.5 * (lo + hi)
+        return tau, stepper.step(system, params, t, Y, tau)
+
+    cut = lambda a: a.reshape(a.shape[:-1] + (n // W, W)).swapaxes(0, -2) if a.ndim > 1 else a.reshape(n // W, W)  # noqa: E731
+    tau, Z = jax.lax.map(chunk, (cut(t), cut(Y), cut(H), cut(which), cut(positive)))
+    return tau.reshape(n), jnp.moveaxis(Z, 0, 1).reshape(Y.shape[0], n)

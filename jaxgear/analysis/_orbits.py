@@ -9,9 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import pad_rows, power_of_two_at_least
-from .._poincare import stroboscopic_orbit
-from ..integrate import batch_field
+from .._batching import SMALL_BATCH, pad_rows, power_of_two_at_least
+from .._poincare import LOCATE_BISECTIONS, locate_sign_changes, sample_trajectory, stroboscopic_orbit
 
 __all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "exact_cycle_multipliers", "section_points_of",
            "advance_states"]
@@ -146,7 +145,8 @@ def exact_cycle_multipliers(system, params, cycles, integrator) -> list[np.ndarr
         return []
     pts = [np.asarray(p, np.float64).reshape(int(k), -1) for p, k in cycles]
     X = np.concatenate(pts)
-    J = np.asarray(_period_jacobians(system, params, jax.device_put(_pad_rows(X)), integrator))[: len(X)]
+    rows = _pad_rows(X, max(1, SMALL_BATCH // X.shape[1]))  # the lanes of the samples' batch: one traced step
+    J = np.asarray(_period_jacobians(system, params, jax.device_put(rows), integrator))[: len(X)]
     out, start = [], 0
     for p in pts:
         M = np.eye(p.shape[1])
@@ -184,56 +184,16 @@ def cycle_multipliers(system, params, cycles, integrator, max_period: int | None
     return out
 
 
-@functools.partial(jax.jit, static_argnames=("system", "stepper", "index", "direction"))
-def _crossings(system, params, X, stepper, index: int, direction: int):
-    """One forcing period from each state ``X (n, dim)`` at phase 0 with the fixed-step
-    ``stepper``, and at every step the crossing of ``x_index = 0`` inside it: whether the
-    step crosses (in ``direction``) ``(steps, n)`` and the state landed on the crossing
-    ``(steps, dim, n)``, by Newton's method on the length of a step from the step's start.
-
-    One call site of the step serves both the full step (iteration 0) and the Newton
-    iterations, so the step is traced once."""
-    n_steps = int(stepper.steps_per_period)
-    h = system.period(params) / n_steps
-    lanes = X.shape[0]
-
-    def one_step(Y, i):
-        t = jnp.full((lanes,), i * h, dtype=jnp.float64)
-        g0 = Y[index]
-
-        def iterate(j, c):
-            dt, _, full = c
-            Z = stepper.step(system, params, t, Y, dt)
-            full = jnp.where(j == 0, Z, full)
-            F = batch_field(system, params, t + dt, Z)
-            g1 = full[index]
-            secant = h * g0 / jnp.where(g0 == g1, 1.0, g0 - g1)
-            newton = dt - Z[index] / jnp.where(F[index] == 0, 1.0, F[index])
-            return jnp.clip(jnp.where(j == 0, secant, newton), 0.0, h), Z, full
-
-        _, Z, full = jax.lax.fori_loop(0, 9, iterate, (jnp.full((lanes,), h), Y, Y))
-        g1 = full[index]
-        up, down = (g0 < 0) & (g1 >= 0), (g0 > 0) & (g1 <= 0)
-        hit = up if direction > 0 else down if direction < 0 else (up | down)
-        return full, (hit, Z)
-
-    _, (hits, Zs) = jax.lax.scan(one_step, X.T, jnp.arange(n_steps, dtype=jnp.float64))
-    return hits, Zs
-
-
-SECTION_ROWS = 32
-"""States integrated together by :func:`section_points_of` (at least; more in powers of
-two): one compiled shape for every result with up to 32 cycle points."""
-
-
 def section_points_of(system, params, cycles, integrator, index, direction) -> list[np.ndarray]:
     """Crossings of Σ = {x_index = 0} over the k periods of each periodic orbit (``cycles``:
     a list of stroboscopic point arrays ``(k, dim)`` in cycle order), in time order:
     ``[(m, dim)]``. ``direction`` > 0 keeps upward crossings, < 0 downward, 0 both.
 
     Every point of every cycle is integrated one period in one batch with the
-    integrator's fixed-step stepper; a step that crosses Σ is redone with its length
-    found by Newton's method so that it ends on Σ (to round-off)."""
+    integrator's fixed-step stepper, one sample per step; each step over which ``x_index``
+    changes sign is bisected to the crossing
+    (:func:`~jaxgear._poincare.locate_sign_changes`, to round-off of the step's length),
+    the programs the gear view's samples and contact changes use."""
     empty = np.zeros((0, system.dim))
     if index is None:
         return [empty for _ in cycles]
@@ -242,14 +202,26 @@ def section_points_of(system, params, cycles, integrator, index, direction) -> l
     if not rows:
         return [empty for _ in cycles]
     X = np.concatenate(rows)
-    Xp = _pad_rows(X, SECTION_ROWS)
     stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
-    hits, Zs = _crossings(system, params, jax.device_put(Xp), stepper=stepper, index=int(index), direction=direction)
-    hits, Zs = np.asarray(hits)[:, : len(X)], np.asarray(Zs)[:, :, : len(X)]
-    lane, step = np.nonzero(hits.T)  # by state (cycle order), then time
-    found = Zs[step, :, lane]
-    found = np.array(found).reshape(-1, system.dim)
-    found[:, index] = 0.0  # on Σ by definition (Newton leaves round-off)
+    s = int(stepper.steps_per_period)
+    ts, xs = sample_trajectory(system, params, _pad_rows(X, SMALL_BATCH), periods=1, samples_per_period=s,
+                               integrator=stepper)
+    ts, xs = np.asarray(ts), np.asarray(xs)[: len(X)]  # (n, s + 1, dim)
+    g0, g1 = xs[:, :-1, index], xs[:, 1:, index]
+    up, down = (g0 < 0) & (g1 >= 0), (g0 > 0) & (g1 <= 0)
+    hits = up if direction > 0 else down if direction < 0 else (up | down)
+    lane, step = np.nonzero(hits)  # by state (cycle order), then time
+    found = np.zeros((0, system.dim))
+    if len(lane):
+        n = len(lane)
+        size = power_of_two_at_least(n, SMALL_BATCH)
+        lp, sp = pad_rows(lane, size), pad_rows(step, size)
+        n_sw = 0 if system.switching is None else int(np.shape(system.switching(0.0, jnp.asarray(X[0]), params))[0])
+        _, Z = locate_sign_changes(system, stepper, LOCATE_BISECTIONS, params, jnp.asarray(ts[sp]),
+                                   jnp.asarray(xs[lp, sp]).T, jnp.asarray(ts[sp + 1] - ts[sp]),
+                                   jnp.full(size, n_sw + int(index), jnp.int32), jnp.asarray(g0[lp, sp] > 0))
+        found = np.array(np.asarray(Z).T[:n])
+    found[:, index] = 0.0  # on Σ by definition (the bisection leaves round-off)
     out, start = [], 0
     for p, good in zip(cycles, ok):
         if not good:
