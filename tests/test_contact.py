@@ -274,3 +274,16 @@ def test_analyze_paper_preset_prints_meshes_in_micrometres(tmp_path, capsys):
     lines = [s for s in text.splitlines() if "RMS TE" in s]
     assert lines and all(" um, dynamic factor " in s for s in lines)
     assert any("sun-planet" in s for s in lines) and any("ring-planet" in s for s in lines)
+    # summary.json and one gear_view_<id>.nc per attractor hold the same views
+    import json
+
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    views = summary["gear_views"]
+    assert [v["attractor_id"] for v in views] == [a["id"] for a in summary["attractors"]]
+    for v in views:
+        saved = jg.load(tmp_path / "out" / f"gear_view_{v['attractor_id']}.nc")
+        assert [m.name for m in saved.meshes] == [m["name"] for m in v["meshes"]] == ["sun-planet", "ring-planet"]
+        for m, d in zip(saved.meshes, v["meshes"]):
+            assert m.te_rms == pytest.approx(d["te_rms"], rel=1e-12) and m.regime.text == d["regime"]
+        line = f"attractor {v['attractor_id']} (P-{v['period']}), ring-planet: "
+        assert any(s.strip().startswith(line) for s in lines)

@@ -218,12 +218,18 @@ def _analyze(args, system, params, grid, method, out: Path | None, gear_set=None
     result = dataclasses.replace(result, runtime_s=time.perf_counter() - t0)
     print(f"done in {result.runtime_s:.1f} s (mean {result.mean_periods:.1f} periods per cell)\n")
     print(with_uncertainty_line(result.table(), result))
-    _print_meshes(result, system, params, gear_set)
+    views = _print_meshes(result, system, params, gear_set)
     written = []
     if out is not None:
         result.save(out / "result.nc")
-        result.write_summary(out / "summary.json")
+        summary = result.summary()
+        if views:
+            summary["gear_views"] = [v.summary() for v in views]
+        write_json(summary, out / "summary.json")
         written += ["result.nc", "summary.json"]
+        for v in views:  # the whole gear view of each attractor, spectra included
+            v.save(out / f"gear_view_{v.attractor_id}.nc")
+            written.append(f"gear_view_{v.attractor_id}.nc")
         if not args.no_figures:
             written += _figures(result, out)
     if args.compare:
@@ -241,24 +247,26 @@ def _analyze(args, system, params, grid, method, out: Path | None, gear_set=None
     return written
 
 
-def _print_meshes(result, system, params, gear_set) -> None:
+def _print_meshes(result, system, params, gear_set) -> list:
     """One line per attractor and mesh: contact regime, RMS transmission error and dynamic
     factor (:func:`jaxgear.gear_views`, every attractor in one batch; in µm with the
     preset's gear set). Nothing for a system without switching functions; one line saying
-    why for a system whose switching functions are not pairs ``X - b, X + b``."""
+    why for a system whose switching functions are not pairs ``X - b, X + b``. Returns the
+    views (none where nothing is shown)."""
     from .._contact import gear_views
 
     if not result.attractors or system.switching is None:  # no switching functions: no meshes
-        return
+        return []
     print("\nmeshes (jaxgear.gear_view" + (", physical units" if gear_set is not None else "") + "):")
     try:
         views = gear_views(system, params, result.attractors, gear_set)
     except ValueError as exc:  # a user system whose switching functions are not meshes
         print(f"  not shown: {exc}")
-        return
+        return []
     for view in views:
         for line in view.lines():
             print(f"  {line}")
+    return views
 
 
 def _figures(result, out) -> list[str]:
