@@ -279,3 +279,26 @@ def test_a_module_that_exits_or_cannot_be_the_one_meant_is_named(usermod, capsys
     (line,) = cap.err.strip().splitlines()
     assert line.startswith("jaxgear analyze: error: --system ") and message in line, line
     assert not (usermod / "out").exists()
+
+
+def test_the_console_script_finds_modules_from_its_folder_and_names_each_failure(tmp_path):
+    """The installed ``jaxgear`` command in a folder of the user's files (no fixture on
+    ``sys.path``): a missing module, a missing file, a module that raises and one that
+    declares no region are each one line naming --system, status 2."""
+    import shutil
+    import subprocess
+
+    exe = shutil.which("jaxgear")
+    assert exe, "the console script is installed with the package"
+    (tmp_path / "raises.py").write_text('raise ImportError("cannot find libfoo")\n')
+    (tmp_path / "noregion.py").write_text("import jaxgear as jg\nSYSTEM = jg.DUFFING\nPARAMS = jg.DuffingParams()\n")
+    cases = [("nosuchmod:X", "no module named 'nosuchmod'"), ("./nosuch.py:X", "no file ./nosuch.py"),
+             ("raises:SYSTEM", "importing raises failed: ImportError: cannot find libfoo"),
+             ("noregion:SYSTEM", "no region: give --region")]
+    for spec, message in cases:
+        p = subprocess.run([exe, "analyze", "--system", spec, "--quiet", "--no-figures", "--out", "out"],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        assert p.returncode == 2, (spec, p.stdout, p.stderr)
+        (line,) = p.stderr.strip().splitlines()
+        assert line.startswith(f"jaxgear analyze: error: --system {spec}: ") and message in line, line
+    assert not (tmp_path / "out").exists()  # (the last two were found in the folder and imported)
