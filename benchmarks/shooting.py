@@ -157,8 +157,8 @@ def main():
         s = jg.find_periodic_orbits(jg.REDUCED, p, seeds, period=periods, search_integrator=search_int,
                                     progress=False, trajectory_samples=0, **kw)
         wall = time.perf_counter() - t
-        runs = sum(c["runs"] for c in s.convergence.values())
-        conv = sum(c["converged"] for c in s.convergence.values())
+        runs = sum(c.runs for c in s.convergence)
+        conv = sum(c.converged for c in s.convergence)
         first = sum(int(np.sum(np.asarray(r.status)[: len(seeds)] == Status.CONVERGED)) for r in s.shots.values())
         orbits = " ".join(f"P-{o.period}{'s' if o.stable else 'u'}" for o in s.orbits)
         lines.append(f"| {label} | {runs} | {conv} | {conv / runs:.1%} | {first}/{64 * len(periods)} | {orbits} "
@@ -190,10 +190,10 @@ def main():
     print()
     print(s.table())
     for i, o in enumerate(s.orbits):
-        c = s.checks[str(i)]
+        c = s.verification_of(i)
         lam = " ".join(f"{z.real:+.6f}{z.imag:+.6f}j" for z in o.multipliers[:2])
         print(f"orbit {i + 1}: P-{o.period} {'stable' if o.stable else o.instability}, leading multipliers {lam}; "
-              f"direct integration: {'kept' if c['kept'] else 'left after {} periods'.format(c['left_at'])}")
+              f"direct integration: {'kept' if c.kept else f'left after {c.left_at} periods'}")
 
 
 if __name__ == "__main__":

@@ -119,6 +119,8 @@ from .shooting import (
     PeriodicOrbit as PeriodicOrbit,
     OrbitSearch as OrbitSearch,
     SearchSettings as SearchSettings,
+    PeriodConvergence as PeriodConvergence,
+    OrbitVerification as OrbitVerification,
     OrbitCheck as OrbitCheck,
 )
 from .continuation import (
@@ -141,6 +143,8 @@ from .sweep import (
     BasinSweep as BasinSweep,
     BasinMap as BasinMap,
     ParameterMap as ParameterMap,
+    SweepDirection as SweepDirection,
+    MapQuantity as MapQuantity,
 )
 from .design import (
     design as design,
@@ -151,6 +155,7 @@ from .design import (
     OrbitSamples as OrbitSamples,
     sample_orbit as sample_orbit,
     MeshForces as MeshForces,
+    GearMesh as GearMesh,
     mesh_forces as mesh_forces,
     transmission_error as transmission_error,
     peak_to_peak as peak_to_peak,

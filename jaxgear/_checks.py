@@ -7,16 +7,19 @@ is allowed, before any integration starts.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import numbers
 import os
 from collections.abc import Iterable
-from typing import Any
+from typing import Any, TypeVar
 
 import jax
 import numpy as np
 
-__all__ = ["check_int", "check_number", "check_choice", "check_bool", "check_finite_array", "article",
+E = TypeVar("E", bound=enum.Enum)
+
+__all__ = ["check_int", "check_number", "check_choice", "check_enum", "check_bool", "check_finite_array", "article",
            "physical_memory", "check_memory", "with_changes", "split_changes"]
 
 
@@ -71,6 +74,20 @@ def check_choice(value: Any, name: str, choices: Iterable[Any]):
     except TypeError:
         pass
     raise ValueError(f"{name}={_show(value)} must be one of {', '.join(map(repr, choices))}.")
+
+
+def check_enum(value: Any, name: str, cls: type[E]) -> E:
+    """``value`` as a member of the enumeration ``cls``: a member itself, or its value (the
+    text of a ``StrEnum`` member: ``"up"`` for ``SweepDirection.UP``); anything else is
+    refused naming the allowed values."""
+    if isinstance(value, cls):
+        return value
+    if not isinstance(value, bool):
+        try:
+            return cls(value)
+        except (TypeError, ValueError):
+            pass
+    raise ValueError(f"{name}={_show(value)} must be one of {', '.join(repr(m.value) for m in cls)}.")
 
 
 def check_bool(value: Any, name: str) -> bool:

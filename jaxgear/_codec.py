@@ -8,7 +8,8 @@ decide how they are stored, from their type annotations and their ``metadata``:
   at run time, such as the grid axes ``x1, x2, x3``); complex arrays are stored as
   ``<name>__real`` and ``<name>__imag``;
 - ``int``, ``float``, ``str`` and ``bool`` become attributes, and so do enumerations
-  (outcomes such as a status or a kind: stored as their value, rebuilt by their class);
+  (outcomes such as a status or a kind: stored as their value, rebuilt by their class;
+  a tuple of them, such as a diagram's sweep directions, is a JSON list of values);
 - nested result dataclasses and ``NamedTuple`` s are stored under ``<name>__<field>``;
 - a tuple of dataclasses (``items_field(dim)``: attractors, orbits, bifurcation points)
   becomes one variable per item field along the item dimension, arrays padded to the
@@ -43,14 +44,21 @@ import numpy as np
 
 from ._checks import article
 
-__all__ = ["FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
+__all__ = ["FORMAT", "TYPED_SETTINGS_FORMAT", "result_type", "array_field", "items_field", "custom_field", "to_dataset", "from_dataset",
            "RESULT_TYPES", "plain", "FieldError"]
 
-FORMAT = 4
-"""Layout version written into every file: 4 since every result's settings are typed
-records holding the options objects (3: the same with the settings of orbit searches and
-designs as dictionaries; 2: every result's settings as dictionaries; files of jaxgear
-0.1 have none and are not read)."""
+FORMAT = 5
+"""Layout version written into every file: 5 since the direct method's pool options are
+one record (``Direct.pool``) and an orbit search's convergence and checks are tuples of
+typed records (4, still read: the direct method's options flat, the search's records as
+dictionaries keyed by text; 4 since every result's settings are typed records holding the
+options objects; 3: the same with the settings of orbit searches and designs as
+dictionaries; 2: every result's settings as dictionaries; files of jaxgear 0.1 have none
+and are not read)."""
+
+TYPED_SETTINGS_FORMAT = 4
+"""The first layout whose files this version reads (:data:`FORMAT` and the layouts since
+this one)."""
 
 RESULT_TYPES: dict[str, type] = {}
 """Registered result types by class name."""
@@ -70,9 +78,11 @@ def array_field(dims=None, *, later: bool = False, **kw):
     return dataclasses.field(metadata={"dims": dims, "later": later}, **kw)
 
 
-def items_field(dim: str, **kw):
-    """A dataclass field holding a tuple of dataclasses, stored along dimension ``dim``."""
-    return dataclasses.field(metadata={"item_dim": dim}, **kw)
+def items_field(dim: str, *, legacy: Callable[[Any], tuple] | None = None, **kw):
+    """A dataclass field holding a tuple of dataclasses, stored along dimension ``dim``.
+    ``legacy``: how a file that holds the field in an earlier form, one JSON attribute
+    (a dictionary), is read: ``legacy(json value) -> tuple of the dataclasses``."""
+    return dataclasses.field(metadata={"item_dim": dim, "legacy": legacy}, **kw)
 
 
 def later_field(default, **kw):
@@ -178,6 +188,8 @@ def _retype(v, hint):
     if origin is dict:
         kt, vt = (typing.get_args(hint) + (Any, Any))[:2]
         return {(_retype(k, kt) if kt is not str else k): _retype(x, vt) for k, x in v.items()}
+    if _is_enum(hint):  # an enumeration inside a JSON value (a tuple of directions): by its value
+        return _enum(hint, v)
     if hint is int and not isinstance(v, bool):
         return int(v)
     if hint is float:
@@ -426,6 +438,8 @@ def _decode_value(r: _Reader, hint, meta, path):
         return r.array(path)
     h = _strip_optional(hint)
     if "item_dim" in meta:
+        if meta.get("legacy") is not None and "n" not in info and path in r.ds.attrs:  # an earlier layout's JSON
+            return tuple(meta["legacy"](json.loads(r.ds.attrs[path])))
         return _decode_items(r, typing.get_args(h)[0], path)
     if _is_record(h):
         return _decode_record(r, h, f"{path}__")

@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._batching import SMALL_BATCH, power_of_two_at_least
 from ._checks import check_int, check_number, with_changes
 from ._codec import array_field, custom_field, items_field, result_type
 from ._format import format_table
@@ -44,7 +45,6 @@ from ._gearset import GearSet
 from ._io import save_result
 from ._model import nplanet_switching, reduced_switching
 from ._params import GearParams, params_to_dict
-from ._batching import SMALL_BATCH, power_of_two_at_least
 from ._poincare import LOCATE_BISECTIONS, locate_sign_changes, sample_trajectory, stroboscopic_map, stroboscopic_orbit
 from ._system import ForcedSystem, check_system
 from ._version import __version__

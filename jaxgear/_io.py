@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ._checks import article
-from ._codec import FORMAT, FieldError, from_dataset, to_dataset
+from ._codec import FORMAT, TYPED_SETTINGS_FORMAT, FieldError, from_dataset, to_dataset
 
 __all__ = ["load", "save_result", "atomic_write", "write_json", "write_text", "save_figure", "read_dataset",
            "strict_json", "TMP_PREFIX", "remove_stale_temporaries", "NotAResultFile"]
@@ -218,10 +218,11 @@ def load(path: str | Path, expected: str | None = None, *, params_type: type | N
         try:
             return _with_params_type(from_dataset(ds, expected), params_type)
         except FieldError as exc:
-            if fmt < FORMAT:
+            if fmt < TYPED_SETTINGS_FORMAT:
                 raise NotAResultFile(f"{path} was written by an earlier development version of jaxgear (format "
-                                     f"{fmt}, before typed settings; this one writes {FORMAT}) and cannot be read: "
-                                     "re-run the analysis with this version.") from None
+                                     f"{fmt}, before typed settings; this one writes {FORMAT} and reads "
+                                     f"{TYPED_SETTINGS_FORMAT} to {FORMAT}) and cannot be read: re-run the analysis "
+                                     "with this version.") from None
             raise NotAResultFile(f"not a jaxgear result file: {path}: {exc}.") from None
         except ValueError as exc:  # an unknown or unexpected result type
             raise NotAResultFile(f"{path}: {exc}") from None

@@ -285,11 +285,11 @@ def test_capture_radius_stays_below_attractor_separation():
 
     a = np.array([[0.0, 0.0], [1.0, 0.0]])
     b = np.array([[0.0, 0.04], [1.0, 1.0]])
-    pts, ks, _, _ = seed_tables([[(a, 2), (b, 2)]], 2, 2)
-    assert float(capture_radius(pts[0], ks[0], None)) == pytest.approx(0.01)  # a quarter of the 0.04 gap
-    pts, ks, _, _ = seed_tables([[(a, 2)]], 2, 2)
-    assert float(capture_radius(pts[0], ks[0], None)) == pytest.approx(0.02)  # 1 % of 1 + max|x|
-    assert float(capture_radius(pts[0], ks[0], 0.3)) == 0.3
+    t = seed_tables([[(a, 2), (b, 2)]], 2, 2)
+    assert float(capture_radius(t.points[0], t.codes[0], None)) == pytest.approx(0.01)  # a quarter of the 0.04 gap
+    t = seed_tables([[(a, 2)]], 2, 2)
+    assert float(capture_radius(t.points[0], t.codes[0], None)) == pytest.approx(0.02)  # 1 % of 1 + max|x|
+    assert float(capture_radius(t.points[0], t.codes[0], 0.3)) == 0.3
     with pytest.raises(ValueError, match="capture_radius"):
         jg.Direct(capture_radius=-1)
 
@@ -306,7 +306,7 @@ def test_pool_compaction_keeps_every_busy_lane_and_its_history():
     L, dim, M = 6000, 4, 3  # more lanes to move (about 1,500) than one chunk of MOVE_CHUNK (1,024)
     X = rng.normal(size=(L, dim))
     att = _lanes.seed_tables([()], M, dim)
-    s = _lanes.init_pool(L, M, jax.device_put(X), jax.device_put(np.zeros(L, np.int32)), *att)
+    s = _lanes.init_pool(L, M, jax.device_put(X), jax.device_put(np.zeros(L, np.int32)), att)
     busy = rng.random(L) < 0.45
     s = s._replace(hist=jax.device_put(rng.normal(size=s.hist.shape)),
                    streak=jax.device_put(rng.integers(0, 9, size=s.streak.shape).astype(np.int32)),

@@ -140,7 +140,7 @@ def test_paper_result_round_trip_exact_and_labelled(paper_result, tmp_path):
         np.testing.assert_array_equal(ds["x3"].values, r.grid.axis_centres(2))
         assert list(ds["state"].values) == ["x1", "x2", "x3", "x4"]
         assert json.loads(ds.attrs["params"]) == jg.paper_params().to_dict()
-        assert ds.attrs["jaxgear_format"] == FORMAT == 4
+        assert ds.attrs["jaxgear_format"] == FORMAT == 5
         for name, v in jg.paper_params().to_dict().items():  # the canonical set, one attribute each
             assert ds.attrs[f"param_{name}"] == v
         assert ds.attrs["system"] == jg.REDUCED.name and ds.attrs["version"] == jg.__version__
@@ -307,6 +307,133 @@ def test_outcomes_are_enums_stored_by_their_values(monkeypatch):
     bad.attrs["status"] = "exploded"
     with pytest.raises(ValueError, match="'status'.*not a DesignStatus"):
         from_dataset(bad, "_Outcomes")
+
+
+def _diagram(directions) -> jg.BifurcationDiagram:
+    """A small bifurcation diagram of 2 values and 1 start per sweep (made by hand: the
+    codec, not the sweep, is checked here)."""
+    D, V = len(directions), 2
+    return jg.BifurcationDiagram(
+        param="omega", fields=("omega",), values=np.array([1.0, 1.1]), directions=directions,
+        starts=np.zeros((1, 2)), points=np.zeros((D, V, 1, 3, 2)), period=np.ones((D, V, 1), np.int64),
+        attractor=np.zeros((D, V, 1), np.int64), system="duffing", state_names=("x", "v"), params={},
+        settings=jg.sweep.SequenceSettings(options=jg.SequenceOptions(max_period=1, record=3), integrator=jg.RK4(16)))
+
+
+def _parameter_map(quantity) -> jg.ParameterMap:
+    """A 2 x 1 two-parameter map of 1 start (made by hand)."""
+    return jg.ParameterMap(
+        param_x="omega", fields_x=("omega",), values_x=np.array([1.0, 1.1]), param_y="gamma", fields_y=("gamma",),
+        values_y=np.array([0.3]), starts=np.zeros((1, 2)), quantity=quantity, period=np.ones((1, 2, 1), np.int64),
+        attractor=np.zeros((1, 2, 1), np.int64), n_attractors=np.ones((1, 2), np.int64),
+        last_point=np.zeros((1, 2, 1, 2)), system="duffing", state_names=("x", "v"), params={},
+        settings=jg.sweep.SequenceSettings(options=jg.SequenceOptions(max_period=1, record=4), integrator=jg.RK4(16)))
+
+
+def _rewrite(path, out, drop=(), **attrs):
+    """The result file ``path`` written to ``out`` with the variables ``drop`` left out and
+    the attributes ``attrs`` set (``None``: removed): an older or a damaged file."""
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        ds = ds.drop_vars([v for v in ds.variables if str(v).startswith(tuple(drop))]).load()
+    for name, value in attrs.items():
+        if value is None:
+            ds.attrs.pop(name, None)
+        else:
+            ds.attrs[name] = value
+    ds.to_netcdf(out, engine="h5netcdf")
+    return out
+
+
+def test_sweep_direction_and_map_quantity_are_enums_stored_by_their_texts(tmp_path):
+    """A diagram's sweep directions and a map's quantity are enumerations: given as their
+    texts they become the members, are stored as the texts (what files held when they were
+    strings, so those load unchanged), load as the same members, and a text that is no
+    member is refused naming the field and the allowed values."""
+    d = _diagram(("independent", "up", "down"))
+    assert d.directions == (jg.SweepDirection.INDEPENDENT, jg.SweepDirection.UP, jg.SweepDirection.DOWN)
+    assert all(type(x) is jg.SweepDirection for x in d.directions) and d.directions == jg.SweepDirection.ALL.sweeps
+    path = d.save(tmp_path / "d.nc")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        assert json.loads(ds.attrs["directions"]) == ["independent", "up", "down"]
+        assert list(ds["direction"].values) == ["independent", "up", "down"]
+    q = jg.load(path)
+    assert_same(q, d)
+    assert [type(x) for x in q.directions] == [jg.SweepDirection] * 3
+    assert q.transitions("down") == q.transitions(jg.SweepDirection.DOWN) and q.summary()["directions"][1] == "up"
+    bad = _rewrite(path, tmp_path / "bad.nc", directions='["independent", "sideways"]')
+    with pytest.raises(ValueError, match=r"'directions'.*'sideways' is not a SweepDirection.*independent, up, down"):
+        jg.load(bad)
+
+    m = _parameter_map("n_attractors")
+    assert m.quantity is jg.MapQuantity.N_ATTRACTORS and m.data is m.n_attractors
+    path = m.save(tmp_path / "m.nc")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        assert ds.attrs["quantity"] == "n_attractors"
+    q = jg.load(path)
+    assert_same(q, m)
+    assert q.quantity is jg.MapQuantity.N_ATTRACTORS and q.summary()["quantity"] == "n_attractors"
+    bad = _rewrite(path, tmp_path / "badm.nc", quantity="periods")
+    with pytest.raises(ValueError, match=r"'quantity'.*'periods' is not a MapQuantity.*period, n_attractors"):
+        jg.load(bad)
+
+
+def test_orbit_search_records_are_typed_and_files_of_format_4_load(duffing_search, tmp_path):
+    """An orbit search's convergence and checks are tuples of typed records (one per period
+    tried, one per orbit verified), stored as columns along their own dimensions; a file of
+    format 4, which held them as dictionaries keyed by texts ("1", "0"), loads as the same
+    records; the summary keeps the dictionaries."""
+    checks = (jg.OrbitVerification(orbit=0, periods=50, kept=True, left_at=-1, consistent=True),
+              jg.OrbitVerification(orbit=2, periods=50, kept=False, left_at=7, consistent=True))
+    s = dataclasses.replace(duffing_search, checks=checks)
+    assert [c.period for c in s.convergence] == [1, 2] and all(type(c) is jg.PeriodConvergence for c in s.convergence)
+    c1 = s.convergence_of(1)
+    assert c1.seeds == 5 and sum(c1.orbits.values()) == c1.converged and all(type(i) is int for i in c1.orbits)
+    assert s.verification_of(2).left_at == 7 and s.verification_of(1) is None
+    with pytest.raises(KeyError, match="period 3 was not tried"):
+        s.convergence_of(3)
+    path = s.save(tmp_path / "o.nc")
+    q = jg.load(path)
+    assert_same(q, s)
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        assert ds["convergence__period"].dims == ("searched_period",) and list(ds["convergence__period"].values) == [1, 2]
+        assert list(ds["checks__left_at"].values) == [-1, 7] and "convergence" not in ds.attrs
+    old_convergence = {str(c.period): c.to_dict() for c in s.convergence}
+    old_checks = {"0": dict(periods=50, kept=True, left_at=-1, consistent=True),
+                  "2": dict(periods=50, kept=False, left_at=7, consistent=True)}
+    assert set(old_convergence["1"]) == {"runs", "seeds", "converged", "seeds_converged", "first_round", "orbits"}
+    assert s.summary()["convergence"] == old_convergence and s.summary()["checks"] == old_checks
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        schema = {k: v for k, v in json.loads(ds.attrs["jaxgear_schema"]).items()
+                  if not k.startswith(("convergence", "checks"))}
+    old = _rewrite(path, tmp_path / "old.nc", drop=("convergence__", "checks__"), jaxgear_format=4,
+                   jaxgear_schema=json.dumps(schema), convergence=json.dumps(old_convergence),
+                   checks=json.dumps(old_checks))
+    assert_same(jg.load(old), s)
+    empty = _rewrite(path, tmp_path / "old_empty.nc", drop=("convergence__", "checks__"), jaxgear_format=4,
+                     jaxgear_schema=json.dumps(schema), convergence="{}", checks="{}")
+    assert jg.load(empty).convergence == () and jg.load(empty).checks == ()
+
+
+def test_a_direct_result_holds_its_pool_options_and_flat_files_of_format_4_load(duffing_results, tmp_path):
+    """The direct method holds the lane pool's options as one record (``Direct.pool``, saved
+    as one); a file of format 4, whose method held them flat (``chunk_size``,
+    ``max_periods``, ...), loads as the same method."""
+    r = dataclasses.replace(duffing_results["direct"],
+                            method=jg.Direct(max_periods=3000, chunk_size=512, capture_radius=0.01, recurrence=None))
+    assert r.method.pool == jg.PoolOptions(max_periods=3000, lanes=512, capture_radius=0.01)
+    path = r.save(tmp_path / "r.nc")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        saved = json.loads(ds.attrs["method"])
+    assert set(saved) == {"name", "integrator", "pool", "recurrence"}
+    assert saved["pool"]["lanes"] == 512 and saved["pool"]["max_periods"] == 3000
+    assert_same(jg.load(path), r)
+    flat = dict(name="direct", integrator=saved["integrator"], max_period=16, period_tol=1e-6, merge_tol=1e-4,
+                chunk_size=512, round_periods=5, max_periods=3000, capture_radius=0.01, escape_bound=1e6,
+                recurrence=None)
+    old = _rewrite(path, tmp_path / "old.nc", jaxgear_format=4, method=json.dumps(flat))
+    q = jg.load(old)
+    assert q.method == r.method and q.method.pool.max_periods == 3000 and q.method.chunk_size == 512
+    assert_same(q, r)
 
 
 # ---------------------------------------------------------------- jaxgear.load

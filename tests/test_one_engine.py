@@ -143,9 +143,10 @@ def _spelled_codes(source: str) -> list[int]:
 
 
 def test_no_module_but_the_pool_program_spells_a_slot_code():
-    """The modules that read attractor tables' slot codes (``att_k``), but ``_lanes`` that
-    defines them, spell none (as ``mark = M + 1``): they read them through ``slot_kind``."""
-    readers = [p for p in sorted(ANALYSIS.glob("*.py")) if p.name != "_lanes.py" and "att_k" in p.read_text()]
+    """The modules that read attractor tables' slot codes (``AttractorTable.codes``), but
+    ``_lanes`` that defines them, spell none (as ``mark = M + 1``): they read them through
+    ``slot_kind``."""
+    readers = [p for p in sorted(ANALYSIS.glob("*.py")) if p.name != "_lanes.py" and ".codes" in p.read_text()]
     assert {p.name for p in readers} >= {"_placement.py", "_pool.py"}
     assert {p.name: _spelled_codes(p.read_text()) for p in readers if _spelled_codes(p.read_text())} == {}
     assert _spelled_codes("mark = M + 1\nsaddle = o.max_period + 2\n") == [1, 2]
@@ -167,3 +168,40 @@ def test_slot_codes_round_trip(M):
         slot_code(SlotKind.CYCLE, M, M + 1)
     with pytest.raises(ValueError, match="period"):
         slot_code(SlotKind.REPELLER, M, 0)
+
+
+# --------------------------------------------------------------------------- attractor tables
+LOOSE_TABLE = {"att_pts", "att_k", "n_att", "att_cloud"}
+"""The names the four arrays of the attractor tables had when they travelled apart."""
+
+
+def _loose_tables(source: str) -> list[str]:
+    """Where a source passes the attractor tables as loose arrays: a parameter, a field, a
+    keyword or an attribute named :data:`LOOSE_TABLE`, or a ``*`` unpacking of a table."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        name = (node.arg if isinstance(node, (ast.arg, ast.keyword)) else node.attr if isinstance(node, ast.Attribute)
+                else node.target.id if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                else None)
+        if name in LOOSE_TABLE:
+            out.append(f"line {node.lineno}: {name}")
+        if isinstance(node, ast.Starred) and isinstance(node.value, ast.Name) and node.value.id in ("att", "tables"):
+            out.append(f"line {node.lineno}: *{node.value.id}")
+    return out
+
+
+def test_attractor_tables_travel_as_one_typed_pytree():
+    """The pool's modules pass an attractor table as one ``AttractorTable`` (points, codes,
+    counts, clouds), never as four loose arrays; the scan finds the loose form."""
+    assert sorted(_loose_tables("def init(L, att_pts, att_k, n_att, att_cloud):\n    f(*att)\n    s.n_att\n")) == [
+        "line 1: att_cloud", "line 1: att_k", "line 1: att_pts", "line 1: n_att", "line 2: *att", "line 3: n_att"]
+    assert {m: _loose_tables((ANALYSIS / m).read_text()) for m in sorted(POOL_MODULES)} == {m: [] for m in
+                                                                                             sorted(POOL_MODULES)}
+    from jaxgear.analysis._lanes import AttractorTable, PoolState, seed_tables
+
+    t = seed_tables([[(np.zeros((2, 3)), 2)], []], 4, 3, Q=5)
+    assert type(t) is AttractorTable and (t.n_values, t.n_slots) == (2, 8) and t.counts.tolist() == [1, 0]
+    grown = t.with_slots(16)
+    assert grown.points.shape == (2, 16, 4, 3) and grown.clouds.shape == (2, 16, 5, 3)
+    assert (slot_kind(grown.codes[:, 8:], 4) == SlotKind.EMPTY).all() and np.array_equal(grown.codes[:, :8], t.codes)
+    assert "attractors" in PoolState._fields and not LOOSE_TABLE & set(PoolState._fields)

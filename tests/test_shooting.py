@@ -438,8 +438,8 @@ def test_deflation_finds_the_saddle_plain_newton_misses():
     saddles = [o for o in defl.orbits if not o.stable]
     assert len(saddles) == 1 and saddles[0].instability == "fold" and saddles[0].residual <= 1e-10
     np.testing.assert_allclose(saddles[0].points[0], [-0.8471, 0.6365], atol=1e-3)  # the saddle (harmonic balance 0.95)
-    c = defl.convergence["1"]
-    assert c["runs"] == 16 and c["first_round"] == 8 and c["converged"] > 8
+    c = defl.convergence_of(1)
+    assert c.runs == 16 and c.first_round == 8 and c.converged > 8
     # plain Newton from the same seeds with the known orbit deflated finds no stable small orbit again
     small = plain.orbits[0].points
     r = jg.periodic_orbit(jg.DUFFING, p, seeds, integrator=jg.RK4(100), max_iter=20, deflate=small, solver=NEWTON)

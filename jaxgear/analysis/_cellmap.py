@@ -20,7 +20,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import chunks, equal_chunk_size, pad_rows, progress_bar
+from .._batching import DEFAULT_CHUNK_CELLS, chunks, equal_chunk_size, pad_rows, progress_bar
 from .._cells import PAPER_REGION, CellGrid
 from .._checks import check_choice, check_int
 from .._devices import local_devices, shard_rows
@@ -37,9 +37,15 @@ __all__ = ["PoincareCellMap", "StroboscopicCellMap", "cell_images"]
 
 
 class _AbstractCellMap(AbstractGlobalMethod):
-    """Options of the cell methods: ``mapping_steps`` (``l``, forcing periods per cell-map
-    step) and ``settle_periods`` (periods each periodic group is followed before its
-    period is read)."""
+    """Options of the cell methods: those every method has (:class:`AbstractGlobalMethod`:
+    ``max_period``, ``period_tol``, ``merge_tol``, ``chunk_size``, declared here), and in
+    each method ``mapping_steps`` (``l``, forcing periods per cell-map step) and
+    ``settle_periods`` (periods each periodic group is followed before its period is read)."""
+
+    max_period: int = eqx.field(static=True, default=16)
+    period_tol: float = eqx.field(static=True, default=1e-6)
+    merge_tol: float = eqx.field(static=True, default=1e-4)
+    chunk_size: int = eqx.field(static=True, default=DEFAULT_CHUNK_CELLS)
 
     def __check_init__(self):
         check_int(self.settle_periods, "settle_periods", 0)

@@ -27,11 +27,11 @@ from __future__ import annotations
 import dataclasses
 from typing import ClassVar
 
-import equinox as eqx
 import numpy as np
 
 from .._cells import CellGrid
-from .._checks import check_int, check_number
+from .._checks import check_int
+from ..integrate import AbstractIntegrator, default_integrator
 from ._boxes import partition_of_states
 from ._lanes import Boxes
 from ._method import AbstractGlobalMethod, Classification, register_method
@@ -52,47 +52,100 @@ REPELLER_PASSES = 3
 unstable cycle); cells still on one after the last pass are unresolved."""
 
 
+_POOL_NAMES = tuple(f.name for f in dataclasses.fields(PoolOptions))
+"""The options of the lane pool, which :class:`Direct` also takes one by one."""
+
+_RECURRENCE = RecurrenceOptions()
+"""The default detection by recurrences."""
+
+
 @register_method
 class Direct(AbstractGlobalMethod):
     """Direct integration of every cell centre on the stroboscopic map (the default method).
 
-    A pool of ``chunk_size`` lanes, kept on the device (:mod:`jaxgear.analysis._pool`),
-    runs rounds of ``round_periods`` forcing periods; after each round a lane is decided
-    when its trajectory escapes (norm > ``escape_bound`` or not finite: the sink), when
-    its last k stroboscopic points follow the whole cycle of a known P-k attractor within
-    ``capture_radius`` without moving away from it, when it recurs with a period
-    ``<= max_period``, or after ``max_periods`` periods (unresolved); freed lanes take the
-    next cells. A recurring cycle whose largest Floquet multiplier is not below
-    :data:`STABLE_BELOW` is not an attractor: its cells run again with it as a repeller
-    (see the module).
+    A pool of ``lanes`` (``chunk_size``) lanes, kept on the device
+    (:mod:`jaxgear.analysis._pool`), runs rounds of ``round_periods`` forcing periods;
+    after each round a lane is decided when its trajectory escapes (norm >
+    ``escape_bound`` or not finite: the sink), when its last k stroboscopic points follow
+    the whole cycle of a known P-k attractor within ``capture_radius`` without moving away
+    from it, when it recurs with a period ``<= max_period``, or after ``max_periods``
+    periods (unresolved); freed lanes take the next cells. A recurring cycle whose largest
+    Floquet multiplier is not below :data:`STABLE_BELOW` is not an attractor: its cells run
+    again with it as a repeller (see the module).
+
+    Built as ``Direct(integrator=..., pool=PoolOptions(...), recurrence=...)``, or with
+    the pool's options one by one: ``Direct(max_periods=4000, max_period=8)`` is
+    ``Direct(pool=PoolOptions(max_periods=4000, max_period=8))`` (``chunk_size`` is the
+    pool's ``lanes``; given with ``pool``, they change it). :meth:`replace` takes them
+    the same way. The pool's options also read as attributes of the method
+    (``method.max_periods`` is ``method.pool.max_periods``).
 
     Attributes:
-        round_periods: periods per round between checks (>= 1).
-        max_periods: limit per cell (then ``UNRESOLVED``).
-        capture_radius: a number >= 0 (state units), or ``None`` (the default): a quarter
-            of the smallest distance between two known attractors' points, at most 1 % of
-            their scale.
-        escape_bound: norm beyond which a state counts as escaped (state units).
+        pool: the lane pool's options (:class:`~jaxgear.analysis.PoolOptions`:
+            ``max_period``, ``round_periods`` (periods per round between checks),
+            ``period_tol``, ``merge_tol``, ``max_periods`` (limit per cell, then
+            ``UNRESOLVED``), ``escape_bound`` (norm beyond which a state counts as escaped),
+            ``capture_radius`` (a number >= 0, or ``None``: a quarter of the smallest
+            distance between two known attractors' points, at most 1 % of their scale),
+            ``lanes`` and ``pilot``).
         recurrence: the detection of attractors of every type by recurrences on a fine
             partition (:class:`~jaxgear.analysis.RecurrenceOptions`), or ``None``: periodic
             attractors only (cells on other attractors stay unresolved).
-        integrator, max_period, period_tol, merge_tol, chunk_size: see
-            :class:`AbstractGlobalMethod`.
+        integrator: see :class:`AbstractGlobalMethod`; ``max_period``, ``period_tol``,
+            ``merge_tol`` and ``chunk_size`` (``pool.lanes``) read the pool's.
     """
 
     name: ClassVar[str] = "direct"
-    round_periods: int = eqx.field(static=True, default=5)
-    max_periods: int = eqx.field(static=True, default=2000)
-    capture_radius: float | None = eqx.field(static=True, default=None)
-    escape_bound: float = eqx.field(static=True, default=1e6)
-    recurrence: RecurrenceOptions | None = RecurrenceOptions()
+    pool: PoolOptions
+    recurrence: RecurrenceOptions | None
 
-    def __check_init__(self):
-        check_int(self.round_periods, "round_periods", 1)
-        check_int(self.max_periods, "max_periods", 1)
-        if self.capture_radius is not None:
-            check_number(self.capture_radius, "capture_radius", 0)
-        check_number(self.escape_bound, "escape_bound", 0, strict_min=True)
+    def __init__(self, *, integrator: AbstractIntegrator | None = None, pool: PoolOptions | None = None,
+                 recurrence: RecurrenceOptions | None = _RECURRENCE, **options):
+        unknown = [k for k in options if k not in _POOL_NAMES and k != "chunk_size"]
+        if unknown:
+            raise TypeError(f"Direct got an unexpected option {unknown[0]!r}; its options are integrator, pool, "
+                            f"recurrence, chunk_size and those of PoolOptions: {', '.join(_POOL_NAMES)}.")
+        if pool is not None and not isinstance(pool, PoolOptions):
+            raise ValueError(f"pool={pool!r} must be a jaxgear.analysis.PoolOptions (or None for the defaults).")
+        if "chunk_size" in options:
+            if "lanes" in options:
+                raise TypeError("Direct takes chunk_size or lanes (the same option), not both.")
+            options["lanes"] = check_int(options.pop("chunk_size"), "chunk_size", 1)
+        pool = PoolOptions() if pool is None else pool
+        self.integrator = default_integrator() if integrator is None else integrator
+        self.pool = dataclasses.replace(pool, **options) if options else pool
+        self.recurrence = recurrence
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        return (*super().option_names(), *_POOL_NAMES, "chunk_size")
+
+    def __getattr__(self, name: str):  # the pool's options as the method's (only called for names it lacks)
+        if name in _POOL_NAMES:
+            return getattr(object.__getattribute__(self, "pool"), name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @property
+    def max_period(self) -> int:
+        return self.pool.max_period
+
+    @property
+    def period_tol(self) -> float:
+        return self.pool.period_tol
+
+    @property
+    def merge_tol(self) -> float:
+        return self.pool.merge_tol
+
+    @property
+    def chunk_size(self) -> int:
+        return self.pool.lanes
+
+    def to_dict(self) -> dict:
+        """The method's name and every option, the pool's as one record (JSON-able;
+        :func:`~jaxgear.analysis.method_from_dict` rebuilds it)."""
+        return {"name": self.name, "integrator": self.integrator.to_dict(), "pool": self.pool.to_dict(),
+                "recurrence": None if self.recurrence is None else self.recurrence.to_dict()}
 
     def check(self, system, grid: CellGrid) -> None:
         return None
@@ -106,13 +159,12 @@ class Direct(AbstractGlobalMethod):
         if isinstance(method, Direct):
             return dataclasses.replace(method, integrator=integrator)
         return cls(integrator=method.integrator if integrator is None else integrator, max_period=method.max_period,
-                   period_tol=method.period_tol, merge_tol=method.merge_tol, chunk_size=method.chunk_size)
+                   period_tol=method.period_tol, merge_tol=method.merge_tol, lanes=method.chunk_size)
 
-    def pool_options(self, pilot: int = PoolOptions.pilot) -> PoolOptions:
-        """The lane pool's options (:class:`~jaxgear.analysis.PoolOptions`) of this method."""
-        return PoolOptions(max_period=self.max_period, round_periods=self.round_periods, period_tol=self.period_tol,
-                           merge_tol=self.merge_tol, max_periods=self.max_periods, escape_bound=self.escape_bound,
-                           capture_radius=self.capture_radius, lanes=self.chunk_size, pilot=pilot)
+    def pool_options(self, pilot: int | None = None) -> PoolOptions:
+        """The lane pool's options (:attr:`pool`), with ``pilot`` states in the pilot pool
+        where given (0: none; the passes off repellers run without one)."""
+        return self.pool if pilot is None else dataclasses.replace(self.pool, pilot=pilot)
 
     def boxes(self, X: np.ndarray) -> Boxes | None:
         """The fine partition of the detection by recurrences over the bounding box of the

@@ -76,7 +76,7 @@ from ._pool_options import PoolOptions
 from ._recurrence_options import RecurrenceOptions
 from ._result import SINK, UNRESOLVED
 
-__all__ = ["PoolState", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
+__all__ = ["PoolState", "AttractorTable", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
            "table_slots", "NOT_DONE", "APERIODIC", "SlotKind", "slot_code", "slot_kind", "slot_period"]
 
 NOT_DONE = -3
@@ -111,15 +111,16 @@ lists the pool takes (:func:`seed_tables`) and returns
 class SlotKind(enum.IntEnum):
     """What a slot of a value's attractor table holds: the one vocabulary of the slot codes.
 
-    The pool stores one int32 code per slot (``att_k``), which carries a cycle's period
-    too; :func:`slot_code` writes it and :func:`slot_kind` / :func:`slot_period` read it,
-    on the device and on the host (nothing else spells a code).
+    The pool stores one int32 code per slot (:attr:`AttractorTable.codes`), which carries a
+    cycle's period too; :func:`slot_code` writes it and :func:`slot_kind` /
+    :func:`slot_period` read it, on the device and on the host (nothing else spells a code).
 
     - ``EMPTY`` (code 0): no attractor yet;
-    - ``CYCLE`` (code ``k``, ``1 <= k <= M``): a P-k attractor, its points in ``att_pts``;
+    - ``CYCLE`` (code ``k``, ``1 <= k <= M``): a P-k attractor, its points in
+      :attr:`AttractorTable.points`;
     - ``REPELLER`` (code ``-k``): an unstable P-k cycle; lanes that shadow it integrate on;
     - ``BOXES`` (code ``M + 1``): an attractor of boxes (no cycle of period ``<= M``), its
-      cloud in ``att_cloud`` and its boxes in the box table;
+      cloud in :attr:`AttractorTable.clouds` and its boxes in the box table;
     - ``SADDLE`` (code ``M + 2``): a chaotic saddle, a set of boxes that recurred like an
       attractor but whose points leave it (a long transient; see
       :func:`~jaxgear.analysis._cloud.leaving_share`). Its boxes keep the lanes that visit
@@ -135,7 +136,7 @@ class SlotKind(enum.IntEnum):
 
 
 def slot_code(kind: SlotKind, M: int, k: int = 0) -> int:
-    """The ``att_k`` code of a slot of ``kind`` (``k``: the period of a cycle or a repeller,
+    """The code (:attr:`AttractorTable.codes`) of a slot of ``kind`` (``k``: the period of a cycle or a repeller,
     ``1 <= k <= M``, an int or a traced int32; ``M``: the pool's ``max_period``)."""
     kind = SlotKind(kind)
     if kind in (SlotKind.CYCLE, SlotKind.REPELLER):
@@ -164,10 +165,43 @@ def slot_period(code, M: int):
     return xp.where(cycle, xp.abs(xp.asarray(code)), 0).astype(xp.int32)
 
 
-def _of_boxes(att_k, M: int):
-    """Whether table slots ``att_k`` hold a set of boxes (an attractor or a saddle)."""
-    kind = slot_kind(att_k, M)
+def _of_boxes(codes, M: int):
+    """Whether the table slots of codes ``codes`` hold a set of boxes (an attractor or a saddle)."""
+    kind = slot_kind(codes, M)
     return (kind == SlotKind.BOXES) | (kind == SlotKind.SADDLE)
+
+
+class AttractorTable(NamedTuple):
+    """The attractor tables of ``V`` values (parameter sets), ``A`` slots each: one pytree
+    (numpy arrays on the host, JAX arrays on the device; on a mesh every leaf has a leading
+    device axis). Slot ``a`` of value ``v`` holds one attractor, repeller or saddle
+    (:class:`SlotKind`, read from its code)."""
+
+    points: jax.Array  # (V, A, M, dim) a cycle's points in cycle order (NaN padded)
+    codes: jax.Array  # (V, A) int32 slot codes (SlotKind: slot_code, slot_kind)
+    counts: jax.Array  # (V,) int32 slots in use
+    clouds: jax.Array  # (V, A, Q, dim) the cloud of each attractor of boxes (NaN elsewhere)
+
+    @property
+    def n_values(self) -> int:
+        """``V`` (a static shape)."""
+        return self.codes.shape[-2]
+
+    @property
+    def n_slots(self) -> int:
+        """``A`` (a static shape)."""
+        return self.codes.shape[-1]
+
+    def with_slots(self, A: int) -> AttractorTable:
+        """The tables grown to ``A >= n_slots`` slots per value (new slots empty)."""
+        xp = jnp if isinstance(self.codes, jax.Array) else np
+        V, A0, M, dim = self.points.shape
+        Q = self.clouds.shape[2]
+        return AttractorTable(
+            points=xp.concatenate([self.points, xp.full((V, A - A0, M, dim), xp.nan)], axis=1),
+            codes=xp.concatenate([self.codes, xp.full((V, A - A0), slot_code(SlotKind.EMPTY, M), xp.int32)], axis=1),
+            counts=self.counts,
+            clouds=xp.concatenate([self.clouds, xp.full((V, A - A0, Q, dim), xp.nan)], axis=1))
 
 
 class PoolState(NamedTuple):
@@ -185,14 +219,11 @@ class PoolState(NamedTuple):
     next_cell: jax.Array  # () int32
     n_done: jax.Array  # () int32
     clock: jax.Array  # () int32
-    att_pts: jax.Array  # (V, A, M, dim) attractor points in cycle order (NaN padded), per parameter row
-    att_k: jax.Array  # (V, A) int32 slot codes (SlotKind: slot_code, slot_kind)
-    n_att: jax.Array  # (V,) int32
+    attractors: AttractorTable  # the attractor table of each parameter row (value)
     radius: jax.Array  # (V,) capture radius
     n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
     overflow: jax.Array  # () bool: a new attractor found no free slot
     rounds: jax.Array  # () int32 rounds run
-    att_cloud: jax.Array  # (V, A, Q, dim) the cloud of each attractor of boxes (NaN elsewhere)
     table: CellTable  # box key (row-mixed) -> slot of the value's table
     hit_att: jax.Array  # (L,) int32 slot of the lane's run of box hits (-1 none)
     hits: jax.Array  # (L,) int32 length of the run
@@ -207,12 +238,12 @@ def table_slots(count: int) -> int:
     return power_of_two_at_least(count, 8)
 
 
-def seed_tables(attractors, M: int, dim: int, Q: int = 1):
-    """The attractor tables ``(points (V, A, M, dim), periods (V, A), counts (V,), clouds
-    (V, A, Q, dim))`` (numpy) of ``V`` values, each holding its value's known attractors
-    ``[(points (k, dim), k)]`` first (``A``: :func:`table_slots`): a P-k cycle; a cycle of
-    period ``-k``, a repeller (an unstable P-k cycle whose lanes integrate on); period
-    :data:`APERIODIC`, an attractor of boxes given by its cloud (at most ``Q`` points kept)."""
+def seed_tables(attractors, M: int, dim: int, Q: int = 1) -> AttractorTable:
+    """The :class:`AttractorTable` (numpy; ``M`` points and ``Q`` cloud points per slot) of
+    ``V`` values, each holding its value's known attractors ``[(points (k, dim), k)]``
+    first (``A``: :func:`table_slots`): a P-k cycle; a cycle of period ``-k``, a repeller
+    (an unstable P-k cycle whose lanes integrate on); period :data:`APERIODIC`, an
+    attractor of boxes given by its cloud (at most ``Q`` points kept)."""
     known = [[(np.asarray(p, np.float64).reshape(-1, dim), int(k)) for p, k in att] for att in attractors]
     if any(not abs(k) <= M for kn in known for _, k in kn):
         raise ValueError(f"known attractors must have periods 1..{M} (repellers -1..-{M}, {APERIODIC}: of boxes)")
@@ -229,16 +260,17 @@ def seed_tables(attractors, M: int, dim: int, Q: int = 1):
             else:
                 pts[v, a, :abs(k)] = p[:abs(k)]
                 ks[v, a] = slot_code(SlotKind.CYCLE if k > 0 else SlotKind.REPELLER, M, abs(k))
-    return pts, ks, np.array([len(kn) for kn in known], np.int32), clouds
+    return AttractorTable(points=pts, codes=ks, counts=np.array([len(kn) for kn in known], np.int32), clouds=clouds)
 
 
 # ----------------------------------------------------------------------------- the state
-def init_pool(L: int, M: int, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes: Boxes | None = None,
+def init_pool(L: int, M: int, X, Xrow, attractors: AttractorTable, boxes: Boxes | None = None,
               n_real=None) -> PoolState:
     """The pool of ``L`` lanes over the queue ``X (n, dim)`` (parameter rows ``Xrow (n,)``),
-    its first lanes holding the first cells; ``n_real`` (traced, optional): the queue's
-    real length when ``X`` is padded (the padding never enters a lane). The boxes of the
-    known attractors of boxes (``att_cloud``) enter the box table."""
+    its first lanes holding the first cells, with the attractor tables ``attractors``;
+    ``n_real`` (traced, optional): the queue's real length when ``X`` is padded (the
+    padding never enters a lane). The boxes of the known attractors of boxes (their
+    clouds) enter the box table."""
     n, dim = X.shape
     H = 2 * M + 1
     take = jnp.asarray(min(L, n), jnp.int32)
@@ -252,24 +284,24 @@ def init_pool(L: int, M: int, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes: 
         streak=jnp.zeros((M, L), jnp.int32), cell=jnp.where(first, lane, -1).astype(jnp.int32),
         row=jnp.where(first, Xrow[src], 0).astype(jnp.int32), age=jnp.zeros(L, jnp.int32),
         labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32), next_cell=take,
-        n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32), att_pts=att_pts, att_k=att_k,
-        n_att=jnp.asarray(n_att, jnp.int32), radius=jnp.zeros(att_k.shape[0], jnp.float64), n_active=take,
-        overflow=jnp.asarray(False), rounds=jnp.asarray(0, jnp.int32), att_cloud=att_cloud,
-        table=_seeded_table(boxes, att_k, att_cloud, M), hit_att=jnp.full(L, -1, jnp.int32),
+        n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32),
+        attractors=attractors._replace(counts=jnp.asarray(attractors.counts, jnp.int32)),
+        radius=jnp.zeros(attractors.n_values, jnp.float64), n_active=take, overflow=jnp.asarray(False),
+        rounds=jnp.asarray(0, jnp.int32), table=_seeded_table(boxes, attractors, M), hit_att=jnp.full(L, -1, jnp.int32),
         hits=jnp.zeros(L, jnp.int32), misses=jnp.zeros(L, jnp.int32), tried=jnp.zeros(L, jnp.int32),
         dropped=jnp.asarray(0, jnp.int32))
 
 
-def _seeded_table(boxes: Boxes | None, att_k, att_cloud, M: int) -> CellTable:
+def _seeded_table(boxes: Boxes | None, attractors: AttractorTable, M: int) -> CellTable:
     """The box table holding the boxes of the seeded attractors of boxes (an empty table of
     the smallest size when there is no detection by recurrences)."""
     if boxes is None:
         return empty_table(64)
-    V, A, Q, dim = att_cloud.shape
-    pts = att_cloud.reshape(V * A * Q, dim).T
+    V, A, Q, dim = attractors.clouds.shape
+    pts = attractors.clouds.reshape(V * A * Q, dim).T
     rows = jnp.repeat(jnp.arange(V, dtype=jnp.int32), A * Q)
     slot = jnp.tile(jnp.repeat(jnp.arange(A, dtype=jnp.int32), Q), V)
-    mark = jnp.repeat(_of_boxes(att_k, M).reshape(-1), Q)
+    mark = jnp.repeat(_of_boxes(attractors.codes, M).reshape(-1), Q)
     keys = jnp.where(mark, row_keys(boxes.partition, pts, rows, V), -1)
     table, _ = insert(empty_table(boxes.options.capacity), keys, slot)
     return table
@@ -283,13 +315,7 @@ def resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolStat
                        age=s.age[:L], hit_att=s.hit_att[:L], hits=s.hits[:L], misses=s.misses[:L],
                        tried=s.tried[:L], n_active=jnp.minimum(s.n_active, L))
     if A is not None:
-        V, A0, M, dim = s.att_pts.shape
-        Q = s.att_cloud.shape[2]
-        s = s._replace(att_pts=jnp.concatenate([s.att_pts, jnp.full((V, A - A0, M, dim), jnp.nan)], axis=1),
-                       att_k=jnp.concatenate([s.att_k, jnp.full((V, A - A0), slot_code(SlotKind.EMPTY, M),
-                                                                 jnp.int32)], axis=1),
-                       att_cloud=jnp.concatenate([s.att_cloud, jnp.full((V, A - A0, Q, dim), jnp.nan)], axis=1),
-                       overflow=jnp.asarray(False))
+        s = s._replace(attractors=s.attractors.with_slots(A), overflow=jnp.asarray(False))
     return s
 
 
@@ -314,7 +340,7 @@ def one_period(system, params, integrator, o: PoolOptions, boxes: Boxes | None, 
     """Every active lane one forcing period on, its point into the ring, its streaks and
     its run of box hits updated."""
     H = s.hist.shape[0] // 2
-    if s.att_k.shape[0] == 1:  # one parameter set
+    if s.attractors.n_values == 1:  # one parameter set
         Y = integrator.advance(system, params, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
     else:  # params holds one row per value; each lane uses its cell's
         Y = integrator.advance_rows(system, params, s.row, s.Y, jnp.asarray(0.0), 1, n_active=s.n_active)
@@ -334,24 +360,24 @@ def one_period(system, params, integrator, o: PoolOptions, boxes: Boxes | None, 
         return s
 
     def track(s):  # only once an attractor of boxes is known
-        lab = lookup(s.table, row_keys(boxes.partition, s.Y, s.row, s.att_k.shape[0]))
+        lab = lookup(s.table, row_keys(boxes.partition, s.Y, s.row, s.attractors.n_values))
         hit_att, hits, misses = track_hits(lab, s.hit_att, s.hits, s.misses, boxes.options.max_misses)
         return s._replace(hit_att=hit_att, hits=hits, misses=misses)
 
-    return jax.lax.cond(jnp.any(_of_boxes(s.att_k, o.max_period)), track, lambda s: s, s)
+    return jax.lax.cond(jnp.any(_of_boxes(s.attractors.codes, o.max_period)), track, lambda s: s, s)
 
 
 # ----------------------------------------------------------------------------- decisions
-def capture_radius(att_pts, att_k, capture: float | None):
-    """The capture radius of one value's table ``(A, M, dim), (A,)``: ``capture`` itself, or
-    (``None``) a quarter of the smallest distance between two attractors' points, at most
-    1 % of ``1 + max |point|``."""
+def capture_radius(points, codes, capture: float | None):
+    """The capture radius of one value's table, its points ``(A, M, dim)`` and codes
+    ``(A,)``: ``capture`` itself, or (``None``) a quarter of the smallest distance between
+    two attractors' points, at most 1 % of ``1 + max |point|``."""
     if capture is not None:
         return jnp.asarray(capture, jnp.float64)
-    A, M, _ = att_pts.shape
-    cycle = slot_kind(att_k, M) == SlotKind.CYCLE
-    valid = (jnp.arange(M, dtype=jnp.int32)[None] < slot_period(att_k, M)[:, None]) & cycle[:, None]  # (A, M)
-    pts = jnp.where(valid[..., None], att_pts, 0.0)
+    A, M, _ = points.shape
+    cycle = slot_kind(codes, M) == SlotKind.CYCLE
+    valid = (jnp.arange(M, dtype=jnp.int32)[None] < slot_period(codes, M)[:, None]) & cycle[:, None]  # (A, M)
+    pts = jnp.where(valid[..., None], points, 0.0)
     scale = 1.0 + jnp.max(jnp.where(valid[..., None], jnp.abs(pts), 0.0))
     d = jnp.sqrt(jnp.sum((pts[:, None, :, None] - pts[None, :, None, :]) ** 2, axis=-1))  # (A, A, M, M)
     pair = valid[:, None, :, None] & valid[None, :, None, :] & ~jnp.eye(A, dtype=bool)[:, :, None, None]
@@ -406,9 +432,9 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
     table, a P-k cycle: every quantity of the attractor is a scalar or broadcast over the
     lanes. A repeller's slot (period ``-k``) marks its lanes ``_ON_REPELLER`` instead:
     they integrate on (an attractor's slot still takes them)."""
-    P = s.att_pts[v, a]  # (M, dim)
-    repeller = slot_kind(s.att_k[v, a], o.max_period) == SlotKind.REPELLER
-    k = slot_period(s.att_k[v, a], o.max_period)  # 0 for a set of boxes: it is matched by its boxes
+    P = s.attractors.points[v, a]  # (M, dim)
+    repeller = slot_kind(s.attractors.codes[v, a], o.max_period) == SlotKind.REPELLER
+    k = slot_period(s.attractors.codes[v, a], o.max_period)  # 0 for a set of boxes: it is matched by its boxes
     valid = jnp.arange(o.max_period, dtype=jnp.int32) < k
     dn = jnp.where(valid[:, None], jnp.sqrt(_sqdist(s.Y[None], P[:, :, None])), jnp.inf)  # (M, L)
     m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
@@ -417,7 +443,7 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
     scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0))
     same = lanes.rec & (k > 0) & (lanes.per == k) & (jnp.min(dn, axis=0) <= o.merge_tol * scale)
     hit = cap | same
-    if s.att_k.shape[0] > 1:
+    if s.attractors.n_values > 1:
         hit = hit & (s.row == v)  # the lanes of value v; a lane's label is a slot of its value's table
     return jnp.where((label < 0) & hit, jnp.where(repeller, _ON_REPELLER, a), label).astype(jnp.int32)
 
@@ -425,13 +451,13 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
 def _busy_rows(s: PoolState):
     """The range ``[lo, hi]`` of values the busy lanes hold."""
     busy = s.cell >= 0
-    V = s.att_k.shape[0]
+    V = s.attractors.n_values
     return jnp.min(jnp.where(busy, s.row, V)), jnp.max(jnp.where(busy, s.row, -1))
 
 
 def _over_rows(s: PoolState, body, carry):
     """``body(v, carry)`` over the values the busy lanes hold (value 0 alone for one value)."""
-    if s.att_k.shape[0] == 1:
+    if s.attractors.n_values == 1:
         return body(0, carry)
     lo, hi = _busy_rows(s)
     return jax.lax.fori_loop(lo, hi + 1, body, carry)
@@ -440,7 +466,8 @@ def _over_rows(s: PoolState, body, carry):
 def _match_known(o: PoolOptions, s: PoolState, lanes: _Lanes):
     """Each lane's attractor slot among the known ones (-1: none; ``_ON_REPELLER``)."""
     def row(v, label):
-        return jax.lax.fori_loop(0, s.n_att[v], lambda a, label: _match_slot(o, s, lanes, v, a, label), label)
+        return jax.lax.fori_loop(0, s.attractors.counts[v], lambda a, label: _match_slot(o, s, lanes, v, a, label),
+                                 label)
 
     return _over_rows(s, row, jnp.full(s.cell.shape[0], -1, jnp.int32))
 
@@ -448,17 +475,17 @@ def _match_known(o: PoolOptions, s: PoolState, lanes: _Lanes):
 def _register_new(o: PoolOptions, s: PoolState, lanes: _Lanes, label, radius):
     """A recurring lane on no known attractor or repeller of its value registers a new one
     (the first such lane, one per value and round); the other recurring lanes of the value
-    whose newest point lies on it join it. Returns the tables, the radii, the labels and
-    the overflow flag."""
+    whose newest point lies on it join it. Returns the tables (an :class:`AttractorTable`),
+    the radii, the labels and the overflow flag."""
     M = o.max_period
     i = jnp.arange(M, dtype=jnp.int32)
     new = lanes.rec & (label == -1)
 
     def register(v, c):
-        att_pts, att_k, n_att, radius, label, overflow = c
-        new_v = new if s.att_k.shape[0] == 1 else new & (s.row == v)
+        tables, radius, label, overflow = c
+        new_v = new if tables.n_values == 1 else new & (s.row == v)
         has_new = jnp.any(new_v)
-        room = n_att[v] < att_k.shape[1]
+        room = tables.counts[v] < tables.n_slots
         l0 = jnp.argmax(new_v)
         k0 = lanes.per[l0]
         last = _back(s.hist[:, :, l0], s.clock, 0, M)  # (M, dim), newest first
@@ -466,19 +493,21 @@ def _register_new(o: PoolOptions, s: PoolState, lanes: _Lanes, label, radius):
         pts0 = jnp.where(valid0[:, None], last[jnp.clip(k0 - 1 - i, 0, M - 1)], jnp.nan)  # oldest of the last k0 first
 
         def add(c):
-            att_pts, att_k, n_att, radius, label = c
-            slot = n_att[v]
-            att_pts, att_k = att_pts.at[v, slot].set(pts0), att_k.at[v, slot].set(slot_code(SlotKind.CYCLE, M, k0))
+            tables, radius, label = c
+            slot = tables.counts[v]
+            tables = tables._replace(points=tables.points.at[v, slot].set(pts0),
+                                     codes=tables.codes.at[v, slot].set(slot_code(SlotKind.CYCLE, M, k0)),
+                                     counts=tables.counts.at[v].add(1))
             scale0 = 1.0 + jnp.max(jnp.where(valid0[:, None], jnp.abs(pts0), 0.0))
             d0 = jnp.where(valid0[:, None], _sqdist(s.Y[None], pts0[:, :, None]), jnp.inf)  # (M, L)
             joins = new_v & (lanes.per == k0) & (jnp.min(d0, axis=0) <= (o.merge_tol * scale0) ** 2)
-            radius = radius.at[v].set(capture_radius(att_pts[v], att_k[v], o.capture_radius))
-            return att_pts, att_k, n_att.at[v].add(1), radius, jnp.where(joins, slot, label).astype(jnp.int32)
+            radius = radius.at[v].set(capture_radius(tables.points[v], tables.codes[v], o.capture_radius))
+            return tables, radius, jnp.where(joins, slot, label).astype(jnp.int32)
 
-        c = jax.lax.cond(has_new & room, add, lambda c: c, (att_pts, att_k, n_att, radius, label))
+        c = jax.lax.cond(has_new & room, add, lambda c: c, (tables, radius, label))
         return (*c, overflow | (has_new & ~room))
 
-    return _over_rows(s, register, (s.att_pts, s.att_k, s.n_att, radius, label, s.overflow))
+    return _over_rows(s, register, (s.attractors, radius, label, s.overflow))
 
 
 def _refill(s: PoolState, decided, X, Xrow, n) -> PoolState:
@@ -523,7 +552,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
     boxes enter the table (lanes visiting them are no candidates again) and the lane
     integrates on."""
     opt, part = boxes.options, boxes.partition
-    M, V = o.max_period, s.att_k.shape[0]
+    M, V = o.max_period, s.attractors.n_values
     mark, saddle = slot_code(SlotKind.BOXES, M), slot_code(SlotKind.SADDLE, M)
     eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
                 & (s.age - s.tried >= opt.transient) & (s.hits == 0))
@@ -533,7 +562,8 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         s, label = c
         v0 = s.row[l0]
         p0 = params if V == 1 else jax.tree.map(lambda a: a[v0], params)
-        P, A, Q = opt.cloud_periods, s.att_k.shape[1], s.att_cloud.shape[2]
+        tables = s.attractors
+        P, A, Q = opt.cloud_periods, tables.n_slots, tables.clouds.shape[2]
 
         def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
             return near_periodic(part, pts, M) | jnp.any(escaped(flat_cloud(pts), o.escape_bound))
@@ -545,7 +575,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         second = flat_cloud(cloud[P // 2:])  # (dim, m)
         second_keys = row_keys(part, second, jnp.full(second.shape[1], v0, jnp.int32), V)
         over = overlap_shares(s.table, second_keys, A)
-        over = jnp.where(_of_boxes(s.att_k[v0], M), over, 0.0)  # only sets of boxes absorb clouds
+        over = jnp.where(_of_boxes(tables.codes[v0], M), over, 0.0)  # only sets of boxes absorb clouds
         best = jnp.argmax(over).astype(jnp.int32)
         joins = over[best] >= opt.overlap_share
         transient = jnp.asarray(False)
@@ -561,20 +591,22 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
                                      elsewhere=elsewhere) >= opt.leave_share
 
             transient = jax.lax.cond(ok & ~joins, leaves, lambda _: jnp.asarray(False), None)
-        room = s.n_att[v0] < A
-        slot = jnp.where(joins, best, s.n_att[v0]).astype(jnp.int32)
+        room = tables.counts[v0] < A
+        slot = jnp.where(joins, best, tables.counts[v0]).astype(jnp.int32)
         step = max(second.shape[1] // Q, 1)
         pts = jnp.full((Q, second.shape[0]), jnp.nan).at[: min(Q, second.shape[1])].set(second[:, ::step][:, :Q].T)
         new = ok & ~joins & room
         taken = ok & (joins | room)
-        attractor = taken & ~transient & ~(joins & (s.att_k[v0, best] == saddle))  # the lane is labelled
+        attractor = taken & ~transient & ~(joins & (tables.codes[v0, best] == saddle))  # the lane is labelled
         keys = jnp.where(taken, second_keys, -1)
         table, dropped = insert(s.table, keys, slot)
         charged = ran + jnp.where(new, verify_length(opt, M) if opt.verify_periods else 0, 0)
+        tables = tables._replace(
+            codes=jnp.where(new, tables.codes.at[v0, slot].set(jnp.where(transient, saddle, mark)), tables.codes),
+            clouds=jnp.where(new, tables.clouds.at[v0, slot].set(pts), tables.clouds),
+            counts=tables.counts.at[v0].add(new.astype(jnp.int32)))
         s = s._replace(
-            att_k=jnp.where(new, s.att_k.at[v0, slot].set(jnp.where(transient, saddle, mark)), s.att_k),
-            att_cloud=jnp.where(new, s.att_cloud.at[v0, slot].set(pts), s.att_cloud),
-            n_att=s.n_att.at[v0].add(new.astype(jnp.int32)), overflow=s.overflow | (ok & ~joins & ~room),
+            attractors=tables, overflow=s.overflow | (ok & ~joins & ~room),
             table=table, dropped=s.dropped + dropped, tried=s.tried.at[l0].set(s.age[l0]),
             age=s.age.at[l0].add(jnp.where(attractor, charged, 0)))
         return s, label.at[l0].set(jnp.where(attractor, slot, label[l0])).astype(jnp.int32)
@@ -591,11 +623,11 @@ def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: P
     # the capture radius follows its value's table: computed for every value in the
     # pool's first round (it starts at 0), then only for a value whose table grew
     radius = jax.lax.cond(s.rounds == 0, lambda: jax.vmap(lambda p, k: capture_radius(p, k, o.capture_radius))(
-        s.att_pts, s.att_k), lambda: s.radius)
-    att_pts, att_k, n_att, radius, label, overflow = _register_new(o, s, lanes, label, radius)
-    s = s._replace(att_pts=att_pts, att_k=att_k, n_att=n_att, radius=radius, overflow=overflow)
+        s.attractors.points, s.attractors.codes), lambda: s.radius)
+    tables, radius, label, overflow = _register_new(o, s, lanes, label, radius)
+    s = s._replace(attractors=tables, radius=radius, overflow=overflow)
     if boxes is not None:
-        on_saddle = slot_kind(s.att_k[s.row, jnp.maximum(s.hit_att, 0)], o.max_period) == SlotKind.SADDLE
+        on_saddle = slot_kind(s.attractors.codes[s.row, jnp.maximum(s.hit_att, 0)], o.max_period) == SlotKind.SADDLE
         hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
         label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
         s, label = _candidate(system, params, integrator, o, boxes, s, lanes, label)
@@ -665,5 +697,6 @@ def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: 
         return jax.lax.cond(worth, compact, lambda s: s, s), r + 1
 
     s, _ = jax.lax.while_loop(cond, body, (s, jnp.asarray(0, jnp.int32)))
-    info = jnp.stack([s.n_done, s.overflow.astype(jnp.int32), s.n_active, s.next_cell, jnp.sum(s.n_att, dtype=jnp.int32)])
+    info = jnp.stack([s.n_done, s.overflow.astype(jnp.int32), s.n_active, s.next_cell,
+                      jnp.sum(s.attractors.counts, dtype=jnp.int32)])
     return s, info

@@ -7,20 +7,20 @@ check a method's type: they call :meth:`~AbstractGlobalMethod.check` and
 :meth:`~AbstractGlobalMethod.classify`.
 """
 
-from __future__ import annotations
-
+# no ``from __future__ import annotations``: equinox reads the ``AbstractVar`` annotations
 import abc
 import dataclasses
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import numpy as np
+from equinox import AbstractVar
 
-from .._batching import DEFAULT_CHUNK_CELLS
 from .._cells import CellGrid
 from .._checks import check_int, check_number
 from .._model import REDUCED
 from ..integrate import AbstractIntegrator, default_integrator, integrator_from_dict
+from ._pool_options import PoolOptions
 from ._recurrence_options import RecurrenceOptions
 
 __all__ = ["AbstractGlobalMethod", "Classification", "METHODS", "method_from_dict", "method_from_name",
@@ -64,14 +64,17 @@ class AbstractGlobalMethod(eqx.Module):
             (:func:`jaxgear._matching.same_attractor`).
         chunk_size: cells integrated in one batch (memory is bounded by it, not by the
             grid; results do not depend on it).
+
+    A method declares the last four as fields (the cell methods) or reads them from the
+    options it holds (:class:`~jaxgear.Direct`, from its ``pool``).
     """
 
     name: ClassVar[str] = "abstract"
     integrator: AbstractIntegrator = eqx.field(static=True, default_factory=default_integrator)
-    max_period: int = eqx.field(static=True, default=16)
-    period_tol: float = eqx.field(static=True, default=1e-6)
-    merge_tol: float = eqx.field(static=True, default=1e-4)
-    chunk_size: int = eqx.field(static=True, default=DEFAULT_CHUNK_CELLS)
+    max_period: AbstractVar[int]
+    period_tol: AbstractVar[float]
+    merge_tol: AbstractVar[float]
+    chunk_size: AbstractVar[int]
 
     def __check_init__(self):
         if not isinstance(self.integrator, AbstractIntegrator):
@@ -106,9 +109,15 @@ class AbstractGlobalMethod(eqx.Module):
         """Crossing direction of Σ for the reported section points."""
         return 1
 
-    def replace(self, **changes) -> AbstractGlobalMethod:
+    def replace(self, **changes) -> "AbstractGlobalMethod":
         """A copy with some options changed (validated again)."""
         return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        """The keyword arguments the method's constructor takes (its fields; a method may
+        take more: :class:`~jaxgear.Direct` also takes its pool's options one by one)."""
+        return tuple(f.name for f in dataclasses.fields(cls))
 
     def to_dict(self) -> dict[str, Any]:
         """The method's name and every option (JSON-able; :func:`method_from_dict` rebuilds it)."""
@@ -130,15 +139,18 @@ def method_from_name(name: str, **options) -> AbstractGlobalMethod:
 
 
 def method_from_dict(d: dict[str, Any]) -> AbstractGlobalMethod:
-    """Rebuild a method from :meth:`AbstractGlobalMethod.to_dict`."""
+    """Rebuild a method from :meth:`AbstractGlobalMethod.to_dict` (also the flat options
+    of the direct method that files of format 4 hold: ``max_periods``, ``chunk_size``, ...)."""
     name = d.get("name")
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; known: {', '.join(METHODS)}.")
     cls = METHODS[name]
-    fields = {f.name for f in dataclasses.fields(cls)}
+    fields = set(cls.option_names())
     opts = {k: v for k, v in d.items() if k in fields and k != "integrator"}
     if isinstance(opts.get("recurrence"), dict):
         opts["recurrence"] = RecurrenceOptions(**opts["recurrence"])
+    if isinstance(opts.get("pool"), dict):
+        opts["pool"] = PoolOptions(**opts["pool"])
     if isinstance(d.get("integrator"), dict):
         opts["integrator"] = integrator_from_dict(d["integrator"])
     return cls(**opts)

@@ -33,7 +33,7 @@ from jax.sharding import PartitionSpec as P
 from .._batching import pad_rows, power_of_two_at_least
 from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
 from .._matching import same_attractor
-from ._lanes import SlotKind, init_pool, resize, run_rounds, slot_code, slot_kind, table_slots
+from ._lanes import AttractorTable, SlotKind, init_pool, resize, run_rounds, slot_code, slot_kind, table_slots
 from ._pool_options import PoolOptions
 
 __all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS", "queue_length"]
@@ -60,8 +60,8 @@ def queue_length(n: int) -> int:
 
 # ----------------------------------------------------------------------------- one device
 @functools.partial(jax.jit, static_argnums=(0, 1))
-def _init_one(L: int, M: int, X, Xrow, n_real, boxes, att_pts, att_k, n_att, att_cloud):
-    return init_pool(L, M, X, Xrow, att_pts, att_k, n_att, att_cloud, boxes, n_real=n_real)
+def _init_one(L: int, M: int, X, Xrow, n_real, boxes, attractors: AttractorTable):
+    return init_pool(L, M, X, Xrow, attractors, boxes, n_real=n_real)
 
 
 @functools.partial(jax.jit, static_argnames=("system", "integrator", "o", "L_min"), donate_argnums=(0,))
@@ -78,14 +78,15 @@ class OneDevice:
     def __init__(self, device=None):
         self.device = device
 
-    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
+    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, attractors: AttractorTable):
         """The pool over the one queue block ``X (n, dim)`` (rows ``(n,)``), padded to
-        :func:`queue_length`, and the arrays it reads."""
+        :func:`queue_length`, starting from the attractor tables ``attractors``, and the
+        arrays it reads."""
         (X,), (Xrow,) = X_blocks, row_blocks
         self.n_real = len(X)
         n = queue_length(len(X))
         data = put((params, boxes, pad_rows(X, n), pad_rows(Xrow, n), np.int32(len(X))), self.device)
-        return _init_one(L, M, data[2], data[3], data[4], data[1], *put(att, self.device)), data
+        return _init_one(L, M, data[2], data[3], data[4], data[1], put(attractors, self.device)), data
 
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
         params, boxes, X, Xrow, n_real = data
@@ -96,10 +97,9 @@ class OneDevice:
         return _resize_one(s, L=L, A=A)
 
     def collect(self, s) -> list[tuple]:
-        """``[(labels, used, points, periods, counts, clouds)]`` of the one block (numpy)."""
-        lab, use, *tables = (np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k, s.n_att,
-                                                                   s.att_cloud)))
-        return [(lab[:self.n_real], use[:self.n_real], *tables)]
+        """``[(labels, used, attractor tables)]`` of the one block (numpy)."""
+        lab, use, tables = jax.tree.map(np.asarray, jax.device_get((s.labels, s.used, s.attractors)))
+        return [(lab[:self.n_real], use[:self.n_real], tables)]
 
 
 # ----------------------------------------------------------------------------- a mesh of devices
@@ -125,11 +125,11 @@ def _per_device(mesh, body, replicated=()):
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1, 2))
-def _init_mesh(mesh, L: int, M: int, X, Xrow, n_real, boxes, att_pts, att_k, n_att, att_cloud):
-    def body(X, Xrow, n_real, boxes, *att):
-        return _stacked(init_pool(L, M, X[0], Xrow[0], *_local(att), boxes, n_real=n_real[0]))
+def _init_mesh(mesh, L: int, M: int, X, Xrow, n_real, boxes, attractors: AttractorTable):
+    def body(X, Xrow, n_real, boxes, attractors):
+        return _stacked(init_pool(L, M, X[0], Xrow[0], _local(attractors), boxes, n_real=n_real[0]))
 
-    return _per_device(mesh, body, replicated=(3,))(X, Xrow, n_real, boxes, att_pts, att_k, n_att, att_cloud)
+    return _per_device(mesh, body, replicated=(3,))(X, Xrow, n_real, boxes, attractors)
 
 
 @functools.partial(jax.jit, static_argnames=("mesh", "system", "integrator", "o", "L_min"), donate_argnums=0)
@@ -154,9 +154,10 @@ class DeviceMesh:
     def __init__(self, mesh):
         self.mesh = mesh
 
-    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, att):
+    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, attractors: AttractorTable):
         """The pools over the blocks ``[X (n_d, dim)]`` (rows ``[(n_d,)]``), padded to one
-        shape (:func:`queue_length` of the longest) with copies of each block's first entry (never taken into a lane)."""
+        shape (:func:`queue_length` of the longest) with copies of each block's first entry
+        (never taken into a lane), each starting from the attractor tables ``attractors``."""
         D = len(X_blocks)
         n_real = np.array([len(b) for b in X_blocks], np.int32)
         n = queue_length(int(n_real.max()))
@@ -167,9 +168,9 @@ class DeviceMesh:
 
         data = (jax.device_put(params, rep), jax.device_put(boxes, rep), padded(X_blocks), padded(row_blocks),
                 jax.device_put(n_real, split))
-        atts = jax.device_put(tuple(np.broadcast_to(a, (D, *a.shape)) for a in att), split)
+        tables = jax.device_put(jax.tree.map(lambda a: np.broadcast_to(a, (D, *a.shape)), attractors), split)
         self.n_real = n_real
-        return _init_mesh(self.mesh, L, M, data[2], data[3], data[4], data[1], *atts), data
+        return _init_mesh(self.mesh, L, M, data[2], data[3], data[4], data[1], tables), data
 
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
         params, boxes, X, Xrow, n_real = data
@@ -180,9 +181,9 @@ class DeviceMesh:
         return _resize_mesh(s, self.mesh, L=L, A=A)
 
     def collect(self, s) -> list[tuple]:
-        lab, use, pts, ks, cnt, cl = (np.asarray(v) for v in jax.device_get((s.labels, s.used, s.att_pts, s.att_k,
-                                                                             s.n_att, s.att_cloud)))
-        return [(lab[d, :m], use[d, :m], pts[d], ks[d], cnt[d], cl[d]) for d, m in enumerate(self.n_real)]
+        """``[(labels, used, attractor tables)]`` of each device's block (numpy)."""
+        lab, use, tables = jax.tree.map(np.asarray, jax.device_get((s.labels, s.used, s.attractors)))
+        return [(lab[d, :m], use[d, :m], jax.tree.map(lambda a, d=d: a[d], tables)) for d, m in enumerate(self.n_real)]
 
 
 # ----------------------------------------------------------------------------- blocks and processes
@@ -201,14 +202,14 @@ def _my_blocks(n: int):
     return blocks, mine, DeviceMesh(batch_mesh(tuple(devices[:len(mine)])))
 
 
-def run_blocks(drive, X: np.ndarray, rows: np.ndarray, att, merge_tol: float, partition=None):
+def run_blocks(drive, X: np.ndarray, rows: np.ndarray, attractors: AttractorTable, merge_tol: float,
+               partition=None):
     """Label the queue ``X (n, dim)`` (value rows ``rows (n,)``) in one pool per device of
-    every process (``drive(placement, X_blocks, row_blocks) -> [(labels, used, points,
-    periods, counts, clouds)]`` runs this process's blocks), starting from the attractor
-    tables ``att = (points (V, A, M, dim), periods (V, A), counts (V,), clouds (V, A, Q,
-    dim))``. Returns ``(labels (n,), periods used (n,), merged tables)`` as numpy arrays,
-    the whole queue's in every process. ``partition``: the fine partition of the pool's
-    attractors of boxes (blocks' clouds that share boxes are one attractor)."""
+    every process (``drive(placement, X_blocks, row_blocks) -> [(labels, used, attractor
+    tables)]`` runs this process's blocks), starting from the attractor tables
+    ``attractors`` (numpy). Returns ``(labels (n,), periods used (n,), merged tables)``
+    (numpy), the whole queue's in every process. ``partition``: the fine partition of the
+    pool's attractors of boxes (blocks' clouds that share boxes are one attractor)."""
     me, procs = cell_processes()
     blocks, mine, placement = _my_blocks(len(X))
     local = drive(placement, [X[blocks[i][0]:blocks[i][1]] for i in mine],
@@ -216,38 +217,36 @@ def run_blocks(drive, X: np.ndarray, rows: np.ndarray, att, merge_tol: float, pa
     results = dict(zip(mine, local))
     if procs > 1:
         results = _exchange(blocks, results, me, procs, len(local_devices()))
-    labels, tables = _merge(att[2], [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)], merge_tol,
-                            partition)
+    labels, tables = _merge(attractors.counts, [(rows[a:b], results[i]) for i, (a, b) in enumerate(blocks)],
+                            merge_tol, partition)
     used = np.concatenate([results[i][1] for i in range(len(blocks))])
     return labels, used, tables
 
 
 def _exchange(blocks, local: dict, me: int, P: int, D: int) -> dict:
-    """Every block's ``(labels, used, points, periods, counts, clouds)`` in every process,
-    from each process's own blocks (``local``; block ``i`` is process ``i % P``'s slot
-    ``i // P``)."""
+    """Every block's ``(labels, used, attractor tables)`` in every process, from each
+    process's own blocks (``local``; block ``i`` is process ``i % P``'s slot ``i // P``)."""
     longest = max(b - a for a, b in blocks)
     some = next(iter(local.values()), None)
-    A = int(allgather(np.array([some[2].shape[1] if some is not None else 0])).max())
-    shapes = allgather(np.array(some[2].shape if some is not None else (0, 0, 0, 0)))
+    A = int(allgather(np.array([some[2].n_slots if some is not None else 0])).max())
+    shapes = allgather(np.array(some[2].points.shape if some is not None else (0, 0, 0, 0)))
     V, _, M, dim = (int(x) for x in shapes.max(axis=0))
-    Q = int(allgather(np.array([some[5].shape[2] if some is not None else 0])).max())
+    Q = int(allgather(np.array([some[2].clouds.shape[2] if some is not None else 0])).max())
     lab = np.full((D, longest), -9, np.int64)
     use = np.zeros((D, longest), np.int64)
-    pts = np.full((D, V, A, M, dim), np.nan)
-    ks = np.full((D, V, A), slot_code(SlotKind.EMPTY, M), np.int32)
-    ns = np.zeros((D, V), np.int32)
-    cl = np.full((D, V, A, Q, dim), np.nan)
-    for i, r in local.items():
+    tables = AttractorTable(points=np.full((D, V, A, M, dim), np.nan),
+                            codes=np.full((D, V, A), slot_code(SlotKind.EMPTY, M), np.int32),
+                            counts=np.zeros((D, V), np.int32), clouds=np.full((D, V, A, Q, dim), np.nan))
+    for i, (labels, used, t) in local.items():
         j = i // P
-        lab[j, : len(r[0])], use[j, : len(r[1])] = r[0], r[1]
-        pts[j, :, : r[2].shape[1]], ks[j, :, : r[3].shape[1]], ns[j] = r[2], r[3], r[4]
-        cl[j, :, : r[5].shape[1]] = r[5]
-    lab, use, pts, ks, ns, cl = (allgather(x) for x in (lab, use, pts, ks, ns, cl))
+        lab[j, : len(labels)], use[j, : len(used)] = labels, used
+        tables.points[j, :, : t.n_slots], tables.codes[j, :, : t.n_slots], tables.counts[j] = t.points, t.codes, t.counts
+        tables.clouds[j, :, : t.n_slots] = t.clouds
+    lab, use, tables = allgather(lab), allgather(use), jax.tree.map(allgather, tables)
     out = {}
     for i, (a, b) in enumerate(blocks):
         p, j = i % P, i // P
-        out[i] = (lab[p, j, : b - a], use[p, j, : b - a], pts[p, j], ks[p, j], ns[p, j], cl[p, j])
+        out[i] = (lab[p, j, : b - a], use[p, j, : b - a], jax.tree.map(lambda x, p=p, j=j: x[p, j], tables))
     return out
 
 
@@ -268,25 +267,27 @@ def same_boxes(partition, a, b, share: float = 0.5) -> bool:
 
 
 def _merge(n0, blocks, merge_tol: float, partition=None):
-    """Merge the attractor tables of the blocks ``[(rows (n_b,), (labels, used, points,
-    periods, counts, clouds))]`` (in queue order), which share their first ``n0[v]``
-    entries per value: the labels of the whole queue and the merged tables (see the
-    module). Cycles are the same by their points, attractors of boxes by their boxes."""
-    V, _, M, dim = blocks[0][1][2].shape
-    Q = blocks[0][1][5].shape[2]
-    luts = [np.tile(np.arange(r[2].shape[1], dtype=np.int64), (V, 1)) for _, r in blocks]
+    """Merge the attractor tables of the blocks ``[(rows (n_b,), (labels, used, attractor
+    tables))]`` (in queue order), which share their first ``n0[v]`` entries per value: the
+    labels of the whole queue and the merged :class:`~jaxgear.analysis._lanes.AttractorTable`
+    (see the module). Cycles are the same by their points, attractors of boxes by their
+    boxes."""
+    V, _, M, dim = blocks[0][1][2].points.shape
+    Q = blocks[0][1][2].clouds.shape[2]
+    luts = [np.tile(np.arange(t.n_slots, dtype=np.int64), (V, 1)) for _, (_, _, t) in blocks]
     tables: list[list] = []
     for v in range(V):
-        first = blocks[0][1]
-        reps = [(first[2][v, a], int(first[3][v, a]), first[5][v, a]) for a in range(int(n0[v]))]
+        first = blocks[0][1][2]
+        reps = [(first.points[v, a], int(first.codes[v, a]), first.clouds[v, a]) for a in range(int(n0[v]))]
         cands, offset = [], 0
-        for b, (rows, (lab, _, _, _, n, _)) in enumerate(blocks):
-            for a in range(int(n0[v]), int(n[v])):
+        for b, (rows, (lab, _, t)) in enumerate(blocks):
+            for a in range(int(n0[v]), int(t.counts[v])):
                 hit = np.flatnonzero((rows == v) & (lab == a))
                 cands.append((offset + int(hit[0]) if len(hit) else np.inf, b, a))
             offset += len(lab)
         for _, b, a in sorted(cands):
-            pts, k, cloud = blocks[b][1][2][v, a], int(blocks[b][1][3][v, a]), blocks[b][1][5][v, a]
+            t = blocks[b][1][2]
+            pts, k, cloud = t.points[v, a], int(t.codes[v, a]), t.clouds[v, a]
             kind = slot_kind(k, M)
             if kind == SlotKind.BOXES:
                 same = [g for g, (_, kk, c) in enumerate(reps)
@@ -311,4 +312,5 @@ def _merge(n0, blocks, merge_tol: float, partition=None):
             pts[v, a], ks[v, a], clouds[v, a] = p, k, c
     labels = np.concatenate([np.where(lab >= 0, lut[rows, np.maximum(lab, 0)], lab)
                              for (rows, (lab, *_)), lut in zip(blocks, luts)])
-    return labels, (pts, ks, np.array([len(t) for t in tables], np.int32), clouds)
+    return labels, AttractorTable(points=pts, codes=ks, counts=np.array([len(t) for t in tables], np.int32),
+                                  clouds=clouds)

@@ -26,7 +26,7 @@ import numpy as np
 
 from .._batching import progress_bar
 from ..integrate import stack_params
-from ._lanes import APERIODIC, Boxes, SlotKind, seed_tables, slot_kind, slot_period
+from ._lanes import APERIODIC, AttractorTable, Boxes, SlotKind, seed_tables, slot_kind, slot_period
 from ._placement import OneDevice, queue_length, run_blocks
 from ._pool_options import PoolOptions
 
@@ -51,14 +51,14 @@ def _next_pool(L: int) -> int:
     return max(TAIL_LANES, L // SHRINK) if L > 2 * TAIL_LANES else L
 
 
-def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: PoolOptions, boxes, att,
-          bar) -> list[tuple]:
+def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: PoolOptions, boxes,
+          attractors: AttractorTable, bar) -> list[tuple]:
     """Run the pools of ``placement`` over the queue blocks ``X_blocks`` (one per device;
-    value rows ``row_blocks``) from the attractor tables ``att`` until every state is
-    decided: ``[(labels, used, points, periods, counts, clouds)]`` per block (numpy)."""
+    value rows ``row_blocks``) from the attractor tables ``attractors`` until every state
+    is decided: ``[(labels, used, attractor tables)]`` per block (numpy)."""
     n = np.array([len(b) for b in X_blocks])
     s, data = placement.start(params, boxes, X_blocks, row_blocks, min(o.lanes, queue_length(int(n.max()))),
-                              o.max_period, att)
+                              o.max_period, attractors)
     done, rounds, compiled = 0, 4, o.compiled()
     while True:
         L = s.Y.shape[-1]
@@ -75,7 +75,7 @@ def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: Poo
         if finished.all():
             return placement.collect(s)
         if overflow.any():
-            s = placement.resize(s, A=2 * s.att_k.shape[-1])
+            s = placement.resize(s, A=2 * s.attractors.n_slots)
         elif L_min < L and np.all(finished | ((next_cell >= n) & (n_active <= L_min))):
             s = placement.resize(s, L=L_min)
 
@@ -125,7 +125,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         orders.append(np.concatenate([first, np.flatnonzero(rest)]))
         n_ps.append(n_p)
     Q = boxes.options.max_points if boxes is not None else 1
-    att = seed_tables(attractors if attractors is not None else [()] * V, o.max_period, dim, Q)
+    tables = seed_tables(attractors if attractors is not None else [()] * V, o.max_period, dim, Q)
     bar = progress_bar(sum(len(X) for X in Xs), label, progress)
     labels = [np.empty(len(X), dtype=np.int64) for X in Xs]
     used = [np.empty(len(X), dtype=np.int64) for X in Xs]
@@ -138,12 +138,12 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         # the pool of one value, refilled from the next
         o_phase = dataclasses.replace(o, lanes=min(o.lanes, queue_length(max(len(p) for p in parts))))
         run = functools.partial(drive, system=system, params=params, integrator=integrator, o=o_phase, boxes=boxes,
-                                att=att, bar=bar)
+                                attractors=tables, bar=bar)
         if phase == 0:  # the pilot, on the first device
-            lab, use, *table = run(OneDevice(), [Xp], [rows])[0]
-            att = tuple(table)
+            lab, use, tables = run(OneDevice(), [Xp], [rows])[0]
         else:  # one pool per device over a block of the queue, the attractors merged
-            lab, use, att = run_blocks(run, Xp, rows, att, o.merge_tol, None if boxes is None else boxes.partition)
+            lab, use, tables = run_blocks(run, Xp, rows, tables, o.merge_tol,
+                                          None if boxes is None else boxes.partition)
         start = 0
         for v, p in enumerate(parts):
             labels[v][p] = lab[start:start + len(p)]
@@ -152,22 +152,23 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     bar.close()
     out = []
     for v in range(V):
-        found, lut = _attractors(att, v, o.max_period)
+        found, lut = _attractors(tables, v, o.max_period)
         out.append((np.where(labels[v] >= 0, lut[np.maximum(labels[v], 0)], labels[v]), found, used[v]))
     return out
 
 
-def _attractors(att, v: int, M: int):
+def _attractors(tables: AttractorTable, v: int, M: int):
     """Value ``v``'s table as ``[(points, k)]``: a cycle's ``k`` points (a repeller's with
     period ``-k``), an attractor of boxes' cloud (its finite points) with period
     :data:`~jaxgear.analysis._lanes.APERIODIC`; a chaotic saddle's slot
     (``SlotKind.SADDLE``, which labels no cell) is left out. Also the label of each slot
     in that list ``(A,)`` (-1 for a saddle)."""
-    att_pts, att_k, n_att, clouds = (np.asarray(a) for a in att)
-    kinds, periods = slot_kind(att_k[v], M), slot_period(att_k[v], M)
+    points, codes, counts, clouds = (np.asarray(tables.points), np.asarray(tables.codes), np.asarray(tables.counts),
+                                     np.asarray(tables.clouds))
+    kinds, periods = slot_kind(codes[v], M), slot_period(codes[v], M)
     out = []
-    lut = np.full(max(att_k.shape[1], 1), -1, np.int64)
-    for a in range(int(n_att[v])):
+    lut = np.full(max(codes.shape[1], 1), -1, np.int64)
+    for a in range(int(counts[v])):
         if kinds[a] == SlotKind.SADDLE:
             continue
         lut[a] = len(out)
@@ -176,5 +177,5 @@ def _attractors(att, v: int, M: int):
             out.append((cloud[np.all(np.isfinite(cloud), axis=1)], APERIODIC))
         else:
             k = int(periods[a])
-            out.append((att_pts[v, a, :k], k if kinds[a] == SlotKind.CYCLE else -k))
+            out.append((points[v, a, :k], k if kinds[a] == SlotKind.CYCLE else -k))
     return out, lut

@@ -42,6 +42,10 @@ class PoolOptions(eqx.Module):
     lanes: int = eqx.field(static=True, default=DEFAULT_CHUNK_CELLS)
     pilot: int = eqx.field(static=True, default=1024)
 
+    def to_dict(self) -> dict:
+        """Every option, JSON-able (``PoolOptions(**d)`` rebuilds it)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
     def compiled(self) -> PoolOptions:
         """These options as the compiled rounds see them: ``lanes`` and ``pilot`` (read by
         the host only, to size the pools) at their defaults, so pools that differ only in

@@ -321,7 +321,9 @@ def _summary(search, system, params, args) -> dict:
         "settings": {"periods_tried": sorted(search.shots), "n_seeds": search.n_seeds, "integrator": st["integrator"],
                      "tol": args.tol, "max_iter": args.max_iter, "t0": 0.0, "seeds_from": args.seeds_from,
                      "random": args.random, "seed": args.seed, "search": st},
-        "status_counts": search.status_counts, "convergence": search.convergence, "checks": search.checks,
+        "status_counts": search.status_counts,
+        "convergence": {str(c.period): c.to_dict() for c in search.convergence},
+        "checks": {str(c.orbit): c.to_dict() for c in search.checks},
         "orbits": [o.to_dict() for o in search.orbits], "version": search.version, "runtime_s": search.runtime_s,
     }
 
@@ -342,7 +344,7 @@ def _print_search(search, system, params, args, source) -> None:
     if not search.orbits:
         print("no periodic orbit converged from these seeds.")
     for i, o in enumerate(search.orbits):
-        _print_orbit(i, o, search.checks.get(str(i)), system)
+        _print_orbit(i, o, search.verification_of(i), system)
 
 
 def _print_orbit(i: int, o, check, system) -> None:
@@ -355,10 +357,10 @@ def _print_orbit(i: int, o, check, system) -> None:
     print(f"  points (phase 0): {names}")
     for pt in o.points:
         print("                   " + " ".join(f"{v:11.5f}" for v in pt))
-    if check:
-        left = "stays on the orbit" if check["kept"] else f"leaves the orbit after {check['left_at']} period(s)"
-        print(f"  direct integration ({check['periods']} periods): {left}"
-              + ("" if check["consistent"] else " (INCONSISTENT with the multipliers)"))
+    if check is not None:
+        left = "stays on the orbit" if check.kept else f"leaves the orbit after {check.left_at} period(s)"
+        print(f"  direct integration ({check.periods} periods): {left}"
+              + ("" if check.consistent else " (INCONSISTENT with the multipliers)"))
 
 
 def _write_files(search, summary: dict, args, out: Path) -> list[str]:

@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
+from ..sweep import SweepDirection
 from .common import (
     ESCAPE_BOUND,
     add_param_options,
@@ -110,7 +111,7 @@ def add_parser(sub) -> None:
                    "--values2 x --values (a basin map, basin_map.nc)")
     p.add_argument("--values2", default=None, metavar="START:STOP:COUNT", help="the values of --param2")
     p.add_argument("--kind", default="bifurcation", choices=KINDS, help="what to compute (default bifurcation)")
-    p.add_argument("--direction", default="all", choices=("independent", "up", "down", "both", "all"),
+    p.add_argument("--direction", default=SweepDirection.ALL.value, choices=[d.value for d in SweepDirection],
                    help="bifurcation: independent (every value from the starts: all coexisting attractors the "
                    "starts reach), up/down (state carried from value to value: a branch is followed until it "
                    "vanishes), both (up and down: hysteresis shows where they differ), all (default: the three)")
@@ -224,7 +225,7 @@ def _resume_note(args, plan: _Plan) -> str:
             done += 1
     total = plan.count * (1 if plan.values2 is None else len(plan.values2))
     if args.kind == "bifurcation":
-        total *= {"independent": 1, "up": 1, "down": 1, "both": 2, "all": 3}[args.direction]
+        total *= len(SweepDirection(args.direction).sweeps)
     return (f"the sweep resumes from {done} of {total} values (run the same command again)" if done
             else "no value was finished; the previous result is unchanged")
 
@@ -433,7 +434,7 @@ def _user_starts_box(args, user):
 def _check_bifurcation_work(args, count: int, dim: int = 4) -> None:
     """The points a bifurcation sweep keeps (values x starts x record x directions) fit in
     memory (``dim`` coordinates per point)."""
-    n_dirs = {"independent": 1, "up": 1, "down": 1, "both": 2, "all": 3}[args.direction]
+    n_dirs = len(SweepDirection(args.direction).sweeps)
     starts = len(args.points) if args.points else (16 if args.starts is None else args.starts)
     point = 8 * dim * n_dirs  # one recorded point of one start at one value, every direction
     flag, value = ("--from", f"{starts} points") if args.points else ("--starts", starts)
@@ -553,8 +554,8 @@ def _sweep(args, plan: _Plan, work: Path, head: str, t0: float) -> list[str]:
 def _report_diagram(args, plan: _Plan, result) -> dict:
     """Print the diagram's table and hysteresis; its figures ``{file name: figure}``."""
     print(result.table())
-    if "up" in result.directions and "down" in result.directions:
-        diff = result.values[result.differs("up", "down")]
+    if SweepDirection.UP in result.directions and SweepDirection.DOWN in result.directions:
+        diff = result.values[result.differs(SweepDirection.UP, SweepDirection.DOWN)]
         print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
               + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
     if args.no_figures:

@@ -7,6 +7,7 @@
 
 from ._design import DesignOptions, DesignResult, DesignSettings, DesignStatus, design
 from ._objectives import (
+    GearMesh,
     MeshForces,
     OrbitSamples,
     max_multiplier,
@@ -20,6 +21,6 @@ from ._objectives import (
     transmission_error_rms,
 )
 
-__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings", "DesignStatus", "OrbitSamples", "sample_orbit", "MeshForces", "mesh_forces",
+__all__ = ["design", "DesignResult", "DesignOptions", "DesignSettings", "DesignStatus", "OrbitSamples", "sample_orbit", "MeshForces", "GearMesh", "mesh_forces",
            "transmission_error", "peak_to_peak", "rms", "max_multiplier", "mesh_force_ptp", "mesh_force_rms",
            "transmission_error_rms"]

@@ -9,21 +9,36 @@ so ``jax.grad`` of a scalar with respect to the parameters is exact for the disc
 
 from __future__ import annotations
 
+import enum
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import check_int
+from .._checks import check_enum, check_int
 from .._model import backlash, mesh_excitation
 from .._params import GearParams
 from .._system import ForcedSystem
 from ..integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, resolve_integrator
 from ..shooting._floquet import check_period
 
-__all__ = ["OrbitSamples", "sample_orbit", "MeshForces", "mesh_forces", "transmission_error", "peak_to_peak",
-           "rms", "max_multiplier", "mesh_force_ptp", "mesh_force_rms", "transmission_error_rms"]
+__all__ = ["OrbitSamples", "sample_orbit", "MeshForces", "GearMesh", "mesh_forces", "transmission_error",
+           "peak_to_peak", "rms", "max_multiplier", "mesh_force_ptp", "mesh_force_rms", "transmission_error_rms"]
+
+
+class GearMesh(enum.StrEnum):
+    """Which mesh of the gear models a design scalar reads (:func:`mesh_force_ptp`,
+    :func:`mesh_force_rms`, :func:`transmission_error`, ...: their ``mesh``). A
+    ``StrEnum``: each member equals its text (``"sp"``, ``"rp"``, ``"both"``), which the
+    functions also accept."""
+
+    SP = "sp"
+    """The sun-planet mesh(es)."""
+    RP = "rp"
+    """The ring-planet mesh(es)."""
+    BOTH = "both"
+    """Both meshes, their values summed (the mesh-force scalars only)."""
 
 
 class OrbitSamples(eqx.Module):
@@ -136,20 +151,20 @@ def mesh_forces(params, orbit) -> MeshForces:
     return MeshForces(g_sp, g_rp)
 
 
-def transmission_error(params, orbit, mesh: str = "sp"):
+def transmission_error(params, orbit, mesh: GearMesh | str = GearMesh.SP):
     """Dynamic transmission error along a sampled gear orbit, ``(m,)`` or ``(m, N)``.
 
     The mesh deflection along the line of action net of the static error (the relative
     displacement the mesh force acts on, in units of ``b_c``): ``X_sp = x1`` for
-    ``mesh="sp"``, ``X_rp = x3 - x1 - e_sp - e_rp`` for ``mesh="rp"`` (model document §4).
+    ``mesh="sp"``, ``X_rp = x3 - x1 - e_sp - e_rp`` for ``mesh="rp"`` (model document §4);
+    ``mesh`` is a :class:`GearMesh` (``SP`` or ``RP``) or its text.
     """
+    mesh = _one_mesh(mesh)
     ts, xs = _times_states(orbit)
     reduced = _is_reduced(params, xs.shape[-1])
-    if mesh not in ("sp", "rp"):
-        raise ValueError(f"mesh must be 'sp' or 'rp', got {mesh!r}.")
     N = params.N
     X = xs[:, 0] if reduced else xs[:, 0:2 * N:2]
-    if mesh == "sp":
+    if mesh == GearMesh.SP:
         return X
     Xsc = xs[:, 2] if reduced else xs[:, 2 * N][:, None]
     _, _, e_sp, _, _, e_rp, _ = jax.vmap(lambda t: mesh_excitation(t, params))(ts)
@@ -185,29 +200,39 @@ def rms(x, axis: int = 0, remove_mean: bool = True):
     return jnp.sqrt(jnp.mean(x * x, axis=axis))
 
 
-def _select(f: MeshForces, mesh: str):
-    if mesh == "sp":
-        return [f.sp]
-    if mesh == "rp":
-        return [f.rp]
-    if mesh == "both":
-        return [f.sp, f.rp]
-    raise ValueError(f"mesh must be 'sp', 'rp' or 'both', got {mesh!r}.")
+def _one_mesh(mesh) -> GearMesh:
+    """``mesh`` as ``GearMesh.SP`` or ``GearMesh.RP`` (a quantity of one mesh)."""
+    m = check_enum(mesh, "mesh", GearMesh)
+    if m == GearMesh.BOTH:
+        raise ValueError(f"mesh={mesh!r} must be one of 'sp', 'rp' (a quantity of one mesh).")
+    return m
 
 
-def mesh_force_ptp(params, orbit, mesh: str = "sp", smooth: float | None = None):
-    """Peak-to-peak dynamic mesh force over the orbit (largest over planets; ``mesh="both"``
-    sums the sun-planet and ring-planet values). Dimensionless (force / ``k_msp b_c``)."""
-    return sum(jnp.max(peak_to_peak(g, 0, smooth)) for g in _select(mesh_forces(params, orbit), mesh))
+def _fields(mesh) -> tuple[str, ...]:
+    """The :class:`MeshForces` fields ``mesh`` (a :class:`GearMesh` or its text) names."""
+    return {GearMesh.SP: ("sp",), GearMesh.RP: ("rp",), GearMesh.BOTH: ("sp", "rp")}[
+        check_enum(mesh, "mesh", GearMesh)]
 
 
-def mesh_force_rms(params, orbit, mesh: str = "sp"):
+def mesh_force_ptp(params, orbit, mesh: GearMesh | str = GearMesh.SP, smooth: float | None = None):
+    """Peak-to-peak dynamic mesh force over the orbit (largest over planets; ``mesh`` a
+    :class:`GearMesh` or its text, ``"both"`` sums the sun-planet and ring-planet values).
+    Dimensionless (force / ``k_msp b_c``)."""
+    names = _fields(mesh)
+    forces = mesh_forces(params, orbit)
+    return sum(jnp.max(peak_to_peak(getattr(forces, name), 0, smooth)) for name in names)
+
+
+def mesh_force_rms(params, orbit, mesh: GearMesh | str = GearMesh.SP):
     """RMS of the dynamic part of the mesh force over the orbit (largest over planets;
-    ``mesh="both"`` sums the two meshes). Dimensionless (force / ``k_msp b_c``)."""
-    return sum(jnp.max(rms(g, 0)) for g in _select(mesh_forces(params, orbit), mesh))
+    ``mesh`` a :class:`GearMesh` or its text, ``"both"`` sums the two meshes).
+    Dimensionless (force / ``k_msp b_c``)."""
+    names = _fields(mesh)
+    forces = mesh_forces(params, orbit)
+    return sum(jnp.max(rms(getattr(forces, name), 0)) for name in names)
 
 
-def transmission_error_rms(params, orbit, mesh: str = "sp"):
+def transmission_error_rms(params, orbit, mesh: GearMesh | str = GearMesh.SP):
     """RMS of the dynamic transmission error (:func:`transmission_error`, mean removed),
     largest over planets, in units of ``b_c``."""
     return jnp.max(rms(transmission_error(params, orbit, mesh), 0))

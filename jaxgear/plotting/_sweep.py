@@ -14,9 +14,10 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from .._checks import check_enum
 from .._lyapunov import AttractorType
 from .._system import state_index
-from ..sweep import period_label, type_label
+from ..sweep import MapQuantity, SweepDirection, period_label, type_label
 from ._style import _PALETTE, SINK_COLOR, UNRESOLVED_COLOR, attractor_color, new_figure
 
 APERIODIC_COLOR = "#404040"
@@ -49,9 +50,9 @@ def type_color(k: int, kind: int) -> str:
 
 
 _DIR_STYLE = {  # marker, size, legend label, horizontal offset (in units of the dodge)
-    "up": ("^", 9.0, "sweep up (state carried)", -1.0),
-    "independent": ("o", 5.0, "independent starts", 0.0),
-    "down": ("v", 9.0, "sweep down (state carried)", 1.0),
+    SweepDirection.UP: ("^", 9.0, "sweep up (state carried)", -1.0),
+    SweepDirection.INDEPENDENT: ("o", 5.0, "independent starts", 0.0),
+    SweepDirection.DOWN: ("v", 9.0, "sweep down (state carried)", 1.0),
 }
 
 
@@ -70,14 +71,16 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
     Args:
         diagram: a :class:`~jaxgear.BifurcationDiagram` (computed or loaded).
         coordinate: state name (``"x1"``) or index.
-        directions: subset of ``diagram.directions`` to draw (default all).
+        directions: subset of ``diagram.directions`` to draw (default all;
+            :class:`~jaxgear.SweepDirection` members or their texts).
     Returns a :class:`matplotlib.figure.Figure`.
     """
     j = state_index(diagram.state_names, coordinate)
     dirs = list(diagram.directions if directions is None else directions)
     for d in dirs:
         if d not in diagram.directions:
-            raise ValueError(f"direction {d!r} is not in this diagram ({diagram.directions}).")
+            raise ValueError(f"direction {d!r} is not in this diagram ({', '.join(map(str, diagram.directions))}).")
+    dirs = [diagram.directions[diagram.directions.index(d)] for d in dirs]  # the members
     fig = new_figure(figsize=(8.0, 4.8), layout="constrained")
     ax = fig.add_subplot()
     vals = np.asarray(diagram.values)
@@ -109,7 +112,7 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
                for k, t in sorted(periods_seen, key=lambda c: (c[0] <= 0, c[0], c[1]))]
     if n_escaped:
         handles.append(Line2D([], [], marker="x", ls="none", color="#999999", label=f"escaped ({n_escaped} runs)"))
-    if len(dirs) > 1 or dirs[0] != "independent":
+    if len(dirs) > 1 or dirs[0] != SweepDirection.INDEPENDENT:
         for name in sorted(dirs, key=lambda n: _DIR_STYLE[n][3]):
             marker, _, label, _ = _DIR_STYLE[name]
             handles.append(Line2D([], [], marker=marker, ls="none", color="k", ms=5, label=label))
@@ -205,22 +208,21 @@ def _edges(c: np.ndarray) -> np.ndarray:
     return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
 
 
-def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None = None):
+def plot_parameter_map(pmap, quantity: MapQuantity | str | None = None, *, title: str | None = None):
     """Two-parameter map as an image (a :class:`~jaxgear.ParameterMap`).
 
-    ``quantity="period"`` (default: the map's own): the period reached from the first
-    start, one colour per period (:func:`period_color`) with a legend;
-    ``"n_attractors"``: the number of distinct attractors reached from the starts.
+    ``quantity`` (a :class:`~jaxgear.MapQuantity` or its text; default: the map's own):
+    ``"period"``, the period reached from the first start, one colour per period
+    (:func:`period_color`) with a legend; ``"n_attractors"``: the number of distinct
+    attractors reached from the starts.
     """
     from matplotlib.colors import ListedColormap
 
-    quantity = quantity or pmap.quantity
-    if quantity not in ("period", "n_attractors"):
-        raise ValueError(f"quantity must be 'period' or 'n_attractors', got {quantity!r}.")
+    quantity = check_enum(pmap.quantity if quantity is None else quantity, "quantity", MapQuantity)
     fig = new_figure(figsize=(7.0, 5.0), layout="constrained")
     ax = fig.add_subplot()
     X, Y = _edges(pmap.values_x), _edges(pmap.values_y)
-    if quantity == "period":
+    if quantity == MapQuantity.PERIOD:
         data = np.asarray(pmap.period[:, :, 0])
         codes = sorted(np.unique(data).tolist(), key=lambda k: (k <= 0, k if k > 0 else -k))
         idx = np.searchsorted(np.array(sorted(codes)), data)
@@ -234,7 +236,7 @@ def plot_parameter_map(pmap, quantity: str | None = None, *, title: str | None =
         _count_panel(fig, ax, X, Y, np.asarray(pmap.n_attractors), f"distinct attractors from {len(pmap.starts)} starts")
     ax.set_xlabel(pmap.param_x)
     ax.set_ylabel(pmap.param_y)
-    ax.set_title(title or ("Period of the attractor reached" if quantity == "period"
+    ax.set_title(title or ("Period of the attractor reached" if quantity == MapQuantity.PERIOD
                            else "Number of coexisting attractors"))
     return fig
 

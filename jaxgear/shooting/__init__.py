@@ -12,10 +12,19 @@
 from ._floquet import Instability, classify_multipliers, floquet_multipliers, monodromy, sorted_eigvals
 from ._options import SearchOptions, ShootOptions, VerifyOptions, default_solver
 from ._orbit import ShootResult, periodic_orbit
-from ._search import NEWTON_STATUSES, OrbitSearch, PeriodicOrbit, SearchSettings, find_periodic_orbits
+from ._search import (
+    NEWTON_STATUSES,
+    OrbitSearch,
+    OrbitVerification,
+    PeriodConvergence,
+    PeriodicOrbit,
+    SearchSettings,
+    find_periodic_orbits,
+)
 from ._seeds import seeds_from_result, seeds_in_box
 from ._verify import OrbitCheck, verify_orbit
 
 __all__ = ["SearchOptions", "ShootOptions", "VerifyOptions", "default_solver", "Instability", "classify_multipliers", "floquet_multipliers", "monodromy", "sorted_eigvals",
            "ShootResult", "periodic_orbit", "OrbitSearch", "SearchSettings", "PeriodicOrbit", "find_periodic_orbits",
+           "PeriodConvergence", "OrbitVerification",
            "NEWTON_STATUSES", "seeds_from_result", "seeds_in_box", "OrbitCheck", "verify_orbit"]

@@ -28,7 +28,8 @@ from ._options import SearchOptions, ShootOptions, with_changes
 from ._orbit import ShootResult, check_shooting, shoot_kernel
 from ._solve import check_segments
 
-__all__ = ["PeriodicOrbit", "OrbitSearch", "SearchSettings", "find_periodic_orbits", "NEWTON_STATUSES"]
+__all__ = ["PeriodicOrbit", "OrbitSearch", "SearchSettings", "PeriodConvergence", "OrbitVerification",
+           "find_periodic_orbits", "NEWTON_STATUSES"]
 
 NEWTON_STATUSES = (Status.CONVERGED, Status.NOT_CONVERGED, Status.SINGULAR, Status.DIVERGED)
 """The outcomes a Newton run can have."""
@@ -88,6 +89,78 @@ class PeriodicOrbit:
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
+class PeriodConvergence:
+    """How the seed runs of one period ``k`` of a search converged (an item of
+    :attr:`OrbitSearch.convergence`).
+
+    Attributes:
+        period: ``k`` (the map ``P^k`` the seeds were shot on).
+        runs: seed runs (all deflation rounds).
+        seeds: seeds shot.
+        converged: runs that converged to an orbit of the result.
+        seeds_converged: seeds with at least one such run.
+        first_round: converged runs of the undeflated round.
+        orbits: ``{orbit index: runs}``: to which orbits of the result the runs converged.
+    """
+
+    period: int
+    runs: int
+    seeds: int
+    converged: int
+    seeds_converged: int
+    first_round: int
+    orbits: dict[int, int] = dataclasses.field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able (without ``period``; the orbit indices as texts): the entry of
+        :meth:`OrbitSearch.summary`'s ``convergence`` for this period."""
+        return dict(runs=int(self.runs), seeds=int(self.seeds), converged=int(self.converged),
+                    seeds_converged=int(self.seeds_converged), first_round=int(self.first_round),
+                    orbits={str(int(i)): int(n) for i, n in self.orbits.items()})
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class OrbitVerification:
+    """An orbit of a search checked by direct integration (:func:`verify_orbit`; an item of
+    :attr:`OrbitSearch.checks`).
+
+    Attributes:
+        orbit: index of the orbit in :attr:`OrbitSearch.orbits`.
+        periods: forcing periods integrated.
+        kept: every perturbed start stayed on the orbit.
+        left_at: first period at which a perturbed start left the orbit (-1 if never).
+        consistent: kept exactly when the multipliers say stable.
+    """
+
+    orbit: int
+    periods: int
+    kept: bool
+    left_at: int
+    consistent: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able (without ``orbit``): the entry of :meth:`OrbitSearch.summary`'s ``checks``."""
+        return dict(periods=int(self.periods), kept=bool(self.kept), left_at=int(self.left_at),
+                    consistent=bool(self.consistent))
+
+
+def _convergence_of_dict(d: dict) -> tuple[PeriodConvergence, ...]:
+    """``OrbitSearch.convergence`` of a file of format 4 (a dictionary keyed by ``"k"``)."""
+    return tuple(PeriodConvergence(period=int(k), runs=int(c["runs"]), seeds=int(c["seeds"]),
+                                   converged=int(c["converged"]), seeds_converged=int(c["seeds_converged"]),
+                                   first_round=int(c["first_round"]),
+                                   orbits={int(i): int(n) for i, n in c["orbits"].items()})
+                 for k, c in sorted(d.items(), key=lambda kv: int(kv[0])))
+
+
+def _checks_of_dict(d: dict) -> tuple[OrbitVerification, ...]:
+    """``OrbitSearch.checks`` of a file of format 4 (a dictionary keyed by ``"i"``)."""
+    return tuple(OrbitVerification(orbit=int(i), periods=int(c["periods"]), kept=bool(c["kept"]),
+                                   left_at=int(c["left_at"]), consistent=bool(c["consistent"]))
+                 for i, c in sorted(d.items(), key=lambda kv: int(kv[0])))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class SearchSettings:
     """What a search of :func:`find_periodic_orbits` was run with (saved field by field).
 
@@ -136,15 +209,14 @@ class OrbitSearch:
         settings: a :class:`SearchSettings`: the :class:`SearchOptions`, the periods
             tried, ``t0`` and the integrator.
         version: jaxgear version; runtime_s: wall time of the search (s).
-        convergence: per ``k`` (keys ``"1"``, ``"2"``, ...): ``runs`` (seed runs, all
-            deflation rounds), ``seeds``, ``converged`` (runs that converged to an orbit of
-            the result), ``seeds_converged`` (seeds with at least one such run),
-            ``first_round`` (converged runs of the undeflated round) and ``orbits``
-            ``{orbit index: runs}``: to what the seeds converged.
-        checks: per orbit index (``"0"``, ...): the check by direct integration
-            (:func:`verify_orbit`): ``periods``, ``kept``, ``left_at`` (first period at
-            which a perturbed start left the orbit, -1 if never) and ``consistent`` (kept
-            exactly when the multipliers say stable). Empty unless ``verify`` was given.
+        convergence: one :class:`PeriodConvergence` per ``k`` tried, in increasing ``k``
+            (``period``, ``runs``, ``seeds``, ``converged``, ``seeds_converged``,
+            ``first_round``, ``orbits``): to what the seeds converged
+            (:meth:`convergence_of`).
+        checks: one :class:`OrbitVerification` per orbit, in the order of ``orbits``: the
+            check by direct integration (:func:`verify_orbit`; ``orbit``, ``periods``,
+            ``kept``, ``left_at``, ``consistent``; :meth:`verification_of`). Empty unless
+            ``verify`` was given.
     """
 
     orbits: tuple[PeriodicOrbit, ...] = items_field("orbit")
@@ -158,8 +230,20 @@ class OrbitSearch:
     settings: SearchSettings
     version: str = ""
     runtime_s: float = float("nan")
-    convergence: dict = dataclasses.field(default_factory=dict)
-    checks: dict = dataclasses.field(default_factory=dict)
+    convergence: tuple[PeriodConvergence, ...] = items_field("searched_period", legacy=_convergence_of_dict,
+                                                             default=())
+    checks: tuple[OrbitVerification, ...] = items_field("verified_orbit", legacy=_checks_of_dict, default=())
+
+    def convergence_of(self, period: int) -> PeriodConvergence:
+        """The :class:`PeriodConvergence` of the period ``k = period``; ``KeyError`` if it was not tried."""
+        for c in self.convergence:
+            if c.period == period:
+                return c
+        raise KeyError(f"period {period} was not tried; the search tried {[c.period for c in self.convergence]}.")
+
+    def verification_of(self, orbit: int) -> OrbitVerification | None:
+        """The :class:`OrbitVerification` of ``orbits[orbit]``, or ``None`` (not verified)."""
+        return next((c for c in self.checks if c.orbit == orbit), None)
 
     @property
     def n_seeds(self) -> int:
@@ -179,11 +263,10 @@ class OrbitSearch:
     def convergence_table(self) -> str:
         """Printable table: per ``k``, seed runs, converged runs and to which orbits."""
         rows = []
-        for k, c in sorted(self.convergence.items(), key=lambda kv: int(kv[0])):
-            to = ", ".join(f"#{int(i) + 1} P-{self.orbits[int(i)].period} x{n}" for i, n in
-                           sorted(c["orbits"].items(), key=lambda kv: int(kv[0]))) or "-"
-            rows.append((f"P^{k}", c["runs"], c["converged"], f"{c['converged'] / max(c['runs'], 1):.0%}",
-                         f"{c['seeds_converged']}/{c['seeds']}", to))
+        for c in sorted(self.convergence, key=lambda c: c.period):
+            to = ", ".join(f"#{i + 1} P-{self.orbits[i].period} x{n}" for i, n in sorted(c.orbits.items())) or "-"
+            rows.append((f"P^{c.period}", c.runs, c.converged, f"{c.converged / max(c.runs, 1):.0%}",
+                         f"{c.seeds_converged}/{c.seeds}", to))
         return format_table(rows, ("map", "runs", "converged", "fraction", "seeds converged", "to orbits"))
 
     def _dim(self) -> int:
@@ -199,7 +282,8 @@ class OrbitSearch:
             jaxgear_type="OrbitSearch", system=self.system, state_names=list(self.state_names),
             params=self.params, settings=self.settings.to_dict(), n_seeds=self.n_seeds,
             status_counts=dict(self.status_counts), orbits=[o.to_dict() for o in self.orbits],
-            convergence=dict(self.convergence), checks=dict(self.checks),
+            convergence={str(c.period): c.to_dict() for c in self.convergence},
+            checks={str(c.orbit): c.to_dict() for c in self.checks},
             runtime_s=self.runtime_s, version=self.version,
         )
 
@@ -447,31 +531,32 @@ def _final_orbits(found, index, lanes, dedup_tol):
     return orbits, to_final
 
 
-def _convergence(to_final: dict[int, np.ndarray], groups: dict[int, np.ndarray]) -> dict:
-    """Per ``k``: runs, seeds, converged runs, seeds with a converged run, to which orbits."""
-    out = {}
-    for k, lab in to_final.items():
+def _convergence(to_final: dict[int, np.ndarray], groups: dict[int, np.ndarray]) -> tuple[PeriodConvergence, ...]:
+    """Per ``k`` (increasing): runs, seeds, converged runs, seeds with a converged run, to which orbits."""
+    out = []
+    for k, lab in sorted(to_final.items()):
         n = len(groups[k])
         ok = lab >= 0
         per_seed = ok.reshape(-1, n).any(axis=0) if len(lab) else np.zeros(n, bool)
-        out[str(k)] = dict(runs=int(len(lab)), seeds=int(n), converged=int(ok.sum()),
-                           seeds_converged=int(per_seed.sum()), first_round=int(np.sum(ok[:n])),
-                           orbits={str(int(j)): int(c) for j, c in zip(*np.unique(lab[ok], return_counts=True))})
-    return out
+        out.append(PeriodConvergence(period=int(k), runs=int(len(lab)), seeds=int(n), converged=int(ok.sum()),
+                                     seeds_converged=int(per_seed.sum()), first_round=int(np.sum(ok[:n])),
+                                     orbits={int(j): int(c) for j, c in zip(*np.unique(lab[ok], return_counts=True))}))
+    return tuple(out)
 
 
-def _checks(ctx: _Search, orbits, integrator) -> dict:
+def _checks(ctx: _Search, orbits, integrator) -> tuple[OrbitVerification, ...]:
     """Each orbit checked by direct integration over ``verify`` periods (:func:`verify_orbit`)."""
     from ._verify import verify_orbit
 
     n = ctx.options.verify
-    out = {}
+    out = []
     for i, o in enumerate(orbits if n else ()):
         c = verify_orbit(ctx.system, ctx.params, o, periods=n, t0=ctx.t0, integrator=integrator)
         left = c.left_at[c.left_at > 0]
-        out[str(i)] = dict(periods=n, kept=bool(c.kept), left_at=int(left.min()) if left.size else -1,
-                           consistent=bool(c.kept) == bool(o.stable))
-    return out
+        out.append(OrbitVerification(orbit=i, periods=int(n), kept=bool(c.kept),
+                                     left_at=int(left.min()) if left.size else -1,
+                                     consistent=bool(c.kept) == bool(o.stable)))
+    return tuple(out)
 
 
 def find_periodic_orbits(system: ForcedSystem, params, seeds: Float[ArrayLike, "n dim"] | Mapping, *,

@@ -13,13 +13,14 @@
 
 from ._basin_map import BasinMap, basin_map, match_on_grid
 from ._basins import BasinSweep, basin_sweep, match_across_values
-from ._bifurcation import DIRECTIONS, BifurcationDiagram, SequenceSettings, bifurcation_diagram
+from ._bifurcation import DIRECTIONS, BifurcationDiagram, SequenceSettings, SweepDirection, bifurcation_diagram
 from ._classify import APERIODIC, ESCAPED, period_label, type_label
 from ._options import BasinOptions, SequenceOptions
-from ._parameter_map import ParameterMap, parameter_map
+from ._parameter_map import MapQuantity, ParameterMap, parameter_map
 from ._values import check_values
 
 __all__ = ["SequenceOptions", "BasinOptions", "BifurcationDiagram", "SequenceSettings", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram",
            "basin_sweep", "basin_map", "parameter_map", "match_on_grid", "ESCAPED", "APERIODIC", "DIRECTIONS",
+           "SweepDirection", "MapQuantity",
            "period_label", "type_label", "match_across_values",
            "check_values"]

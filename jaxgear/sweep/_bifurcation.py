@@ -17,6 +17,7 @@ enter the compiled kernels as array leaves, so nothing is recompiled per value. 
 from __future__ import annotations
 
 import dataclasses
+import enum
 import functools
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
-from .._checks import check_bool, check_choice, with_changes
+from .._checks import check_bool, check_enum, with_changes
 from .._codec import array_field, custom_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
@@ -45,9 +46,40 @@ from ._kernels import independent_points, sequential_points, values_exponent_est
 from ._options import DIAGRAM_RECORD, SequenceOptions
 from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
 
-__all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "DIRECTIONS", "check_common", "read_only"]
+__all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "SweepDirection", "DIRECTIONS",
+           "check_common", "read_only"]
 
-DIRECTIONS = ("independent", "up", "down", "both", "all")
+
+class SweepDirection(enum.StrEnum):
+    """How a bifurcation diagram runs through the parameter values (:func:`bifurcation_diagram`'s
+    ``direction``, :attr:`BifurcationDiagram.directions`). A ``StrEnum``: each member equals
+    its text (``"up"``, ...), which the functions also accept and files hold.
+
+    Not the crossing direction of a Poincaré section (``PoincareCellMap.direction``,
+    :func:`~jaxgear.section_map`), which is a signed number (+1, -1, 0).
+    """
+
+    INDEPENDENT = "independent"
+    """Every (value, start) from the starts, all batched."""
+    UP = "up"
+    """Values in increasing order, each from the state the previous one ended in."""
+    DOWN = "down"
+    """The same in decreasing order."""
+    BOTH = "both"
+    """The up and the down sweep, run together."""
+    ALL = "all"
+    """Independent, up and down."""
+
+    @property
+    def sweeps(self) -> tuple[SweepDirection, ...]:
+        """The sweeps it runs, in the order of :attr:`BifurcationDiagram.directions`
+        (``BOTH``: ``(UP, DOWN)``; ``ALL``: ``(INDEPENDENT, UP, DOWN)``)."""
+        D = SweepDirection
+        return {D.BOTH: (D.UP, D.DOWN), D.ALL: (D.INDEPENDENT, D.UP, D.DOWN)}.get(self, (self,))
+
+
+DIRECTIONS = tuple(d.value for d in SweepDirection)
+"""The texts of :class:`SweepDirection` (``"independent"``, ``"up"``, ``"down"``, ``"both"``, ``"all"``)."""
 
 
 def read_only(a) -> np.ndarray:
@@ -80,8 +112,9 @@ class BifurcationDiagram:
     Attributes:
         param: the swept name as given (a field or an alias); fields: the fields it sets.
         values: ``(V,)`` parameter values, increasing.
-        directions: which sweeps: ``("independent",)``, ``("up",)``, ``("down",)``,
-            ``("up", "down")`` or ``("independent", "up", "down")``.
+        directions: which sweeps (:class:`SweepDirection` members, equal to their texts):
+            ``(INDEPENDENT,)``, ``(UP,)``, ``(DOWN,)``, ``(UP, DOWN)`` or
+            ``(INDEPENDENT, UP, DOWN)`` (:attr:`SweepDirection.sweeps`).
         starts: ``(S, dim)`` initial states.
         points: ``(D, V, S, R, dim)`` recorded stroboscopic points (state at forcing phase
             0 of R successive periods after the transient), per direction, value, start.
@@ -103,7 +136,7 @@ class BifurcationDiagram:
     param: str
     fields: tuple[str, ...]
     values: np.ndarray = array_field(lambda d: (d.param_coord,))
-    directions: tuple[str, ...] = ()
+    directions: tuple[SweepDirection, ...] = ()
     starts: np.ndarray = array_field(("start", "state"))
     points: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start", "record", "state"))
     period: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start"))
@@ -121,6 +154,8 @@ class BifurcationDiagram:
     version: str = ""
 
     def __post_init__(self):
+        object.__setattr__(self, "directions", tuple(check_enum(d, "direction", SweepDirection)
+                                                     for d in self.directions))
         if self.attractor_type is None:  # a file written before types were recorded: cycles periodic, the rest unknown
             object.__setattr__(self, "attractor_type", np.where(np.asarray(self.period) > 0, int(AttractorType.PERIODIC),
                                                       int(AttractorType.UNKNOWN)).astype(np.int64))
@@ -136,11 +171,12 @@ class BifurcationDiagram:
         unless it clashes with another dimension)."""
         return coord_name(self.param, list(self.state_names) + ["direction", "start", "record", "state"])
 
-    def _d(self, direction: str | None) -> int:
+    def _d(self, direction: SweepDirection | str | None) -> int:
         if direction is None:
             return 0
         if direction not in self.directions:
-            raise ValueError(f"direction {direction!r} is not in this diagram; it has {self.directions}.")
+            raise ValueError(f"direction {direction!r} is not in this diagram; it has "
+                             f"{', '.join(map(str, self.directions))}.")
         return self.directions.index(direction)
 
     def labels(self) -> np.ndarray:
@@ -150,7 +186,7 @@ class BifurcationDiagram:
                        dtype=object)
         return out.reshape(self.period.shape)
 
-    def attractors_at(self, index: int, direction: str | None = None) -> list[dict]:
+    def attractors_at(self, index: int, direction: SweepDirection | str | None = None) -> list[dict]:
         """Distinct attractors at ``values[index]``: label (``"P-k"``, ``"chaotic"``,
         ``"quasi-periodic"``, ``"aperiodic"``), period, type, largest Lyapunov exponent and
         its error (per forcing period; NaN for P-k), number of starts, one point."""
@@ -171,12 +207,12 @@ class BifurcationDiagram:
                             largest_exponent=float("nan"), exponent_error=float("nan"), starts=n_esc, point=None))
         return out
 
-    def transitions(self, direction: str | None = None) -> list[dict]:
+    def transitions(self, direction: SweepDirection | str | None = None) -> list[dict]:
         """Where the set of attractor labels changes: ``[{before, after, from, to}, ...]``."""
         d = self._d(direction)
         sets = [tuple(sorted({a["label"] for a in self.attractors_at(i, self.directions[d])},
                              key=label_order)) for i in range(len(self.values))]
-        order = range(len(self.values)) if self.directions[d] != "down" else range(len(self.values) - 1, -1, -1)
+        order = range(len(self.values)) if self.directions[d] != SweepDirection.DOWN else range(len(self.values) - 1, -1, -1)
         order = list(order)
         out = []
         for i, j in zip(order[:-1], order[1:]):
@@ -197,7 +233,8 @@ class BifurcationDiagram:
             out.append(("escaped", np.zeros((0, pts.shape[-1]))))
         return out
 
-    def differs(self, a: str = "up", b: str = "down") -> np.ndarray:
+    def differs(self, a: SweepDirection | str = SweepDirection.UP,
+                b: SweepDirection | str = SweepDirection.DOWN) -> np.ndarray:
         """``(V,)`` bool: the sweeps ``a`` and ``b`` end on different sets of attractors at
         each value (same periods and point sets within ``merge_tol``, or aperiodic
         attractors of the same type, count as equal);
@@ -251,16 +288,16 @@ class BifurcationDiagram:
         """JSON-able summary: settings, parameters and the attractors at every value."""
         return dict(
             kind="bifurcation", param=self.param, fields=list(self.fields), values=self.values.tolist(),
-            directions=list(self.directions), n_starts=int(len(self.starts)), system=self.system,
+            directions=[str(d) for d in self.directions], n_starts=int(len(self.starts)), system=self.system,
             state_names=list(self.state_names), params=self.params, settings=plain(self.settings), version=self.version,
-            transitions={d: self.transitions(d) for d in self.directions},
+            transitions={str(d): self.transitions(d) for d in self.directions},
             hysteresis=(self.values[self.differs()].tolist()
-                        if "up" in self.directions and "down" in self.directions else None),
-            attractors={d: [self.attractors_at(i, d) for i in range(len(self.values))] for d in self.directions},
+                        if SweepDirection.UP in self.directions and SweepDirection.DOWN in self.directions else None),
+            attractors={str(d): [self.attractors_at(i, d) for i in range(len(self.values))] for d in self.directions},
         )
 
     def _coords(self) -> dict:
-        return {"direction": ("direction", list(self.directions)),
+        return {"direction": ("direction", [str(d) for d in self.directions]),
                 self.param_coord: (self.param_coord, np.asarray(self.values),
                                    {"long_name": self.param, "sets": ",".join(self.fields)}),
                 "state": ("state", list(self.state_names))}
@@ -286,7 +323,8 @@ def check_common(system, params):
 
 
 def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values, x0s, *,
-                        direction: str = "independent", integrator: AbstractIntegrator | None = None,
+                        direction: SweepDirection | str = SweepDirection.INDEPENDENT,
+                        integrator: AbstractIntegrator | None = None,
                         options: SequenceOptions | None = None, progress: bool = True, out=None,
                         restart: bool = False, save: bool = True, **changes) -> BifurcationDiagram:
     """Bifurcation diagram: stroboscopic points against one parameter, classified by period.
@@ -311,13 +349,13 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
             per-planet fields are set for all planets.
         values: the parameter values (sorted increasing, distinct).
         x0s: initial states ``(S, dim)`` (or one ``(dim,)``).
-        direction: ``"independent"`` — every (value, start) from ``x0s``, all batched;
-            ``"up"`` — values in increasing order, each value starting from the state the
-            previous value ended in (the first from ``x0s``), so a branch is followed
-            until it vanishes; ``"down"`` — the same in decreasing order from ``x0s``;
-            ``"both"`` — the up and the down sweep, each from ``x0s`` (run together);
-            ``"all"`` — independent, up and down. A lane of a sweep that escapes
-            restarts from its ``x0`` at the next value.
+        direction: a :class:`SweepDirection` or its text: ``"independent"`` — every
+            (value, start) from ``x0s``, all batched; ``"up"`` — values in increasing
+            order, each value starting from the state the previous value ended in (the
+            first from ``x0s``), so a branch is followed until it vanishes; ``"down"`` —
+            the same in decreasing order from ``x0s``; ``"both"`` — the up and the down
+            sweep, each from ``x0s`` (run together); ``"all"`` — independent, up and down.
+            A lane of a sweep that escapes restarts from its ``x0`` at the next value.
         integrator: default :func:`~jaxgear.integrate.default_integrator` (for a fixed-step
             integrator the step is ``h = T/steps`` per value).
         options: :class:`~jaxgear.SequenceOptions` (``transient``, ``record`` (``None``:
@@ -342,12 +380,13 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
         :class:`BifurcationDiagram`.
     """
     opts = with_changes(options, SequenceOptions, changes).with_record(DIAGRAM_RECORD)
-    system, params, vals, X0, integrator = _check_diagram(system, params, param, values, x0s, direction, integrator,
-                                                          restart, save)
+    direction = check_enum(direction, "direction", SweepDirection)
+    system, params, vals, X0, integrator = _check_diagram(system, params, param, values, x0s, integrator, restart,
+                                                          save)
     passes, dirs, blocks = _passes(direction, len(vals), len(X0), opts.chunk_size)
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
                     starts=X0.tolist(), params=params_to_dict(params), transient=opts.transient, record=opts.record,
-                    direction=direction, integrator=integrator.to_dict(), max_period=opts.max_period,
+                    direction=direction.value, integrator=integrator.to_dict(), max_period=opts.max_period,
                     tol=float(opts.tol), merge_tol=float(opts.merge_tol), escape_bound=float(opts.escape_bound),
                     block_values=blocks, version=__version__)
     ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
@@ -367,11 +406,10 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     return diagram
 
 
-def _check_diagram(system, params, param, values, x0s, direction, integrator, restart, save):
-    """The defaults and checks of :func:`bifurcation_diagram`: ``(system, params, values
-    (sorted), starts (S, dim), integrator)``."""
+def _check_diagram(system, params, param, values, x0s, integrator, restart, save):
+    """The defaults and checks of :func:`bifurcation_diagram` (but its ``direction``'s):
+    ``(system, params, values (sorted), starts (S, dim), integrator)``."""
     system, params = check_common(system, params)
-    check_choice(direction, "direction", DIRECTIONS)
     check_bool(restart, "restart")
     check_bool(save, "save")
     param_targets(params, param)
@@ -382,15 +420,17 @@ def _check_diagram(system, params, param, values, x0s, direction, integrator, re
     return system, params, vals, X0, resolve_integrator(integrator)
 
 
-def _passes(direction: str, V: int, S: int, chunk_size: int):
-    """The passes of a diagram: ``[(name of its parts, directions it computes together)]``,
-    the directions in order, and the values per block of each pass (independent: as many
-    as ``chunk_size`` trajectories hold; sequential: the block only sets how often the
-    sweep is saved)."""
-    passes = {"independent": [("independent", ("independent",))], "up": [("up", ("up",))],
-              "down": [("down", ("down",))], "both": [("both", ("up", "down"))],
-              "all": [("independent", ("independent",)), ("both", ("up", "down"))]}[direction]
-    dirs = tuple(d for _, ds in passes for d in ds)
+def _passes(direction: SweepDirection, V: int, S: int, chunk_size: int):
+    """The passes of a diagram: ``[(name of its parts, directions it computes together)]``
+    (the up and the down sweep are one pass, named ``"both"``), the directions in order
+    (:attr:`SweepDirection.sweeps`), and the values per block of each pass (independent:
+    as many as ``chunk_size`` trajectories hold; sequential: the block only sets how often
+    the sweep is saved)."""
+    D = SweepDirection
+    passes = {D.BOTH: [("both", (D.UP, D.DOWN))],
+              D.ALL: [("independent", (D.INDEPENDENT,)), ("both", (D.UP, D.DOWN))]}.get(direction,
+                                                                                       [(direction.value, (direction,))])
+    dirs = tuple(d for _, ds in passes for d in ds)  # direction.sweeps
     blocks = {}
     for name, ds in passes:
         if name == "independent":
@@ -438,7 +478,7 @@ def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: s
     for name, ds in passes:
         B, nd = blocks[name], len(ds)
         rows = [dirs.index(d) for d in ds]
-        orders = [np.arange(V)[::-1] if d == "down" else np.arange(V) for d in ds]
+        orders = [np.arange(V)[::-1] if d == SweepDirection.DOWN else np.arange(V) for d in ds]
         carry = np.broadcast_to(run.starts, (nd, S, dim)).copy()
         for bi, a in enumerate(range(0, V, B)):
             b = min(a + B, V)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import enum
 from pathlib import Path
 from typing import Any
 
@@ -10,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import progress_bar
-from .._checks import check_choice, with_changes
+from .._checks import check_enum, with_changes
 from .._codec import array_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
@@ -26,7 +27,18 @@ from ._kernels import independent_points
 from ._options import SequenceOptions
 from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
 
-__all__ = ["ParameterMap", "parameter_map"]
+__all__ = ["ParameterMap", "parameter_map", "MapQuantity"]
+
+
+class MapQuantity(enum.StrEnum):
+    """What a :class:`ParameterMap` shows (its :attr:`~ParameterMap.data` and figure). A
+    ``StrEnum``: each member equals its text (``"period"``, ``"n_attractors"``), which
+    :func:`parameter_map` also accepts and files hold."""
+
+    PERIOD = "period"
+    """The period reached from the first start."""
+    N_ATTRACTORS = "n_attractors"
+    """The number of distinct attractors reached from the starts."""
 
 
 @result_type
@@ -37,7 +49,8 @@ class ParameterMap:
     Attributes:
         param_x, fields_x, values_x ``(nx,)``; param_y, fields_y, values_y ``(ny,)``.
         starts: ``(S, dim)`` initial states (the same for every grid point).
-        quantity: ``"period"`` or ``"n_attractors"`` (what :attr:`data` and the figure show).
+        quantity: a :class:`MapQuantity`, ``PERIOD`` or ``N_ATTRACTORS`` (what :attr:`data`
+            and the figure show).
         period: ``(ny, nx, S)`` period code reached from each start (k, 0 aperiodic, -1 escaped).
         attractor: ``(ny, nx, S)`` distinct-attractor id per grid point (-1 escaped).
         n_attractors: ``(ny, nx)`` number of distinct attractors reached (escape not counted).
@@ -53,7 +66,7 @@ class ParameterMap:
     fields_y: tuple[str, ...] = ()
     values_y: np.ndarray = array_field(lambda m: (m.coords_xy[1],))
     starts: np.ndarray = array_field(("start", "state"))
-    quantity: str = "period"
+    quantity: MapQuantity = MapQuantity.PERIOD
     period: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0], "start"))
     attractor: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0], "start"))
     n_attractors: np.ndarray = array_field(lambda m: (m.coords_xy[1], m.coords_xy[0]))
@@ -65,13 +78,14 @@ class ParameterMap:
     version: str = ""
 
     def __post_init__(self):
+        object.__setattr__(self, "quantity", check_enum(self.quantity, "quantity", MapQuantity))
         for f in ("values_x", "values_y", "starts", "period", "attractor", "n_attractors", "last_point"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
 
     @property
     def data(self) -> np.ndarray:
         """``(ny, nx)``: the period reached from the first start, or the number of attractors."""
-        return self.period[:, :, 0] if self.quantity == "period" else self.n_attractors
+        return self.period[:, :, 0] if self.quantity == MapQuantity.PERIOD else self.n_attractors
 
     def table(self) -> str:
         """Share of the grid per period (from the first start) and per number of attractors."""
@@ -87,7 +101,7 @@ class ParameterMap:
 
     def summary(self) -> dict[str, Any]:
         return dict(kind="parameter_map", param_x=self.param_x, values_x=self.values_x.tolist(),
-                    param_y=self.param_y, values_y=self.values_y.tolist(), quantity=self.quantity,
+                    param_y=self.param_y, values_y=self.values_y.tolist(), quantity=self.quantity.value,
                     n_starts=int(len(self.starts)), system=self.system, params=self.params, settings=plain(self.settings),
                     version=self.version,
                     period_counts={period_label(k): int((self.period[:, :, 0] == k).sum())
@@ -118,12 +132,13 @@ class ParameterMap:
 
 
 def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y, x0s, *,
-                  quantity: str = "period", integrator: AbstractIntegrator | None = None,
+                  quantity: MapQuantity | str = MapQuantity.PERIOD, integrator: AbstractIntegrator | None = None,
                   options: SequenceOptions | None = None, progress: bool = True, out=None, restart: bool = False,
                   **changes) -> ParameterMap:
     """Two-parameter map: the period of the attractor reached from a fixed initial state
-    (``quantity="period"``: from ``x0s[0]``) or the number of distinct attractors reached
-    from several starts (``"n_attractors"``), on the grid ``values_y x values_x``.
+    (``quantity="period"``, :attr:`MapQuantity.PERIOD`: from ``x0s[0]``) or the number of
+    distinct attractors reached from several starts (``"n_attractors"``), on the grid
+    ``values_y x values_x``; ``quantity`` is a :class:`MapQuantity` or its text.
 
     Every (grid point, start) runs as in :func:`bifurcation_diagram` with
     ``direction="independent"`` and the :class:`~jaxgear.SequenceOptions` ``options``
@@ -137,6 +152,7 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     exchange the parts: every process returns the whole, identical map, and only
     process 0 keeps ``out`` and writes the file.
     """
+    quantity = check_enum(quantity, "quantity", MapQuantity)
     opts = with_changes(options, SequenceOptions, changes)
     opts = opts.with_record(2 * opts.max_period + 2)
     system, params = check_common(system, params)
@@ -150,7 +166,6 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     VV = np.stack(np.meshgrid(vx, vy, indexing="xy"), axis=-1).reshape(-1, 2)  # (ny*nx, 2), y major
     check_system(system, apply_values(params, names, VV[0]), X0[0])
     check_values(system, params, names, VV)
-    check_choice(quantity, "quantity", ("period", "n_attractors"))
     integrator = resolve_integrator(integrator)
     S, n = len(X0), len(VV)
     B = max(1, min(n, opts.chunk_size // S))
