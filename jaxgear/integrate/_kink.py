@@ -23,7 +23,7 @@ for the gear models (:mod:`jaxgear.integrate._native`) gathers them per block of
 from __future__ import annotations
 
 import functools
-from typing import ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -353,15 +353,29 @@ def _zero_tangent(a):
     return np.zeros(a.shape, jax.dtypes.float0)
 
 
+class _SubStep(NamedTuple):
+    """The state of :func:`_event`: a (sub-)step's start ``Ys`` and end ``Ye`` states
+    ``(dim, n)``, its start time ``tt`` and length ``hh`` ``(n,)``, the field ``k1`` at its
+    start, the ``sides`` its stages use and the switching functions ``S0``, ``S1`` at both
+    ends."""
+
+    Ys: Any
+    tt: Any
+    hh: Any
+    k1: Any
+    Ye: Any
+    sides: Any
+    S0: Any
+    S1: Any
+
+
 def _event(system, params, state, lazy=False, first=None):
     """One event of the lanes in ``state`` (each holding one): locate the first event of
     the (sub-)step ``Ys -> Ye`` (from ``tt``, length ``hh``), sub-step to it, land, flip
     the crossed surface's side, step the rest of the step. Returns the new state and
     whether its rest step holds another event.
 
-    ``state = (Ys, tt, hh, k1, Ye, sides, S0, S1)``: the sub-step's start and end states,
-    its start time and length, the field at its start, the sides its stages use, and the
-    switching functions at both ends. ``first = (i, rates)``: in a loop over events, the
+    ``state``: a :class:`_SubStep`. ``first = (i, rates)``: in a loop over events, the
     event's index and the :func:`_crossing_rates` of the whole step, computed before the
     loop where the step's times are still shared by the lanes (used by event 0).
 
@@ -393,7 +407,7 @@ def _event(system, params, state, lazy=False, first=None):
     tt, hh = tt + h1, hh - h1
     Ye, k1 = _rk4(system, params, tt, Ym, hh, window=window, sides=pieces(sides))
     S0, S1 = _switching(system, params, tt, Ym), _switching(system, params, tt + hh, Ye)
-    return (Ym, tt, hh, k1, Ye, sides, S0, S1), _pending(system, params, tt, hh, S0, S1, sides)
+    return _SubStep(Ym, tt, hh, k1, Ye, sides, S0, S1), _pending(system, params, tt, hh, S0, S1, sides)
 
 
 def _pending(system, params, t, h, S0, S1, sides):
@@ -438,12 +452,12 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
         # every lane of the batch through every event (a lane without a further event
         # steps the rest of its step whole again), selected at the end
         lane = lambda a: jnp.broadcast_to(a, (n,))  # noqa: E731
-        state = (Y, lane(t), lane(h), k1, Y1, sides, S0, S1)
+        state = _SubStep(Y, lane(t), lane(h), k1, Y1, sides, S0, S1)
 
         def dense(_):
             rates = _crossing_rates(system, params, t, Y, Y1, h, k1)
             ev = lambda i, c: _event(system, params, c[0], first=(i, rates))  # noqa: E731
-            end = jax.lax.fori_loop(0, max_splits, ev, (state, need))[0][4]
+            end = jax.lax.fori_loop(0, max_splits, ev, (state, need))[0].Ye
             return jnp.where(need[None], end, Y1)
 
         return jax.lax.cond(jnp.any(need), dense, lambda _: Y1, None)
@@ -468,16 +482,15 @@ def kink_step(system, params, t, Y, h, max_splits: int = 2):
                 tt = t if jnp.ndim(t) == 0 else take(t)
                 hh = h if jnp.ndim(h) == 0 else take(h)
                 sub = _start_state(system, params, tt, take(Y), hh, take(Y1))
-                rates = _crossing_rates(system, params, tt, sub[0], sub[4], hh, sub[3])
-                sub = sub[:1] + (jnp.broadcast_to(tt, (C,)), jnp.broadcast_to(hh, (C,))) + sub[3:]
+                rates = _crossing_rates(system, params, tt, sub.Ys, sub.Ye, hh, sub.k1)
+                sub = sub._replace(tt=jnp.broadcast_to(tt, (C,)), hh=jnp.broadcast_to(hh, (C,)))
 
                 def ev(i, c):
                     return jax.lax.cond(i <= lev, lambda c: _event(system, params, c[0], lazy=True, first=(i, rates)),
                                         lambda c: c, c)
 
-                (_, _, _, _, Ye, *_), more = jax.lax.fori_loop(
-                    0, max_splits, ev, (sub, jnp.zeros((C,), bool)))
-                Yout = Yout.at[:, ids].set(Ye, mode="drop")
+                end, more = jax.lax.fori_loop(0, max_splits, ev, (sub, jnp.zeros((C,), bool)))
+                Yout = Yout.at[:, ids].set(end.Ye, mode="drop")
                 more = more & (ids < n)
                 at = jnp.where(more, k + jnp.cumsum(more) - 1, size)
                 return Yout, nxt.at[at].set(ids, mode="drop"), k + jnp.sum(more)
@@ -503,7 +516,7 @@ def _start_state(system, params, t, Y, h, Y1):
     else:
         k1 = _field(system, params, t, Y)
     S0, S1 = _switching(system, params, t, Y), _switching(system, params, t + h, Y1)
-    return (Y, t, h, k1, Y1, _sides(S0) if S0.shape[0] else S0, S0, S1)
+    return _SubStep(Y, t, h, k1, Y1, _sides(S0) if S0.shape[0] else S0, S0, S1)
 
 
 def _listed(mask, size: int, block: int = 32):
