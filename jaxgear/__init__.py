@@ -75,6 +75,7 @@ from ._lyapunov import (
     LyapunovOptions as LyapunovOptions,
     lyapunov_spectrum as lyapunov_spectrum,
     classify_attractor as classify_attractor,
+    type_reason as type_reason,
     kaplan_yorke as kaplan_yorke,
     ensemble_spectrum as ensemble_spectrum,
 )

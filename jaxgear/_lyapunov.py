@@ -33,7 +33,7 @@ from ._status import Status
 from ._system import ForcedSystem, check_state_shape, check_system
 from .integrate import AbstractIntegrator, resolve_integrator
 
-__all__ = ["AttractorType", "LyapunovSpectrum", "LyapunovOptions", "lyapunov_spectrum", "classify_attractor", "kaplan_yorke",
+__all__ = ["AttractorType", "LyapunovSpectrum", "LyapunovOptions", "lyapunov_spectrum", "classify_attractor", "type_reason", "kaplan_yorke",
            "ensemble_spectrum",
            "birkhoff_weights", "DEFAULT_ZERO_TOL"]
 
@@ -49,19 +49,35 @@ class AttractorType(enum.IntEnum):
     ``UNKNOWN`` (-1): the trajectory blew up or the exponents are not finite;
     ``PERIODIC`` (0): a P-k orbit (a fixed point of ``P^k``; a stable one has a negative
     largest exponent); ``QUASI_PERIODIC`` (1): bounded, not periodic, largest exponent
-    zero within its error (an invariant closed curve of ``P``: a torus of the flow);
-    ``CHAOTIC`` (2): largest exponent positive beyond its error.
+    zero within its error and the next one negative beyond its error (an attracting
+    invariant closed curve of ``P``: a torus of the flow); ``CHAOTIC`` (2): largest
+    exponent positive beyond its error; ``UNDETERMINED`` (3): bounded, not periodic, the
+    largest exponent zero within its error but the test for a closed curve fails (the
+    second exponent is zero within its error too: a torus of higher dimension, or a
+    slowly mixing set): not decided, never guessed (:func:`type_reason` says why).
     """
 
     UNKNOWN = -1
     PERIODIC = 0
     QUASI_PERIODIC = 1
     CHAOTIC = 2
+    UNDETERMINED = 3
 
     @property
     def label(self) -> str:
-        """``"periodic"``, ``"quasi-periodic"``, ``"chaotic"`` or ``"unknown"``."""
+        """``"periodic"``, ``"quasi-periodic"``, ``"chaotic"``, ``"undetermined"`` or ``"unknown"``."""
         return self.name.lower().replace("_", "-")
+
+
+def attractor_label(period: int, kind) -> str:
+    """The label of an attractor of ``period`` k (> 0: ``"P-k"``) and type ``kind`` (an
+    :class:`AttractorType`): for period 0 ``"chaotic"``, ``"quasi-periodic"`` or
+    ``"undetermined"``, and ``"aperiodic"`` where the type is unknown (or says periodic:
+    a cycle longer than the periods searched)."""
+    if int(period) > 0:
+        return f"P-{int(period)}"
+    return {int(AttractorType.CHAOTIC): "chaotic", int(AttractorType.QUASI_PERIODIC): "quasi-periodic",
+            int(AttractorType.UNDETERMINED): "undetermined"}.get(int(kind), "aperiodic")
 
 
 class LyapunovSpectrum(eqx.Module):
@@ -352,7 +368,12 @@ def classify_attractor(spectrum: LyapunovSpectrum, period: int | ArrayLike | Non
       ``lambda_1 > max(n_sigma * error_1, zero_tol)``;
     - ``QUASI_PERIODIC`` when it is zero within its error,
       ``|lambda_1| <= max(n_sigma * error_1, zero_tol)`` (the trajectory stayed bounded:
-      its status is ``CONVERGED``) and no period is given;
+      its status is ``CONVERGED``), no period is given, and the attractor is a closed
+      curve of the map: the second exponent is negative beyond its error,
+      ``lambda_2 < -max(n_sigma * error_2, zero_tol)`` (a spectrum of one exponent has no
+      second: the first test alone decides);
+    - ``UNDETERMINED`` when the first exponent is zero within its error and the second
+      is too (not a closed curve: not decided; :func:`type_reason` says so);
     - ``UNKNOWN`` when the trajectory diverged.
 
     Exponents per forcing period; ``zero_tol`` (per forcing period) is the floor of what
@@ -376,10 +397,41 @@ def classify_attractor(spectrum: LyapunovSpectrum, period: int | ArrayLike | Non
         has_period = np.broadcast_to(p > 0, lam1.shape)
     tol = np.maximum(n_sigma * err1, zero_tol)
     good = (status == int(Status.CONVERGED)) & np.isfinite(lam1) & np.isfinite(err1)
-    code = np.where(lam1 > tol, int(AttractorType.CHAOTIC),
-                    np.where(lam1 < -tol, int(AttractorType.PERIODIC), int(AttractorType.QUASI_PERIODIC)))
+    exps, errs = np.asarray(spectrum.exponents), np.asarray(spectrum.errors)
+    if exps.shape[-1] >= 2:  # a closed curve: contracting across it
+        curve = exps[..., 1] < -np.maximum(n_sigma * errs[..., 1], zero_tol)
+    else:
+        curve = np.ones(lam1.shape, bool)
+    zero = np.where(curve, int(AttractorType.QUASI_PERIODIC), int(AttractorType.UNDETERMINED))
+    code = np.where(lam1 > tol, int(AttractorType.CHAOTIC), np.where(lam1 < -tol, int(AttractorType.PERIODIC), zero))
     code = np.where(has_period, int(AttractorType.PERIODIC), code)
     code = np.where(good, code, int(AttractorType.UNKNOWN)).astype(np.int32)
     if code.ndim == 0:
         return AttractorType(int(code))
     return code
+
+
+def type_reason(kind, exponents, errors, period: int = 0, *, n_sigma: float = 3.0,
+                zero_tol: float = DEFAULT_ZERO_TOL) -> str:
+    """One sentence saying why an attractor has the type ``kind`` (an
+    :class:`AttractorType`) that :func:`classify_attractor` gave it from its leading
+    ``exponents`` and their ``errors`` (per forcing period) and its ``period`` (> 0: a
+    P-k cycle), with the numbers the test compared."""
+    kind = AttractorType(int(kind))
+    lam, err = np.atleast_1d(np.asarray(exponents, float)), np.atleast_1d(np.asarray(errors, float))
+    if kind is AttractorType.PERIODIC and period > 0:
+        return f"a P-{int(period)} cycle (a fixed point of P^{int(period)})"
+    if kind is AttractorType.UNKNOWN or not len(lam):
+        return "not measured, or the trajectory blew up"
+    one = f"lambda_1 = {lam[0]:+.4g} +- {err[0]:.2g}"
+    bound = max(n_sigma * err[0], zero_tol)
+    if kind is AttractorType.CHAOTIC:
+        return f"{one}: positive beyond {n_sigma:g} errors ({bound:.2g})"
+    if kind is AttractorType.PERIODIC:
+        return f"{one}: negative beyond {n_sigma:g} errors, no period found (a cycle of a longer period)"
+    two = f"lambda_2 = {lam[1]:+.4g} +- {err[1]:.2g}" if len(lam) > 1 else ""
+    if kind is AttractorType.QUASI_PERIODIC:
+        return f"{one}: zero within {n_sigma:g} errors" + (f"; {two}: negative beyond them (a closed curve)"
+                                                            if two else "")
+    return (f"{one} and {two}: both zero within {n_sigma:g} errors (not a closed curve of the map: a torus of "
+            "higher dimension or a slowly mixing set), not decided")

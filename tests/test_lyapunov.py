@@ -300,6 +300,33 @@ def test_classify_from_constructed_spectra():
     assert list(classify_attractor(spec(5e-7, 1e-9))) == [AttractorType.QUASI_PERIODIC]  # below zero_tol
 
 
+def test_a_zero_exponent_is_a_torus_only_on_a_closed_curve_else_undetermined():
+    """Zero largest exponent: quasi-periodic when the second contracts beyond its errors (a
+    closed curve of the map), undetermined when the second is zero too (never guessed);
+    the reason names the numbers the test compared. Chaotic and contracting are unchanged."""
+    def spec(l1, e1, l2, e2):
+        z, e = jnp.array([[l1, l2]]), jnp.array([[e1, e2]])
+        return LyapunovSpectrum(exponents=z, per_time=z, errors=e, errors_per_time=e,
+                                stretch_exponents=jnp.zeros((1, 2, 2)), kaplan_yorke=jnp.zeros(1),
+                                final_state=jnp.zeros((1, 2)), status=jnp.array([0], jnp.int32),
+                                periods=2, transient=0, weighted=False)
+
+    cases = [((0.001, 0.001, -0.3, 0.01), AttractorType.QUASI_PERIODIC, "a closed curve"),
+             ((0.001, 0.001, -0.002, 0.001), AttractorType.UNDETERMINED, "both zero within 3 errors"),
+             ((0.4, 0.005, -0.002, 0.001), AttractorType.CHAOTIC, "positive beyond 3 errors"),
+             ((-0.1, 0.001, -0.2, 0.001), AttractorType.PERIODIC, "no period found")]
+    for (l1, e1, l2, e2), want, words in cases:
+        (got,) = classify_attractor(spec(l1, e1, l2, e2))
+        assert got == want, (l1, l2, got)
+        reason = jaxgear.type_reason(got, [l1, l2], [e1, e2])
+        assert words in reason and f"{l1:+.4g}" in reason, reason
+    assert jaxgear.type_reason(AttractorType.PERIODIC, [-0.1, -0.2], [0, 0], period=4).startswith("a P-4 cycle")
+    a = jaxgear.Attractor(id=0, period=0, points=np.zeros((3, 2)), section_points=np.zeros((0, 2)),
+                          kind=int(AttractorType.UNDETERMINED), exponents=np.array([0.001, -0.002]),
+                          exponent_errors=np.array([0.001, 0.001]))
+    assert a.label == "undetermined" and "not decided" in a.type_reason and a.summary()["type"] == "undetermined"
+
+
 def test_bad_options_are_refused():
     p = DuffingParams()
     x = jnp.zeros(2)

@@ -51,7 +51,9 @@ def warn_if_unreliable(r: GlobalResult) -> None:
     for a in r.attractors:
         typed = getattr(m, "recurrence", None) is not None and a.type in (AttractorType.CHAOTIC,
                                                                          AttractorType.QUASI_PERIODIC)
-        if a.period == 0 and not typed:  # a cell group with no period, or a cycle found by its boxes
+        if a.type == AttractorType.UNDETERMINED:
+            warnings.warn(f"attractor {a.id}: its type is not decided: {a.type_reason}.", stacklevel=3)
+        elif a.period == 0 and not typed:  # a cell group with no period, or a cycle found by its boxes
             warnings.warn(f"attractor {a.id} showed no period <= max_period={m.max_period}"
                           + (" and its largest Lyapunov exponent is negative: a cycle of a longer period"
                              if a.type == AttractorType.PERIODIC else

@@ -217,12 +217,14 @@ def with_longer_look(spectrum, measure):
     (measured over :data:`LYAPUNOV_PERIODS` periods, no period known), where those that
     come out quasi-periodic are measured again by ``measure(index, x0, periods,
     stretches) -> LyapunovSpectrum`` from the spectrum's final states, over
-    :data:`LYAPUNOV_RECHECK` times as many periods and stretches, and typed by that."""
+    :data:`LYAPUNOV_RECHECK` times as many periods and stretches, and typed by that (as are
+    those left undetermined: a zero largest exponent that the first look could not call a
+    closed curve)."""
     n = spectrum.exponents.shape[0]
     kinds = np.asarray(classify_attractor(spectrum, period=np.zeros(n, np.int64)))
     exps, errs, ky = (np.array(a) for a in (spectrum.exponents, spectrum.errors, spectrum.kaplan_yorke))
-    torus = np.flatnonzero(kinds == int(AttractorType.QUASI_PERIODIC))
-    if torus.size:  # a longer look before a zero exponent is believed
+    torus = np.flatnonzero(np.isin(kinds, [int(AttractorType.QUASI_PERIODIC), int(AttractorType.UNDETERMINED)]))
+    if torus.size:  # a longer look before a zero exponent is believed (or left undecided)
         longer = measure(torus, np.asarray(spectrum.final_state)[torus], LYAPUNOV_PERIODS * LYAPUNOV_RECHECK,
                          LYAPUNOV_STRETCHES * LYAPUNOV_RECHECK)
         kinds[torus] = classify_attractor(longer, period=np.zeros(torus.size, np.int64))

@@ -11,7 +11,7 @@ from .._cells import CellGrid
 from .._codec import array_field, custom_field, items_field, later_field, result_type
 from .._format import format_table
 from .._io import save_result, write_json
-from .._lyapunov import AttractorType
+from .._lyapunov import AttractorType, attractor_label, type_reason
 from ..integrate import AbstractFixedStep, AbstractIntegrator, integrator_from_dict
 from ._fractal import BasinEntropy
 from ._method import AbstractGlobalMethod, method_from_dict
@@ -84,16 +84,20 @@ class Attractor:
 
     @property
     def label(self) -> str:
-        """``"P-k"``, ``"quasi-periodic"`` or ``"chaotic"`` (``"aperiodic"`` for period 0
-        of unknown type)."""
-        if self.period > 0:
-            return f"P-{self.period}"
-        return {AttractorType.CHAOTIC: "chaotic", AttractorType.QUASI_PERIODIC: "quasi-periodic"}.get(
-            self.type, "aperiodic")
+        """``"P-k"``, ``"quasi-periodic"``, ``"chaotic"`` or ``"undetermined"``
+        (``"aperiodic"`` for period 0 of unknown type)."""
+        return attractor_label(self.period, self.kind)
+
+    @property
+    def type_reason(self) -> str:
+        """Why it has its type: the test of :func:`~jaxgear.classify_attractor` with its
+        numbers (:func:`~jaxgear.type_reason`)."""
+        return type_reason(self.type, self.exponents, self.exponent_errors, self.period)
 
     def summary(self) -> dict[str, Any]:
         """JSON-able description (points as lists)."""
         return dict(id=self.id, period=self.period, label=self.label, type=self.type.name.lower(),
+                    type_reason=self.type_reason,
                     exponents=np.asarray(self.exponents).tolist(),
                     exponent_errors=np.asarray(self.exponent_errors).tolist(), kaplan_yorke=self.kaplan_yorke,
                     cell_count=self.cell_count,

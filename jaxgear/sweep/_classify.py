@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._lyapunov import AttractorType
+from .._lyapunov import attractor_label
 from .._matching import pairwise_hausdorff
 from ..analysis import detect_period
 
@@ -64,16 +64,14 @@ def period_label(k: int) -> str:
 
 def type_label(k: int, kind: int) -> str:
     """Label of an attractor of period code ``k`` and type ``kind`` (an
-    :class:`~jaxgear.AttractorType` value): ``"P-k"``; for period 0 ``"chaotic"`` or
-    ``"quasi-periodic"``, ``"aperiodic"`` where the type is unknown (or says periodic: a
-    cycle longer than the periods searched); ``"escaped"``."""
+    :class:`~jaxgear.AttractorType` value): ``"P-k"``; for period 0 that of
+    :func:`~jaxgear._lyapunov.attractor_label`; ``"escaped"``."""
     if int(k) == APERIODIC:
-        return {int(AttractorType.CHAOTIC): "chaotic", int(AttractorType.QUASI_PERIODIC): "quasi-periodic"}.get(
-            int(kind), "aperiodic")
+        return attractor_label(0, kind)
     return period_label(k)
 
 
-_APERIODIC_ORDER = {"quasi-periodic": 1, "chaotic": 2, "aperiodic": 3}
+_APERIODIC_ORDER = {"quasi-periodic": 1, "chaotic": 2, "undetermined": 3, "aperiodic": 4}
 
 
 def label_order(label: str):
