@@ -287,3 +287,32 @@ def test_analyze_paper_preset_prints_meshes_in_micrometres(tmp_path, capsys):
             assert m.te_rms == pytest.approx(d["te_rms"], rel=1e-12) and m.regime.text == d["regime"]
         line = f"attractor {v['attractor_id']} (P-{v['period']}), ring-planet: "
         assert any(s.strip().startswith(line) for s in lines)
+
+
+def test_the_figure_shades_the_contact_states_the_view_counted(p2_view):
+    """plot_gear_view draws one row per mesh: over the P-2's two periods the shaded gap and
+    back-flank time equal the view's gap and back shares (to the sample spacing), and the
+    spectrum's stems are the view's amplitudes."""
+    from jaxgear.plotting import plot_gear_view
+
+    assert p2_view.meshes[0].back_share > 0.01  # (the fixture's mesh reaches the back flank)
+    fig = plot_gear_view(p2_view, SPUR, P2_PARAMS)
+    ax, sp = fig.axes[0], fig.axes[1]
+    gap, back = ax.collections[0], ax.collections[1]  # fill_between, in that order
+    (m,) = p2_view.meshes
+
+    def shaded_share(poly):
+        # the shaded intervals of the phase axis (vertices of the filled polygons)
+        covered = 0.0
+        for path in poly.get_paths():
+            x = path.vertices[:, 0]
+            covered += x.max() - x.min() if len(x) else 0.0
+        return covered / p2_view.period
+
+    tol = 3.0 / p2_view.samples_per_period  # a sample interval at each end of each shaded piece
+    assert shaded_share(gap) == pytest.approx(m.gap_share, abs=tol)
+    assert shaded_share(back) == pytest.approx(m.back_share, abs=tol)
+    stems = sp.collections[0].get_segments()
+    np.testing.assert_allclose([s[1][1] for s in stems], m.amplitudes)
+    with pytest.raises(ValueError, match="must be a jaxgear.GearView"):
+        plot_gear_view("view", SPUR, P2_PARAMS)

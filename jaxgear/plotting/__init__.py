@@ -20,6 +20,7 @@ from ._basins import (
     plot_shares as plot_shares,
 )
 from ._branch import plot_branch as plot_branch
+from ._gear import plot_gear_view as plot_gear_view
 from ._orbit import plot_multipliers as plot_multipliers
 from ._orbit import plot_orbit as plot_orbit
 from ._style import SINK_COLOR as SINK_COLOR

@@ -1,0 +1,73 @@
+"""The gear view's figure: for each mesh, its transmission error over the attractor with
+the contact states shaded, and its amplitude spectrum (:func:`~jaxgear.gear_view`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._contact import GearView, _layout, _switching_at
+from .._poincare import sample_trajectory
+from ._style import attractor_color, new_figure
+
+__all__ = ["plot_gear_view"]
+
+GAP_COLOR = "#fdd49e"
+BACK_COLOR = "#d7301f"
+
+
+def plot_gear_view(view: GearView, system, params, *, periods: int | None = None):
+    """One row per mesh of ``view`` (a :class:`~jaxgear.GearView` of ``system`` and
+    ``params``): left, the dynamic transmission error over ``periods`` forcing periods
+    from the view's start (default: the ``k`` periods of a P-k, 4 periods of an aperiodic
+    attractor), the backlash ``+-b`` dashed, the time in the gap shaded light and on the
+    back flank dark; right, its amplitude spectrum against the order of the mesh frequency
+    (in Hz on top with a gear set). The trajectory is sampled again from ``view.start``
+    with the view's integrator (the figure computes nothing else). Returns a Figure."""
+    if not isinstance(view, GearView):
+        raise ValueError(f"view={type(view).__name__} must be a jaxgear.GearView (from jaxgear.gear_view).")
+    n_periods = int(periods) if periods is not None else (view.period if view.period > 0 else 4)
+    if n_periods < 1:
+        raise ValueError(f"periods={periods!r} must be at least 1.")
+    layout = _layout(system, params, np.asarray(view.start), None)
+    if len(layout.pairs) != len(view.meshes):
+        raise ValueError(f"view has {len(view.meshes)} meshes, {system.name} {len(layout.pairs)}: the view is not "
+                         "of this system (or was made with a MeshSpec; draw it with the same meshes).")
+    s = int(view.samples_per_period)
+    ts, xs = sample_trajectory(system, params, view.start, periods=n_periods, samples_per_period=s,
+                               integrator=view.integrator)
+    ts, xs = np.asarray(ts), np.asarray(xs)
+    T = float(system.period(params))
+    S = np.asarray(_switching_at(system, params, ts, xs))
+    phase = ts / T
+    fig = new_figure(figsize=(10.0, 2.6 * len(view.meshes)), layout="constrained")
+    axes = fig.subplots(len(view.meshes), 2, squeeze=False, gridspec_kw={"width_ratios": (2.2, 1.0)})
+    color = attractor_color(view.attractor_id)
+    for row, ((i_drive, i_back), m) in enumerate(zip(layout.pairs, view.meshes)):
+        ax, sp = axes[row]
+        te = 0.5 * (S[:, i_drive] + S[:, i_back]) * view.length_scale
+        b = 0.5 * (S[:, i_back] - S[:, i_drive]) * view.length_scale
+        gap = (S[:, i_drive] <= 0) & (S[:, i_back] > 0)
+        back = S[:, i_back] <= 0
+        ax.fill_between(phase, 0, 1, where=gap, transform=ax.get_xaxis_transform(), color=GAP_COLOR, lw=0,
+                        label="gap (no contact)")
+        ax.fill_between(phase, 0, 1, where=back, transform=ax.get_xaxis_transform(), color=BACK_COLOR, alpha=0.5,
+                        lw=0, label="back-flank contact")
+        ax.plot(phase, te, color=color, lw=1.2, label="transmission error")
+        ax.plot(phase, b, "k--", lw=0.8, label="+-b")
+        ax.plot(phase, -b, "k--", lw=0.8)
+        ax.set_ylabel(f"TE [{view.length_unit}]")
+        ax.set_title(f"{m.name}: {m.regime.text}, RMS {m.te_rms:.4g} {view.length_unit}, "
+                     f"dynamic factor {m.dynamic_factor:.3g}", fontsize="medium")
+        ax.set_xlim(phase[0], phase[-1])
+        sp.vlines(m.orders, 0, m.amplitudes, color=color, lw=1.5)
+        sp.set_xlabel("order of the mesh frequency")
+        sp.set_ylabel(f"amplitude [{view.length_unit}]")
+        sp.set_ylim(bottom=0)
+        if np.isfinite(view.mesh_frequency_hz):
+            top = sp.secondary_xaxis("top", functions=(lambda o: o * view.mesh_frequency_hz,
+                                                      lambda f: f / view.mesh_frequency_hz))
+            top.set_xlabel("Hz")
+    axes[-1][0].set_xlabel("time [forcing periods]")
+    axes[0][0].legend(fontsize="small", loc="upper right", ncols=2)
+    fig.suptitle(f"attractor {view.attractor_id} ({view.label})", fontsize="medium")
+    return fig
