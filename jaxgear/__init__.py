@@ -169,6 +169,8 @@ from .design import (
 from ._contact import (
     gear_view as gear_view,
     gear_views as gear_views,
+    regime_shares as regime_shares,
+    RegimeShares as RegimeShares,
     GearView as GearView,
     MeshView as MeshView,
     ContactRegime as ContactRegime,

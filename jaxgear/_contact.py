@@ -52,7 +52,8 @@ from .analysis import Attractor
 from .design import mesh_forces
 from .integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, KinkAwareRK4, integrator_from_dict
 
-__all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view", "gear_views"]
+__all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view", "gear_views",
+           "RegimeShares", "regime_shares"]
 
 
 class ContactRegime(enum.IntEnum):
@@ -785,3 +786,90 @@ def _mesh_views(layout: _Layout, parts: list[_Stretch], *, periodic: bool, k: in
             dynamic_factor=float(f_hi[i] / static[i]) if np.isfinite(static[i]) else float("nan"),
             orders=np.asarray(orders, dtype=float), amplitudes=np.asarray(amps[:, i], dtype=float)))
     return tuple(out)
+
+
+# ----------------------------------------------------------------------- across a sweep
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RegimeShares:
+    """Result of :func:`regime_shares`: at every value of a basin sweep, the share of the
+    state space (of the grid's cells) whose motion is in each contact regime, mesh by mesh.
+
+    Attributes:
+        param: the swept parameter; values: ``(V,)`` its values.
+        meshes: the meshes' names.
+        shares: ``(V, n_meshes, 3)`` the share of the cells whose attractor's mesh is in
+            regime ``r`` (:class:`ContactRegime` order: no impact, single-sided,
+            double-sided); with ``no_attractor`` each value's shares of one mesh add to 1.
+        no_attractor: ``(V,)`` the share of the cells on no attractor (sink, unresolved).
+    """
+
+    param: str
+    values: np.ndarray
+    meshes: tuple[str, ...]
+    shares: np.ndarray
+    no_attractor: np.ndarray
+
+    def share(self, mesh: str, regime: ContactRegime) -> np.ndarray:
+        """``(V,)`` the share of the cells in ``regime`` on ``mesh``."""
+        if mesh not in self.meshes:
+            raise ValueError(f"mesh {mesh!r}: the meshes are {', '.join(self.meshes)}.")
+        return self.shares[:, self.meshes.index(mesh), int(ContactRegime(regime))]
+
+    def table(self) -> str:
+        """One row per value and mesh: the share in each regime (%)."""
+        rows = [(f"{v:.6g}", name, *(f"{100 * s:.2f}" for s in self.shares[i, j]), f"{100 * self.no_attractor[i]:.2f}")
+                for i, v in enumerate(self.values) for j, name in enumerate(self.meshes)]
+        return format_table(rows, (self.param, "mesh", *(f"{r.text} %" for r in ContactRegime), "no attractor %"))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able description."""
+        return dict(param=self.param, values=np.asarray(self.values).tolist(), meshes=list(self.meshes),
+                    regimes=[r.text for r in ContactRegime], shares=np.asarray(self.shares).tolist(),
+                    no_attractor=np.asarray(self.no_attractor).tolist())
+
+
+def regime_shares(sweep, system: ForcedSystem, params, gear_set: GearSet | None = None, *,
+                  meshes: MeshSpec | None = None, options: GearViewOptions | None = None,
+                  **changes) -> RegimeShares:
+    """The share of the state space whose motion is in each contact regime, for every mesh
+    at every value of a basin sweep (:func:`~jaxgear.basin_sweep`: for example the share of
+    the starts that end in double-sided impacts against the backlash).
+
+    At each value, the :func:`gear_views` of the attractors present there (from the
+    sweep's stroboscopic points: a cycle's points, a point of an aperiodic attractor's
+    cloud) give each one's regime per mesh; a regime's share is the sum of the shares of
+    its attractors. ``params``: the sweep's base parameters (each value is set on them as
+    the sweep did); ``gear_set``, ``meshes``, ``options``: as in :func:`gear_view`. The
+    programs are compiled once for all values (the parameters are arguments of them).
+    """
+    from .sweep import BasinSweep
+    from .sweep._values import apply_values
+
+    if not isinstance(sweep, BasinSweep):
+        raise ValueError(f"sweep={type(sweep).__name__} must be a jaxgear.BasinSweep (from jaxgear.basin_sweep); "
+                         "the map of two parameters is not supported.")
+    values = np.asarray(sweep.values, dtype=float)
+    names: tuple[str, ...] = ()
+    shares = None
+    for i, v in enumerate(values):
+        p = apply_values(params, tuple(sweep.fields), np.full(len(sweep.fields), v))
+        present = np.flatnonzero(np.asarray(sweep.present[i]))
+        attractors = []
+        for g in present:
+            k = int(sweep.period[i, g])
+            pts = np.asarray(sweep.points[i, g, : max(int(sweep.n_points[i, g]), 1)], dtype=float)
+            attractors.append(Attractor(id=int(g), period=k, points=pts, section_points=np.zeros((0, pts.shape[1])),
+                                        kind=int(sweep.attractor_type[i, g])))
+        views = gear_views(system, p, attractors, gear_set, meshes=meshes, options=options, **changes)
+        if shares is None and views:
+            names = tuple(m.name for m in views[0].meshes)
+            shares = np.zeros((len(values), len(names), len(ContactRegime)))
+        for g, view in zip(present, views):
+            for j, m in enumerate(view.meshes):
+                shares[i, j, int(m.regime)] += float(sweep.shares[i, g])
+    if shares is None:  # no attractor at any value
+        layout = _layout(system, params, np.zeros(system.dim), meshes)
+        names = layout.names
+        shares = np.zeros((len(values), len(names), len(ContactRegime)))
+    no_attractor = np.asarray(sweep.sink_share, float) + np.asarray(sweep.unresolved_share, float)
+    return RegimeShares(param=sweep.param, values=values, meshes=names, shares=shares, no_attractor=no_attractor)

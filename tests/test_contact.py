@@ -316,3 +316,52 @@ def test_the_figure_shades_the_contact_states_the_view_counted(p2_view):
     np.testing.assert_allclose([s[1][1] for s in stems], m.amplitudes)
     with pytest.raises(ValueError, match="must be a jaxgear.GearView"):
         plot_gear_view("view", SPUR, P2_PARAMS)
+
+
+@pytest.mark.slow  # about 20 s: a basin sweep of two values
+def test_regime_shares_across_a_sweep_partition_the_state_space():
+    """Over an excitation sweep of the spur pair: at a small excitation the mesh keeps
+    contact from every start (the linear oscillator's amplitude 0.014 is below the static
+    deflection 0.1: closed form, see the first test), at the P-2's excitation every motion
+    hits the back flank (the P-2 is the event-counted double-sided motion); each value's
+    regimes and the cells on no attractor add to 1; a map is refused."""
+    grid = jg.CellGrid.box([(-1.0, 1.5), (-2.0, 2.0)], (6, 6), names=("x", "v"))
+    sweep = jg.basin_sweep(SPUR, P2_PARAMS, "e_amp", [0.01, 0.3], grid, progress=False, uncertainty=0)
+    rs = jg.regime_shares(sweep, SPUR, P2_PARAMS, meshes=MeshSpec(force=spur_force, static_force=0.1))
+    assert rs.meshes == ("mesh 1",) and rs.param == "e_amp"
+    np.testing.assert_allclose(rs.shares.sum(axis=2)[:, 0] + rs.no_attractor, 1.0, atol=1e-12)
+    assert rs.share("mesh 1", ContactRegime.NO_IMPACT)[0] == pytest.approx(1.0)
+    p2 = [g for g in range(sweep.n_attractors) if sweep.period[1, g] == 2]
+    assert p2 and rs.share("mesh 1", ContactRegime.DOUBLE_SIDED)[1] >= float(sweep.shares[1, p2[0]]) > 0
+    assert set(rs.summary()) >= {"param", "values", "meshes", "regimes", "shares", "no_attractor"}
+    from jaxgear.plotting import plot_regime_shares
+
+    fig = plot_regime_shares(rs)
+    assert len(fig.axes) == 1
+    with pytest.raises(ValueError, match="must be a jaxgear.BasinSweep"):
+        jg.regime_shares("sweep", SPUR, P2_PARAMS)
+
+
+@pytest.mark.slow  # about a minute: two values of the gear model, one chaotic
+def test_sweep_command_prints_and_keeps_the_regime_shares(tmp_path, capsys):
+    """``jaxgear sweep --kind basins`` over the backlash of the gear model: at b = 2 the
+    chaotic motion hits the ring-planet back flanks, at b = 5 (the paper's P-4 and P-8)
+    the ring-planet mesh rattles without; summary.json holds the table and regimes.png
+    is drawn."""
+    import json
+
+    from jaxgear.cli import main
+
+    out = tmp_path / "out"
+    rc = main(["sweep", "--kind", "basins", "--param", "b", "--values", "2:5:2", "--grid", "3,2,3",
+               "--uncertainty-samples", "0", "--quiet", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "share of the cells in each contact regime" in text
+    reg = json.loads((out / "summary.json").read_text())["contact_regimes"]
+    ring = reg["meshes"].index("ring-planet")
+    shares = np.asarray(reg["shares"])[:, ring]
+    assert reg["values"] == [2.0, 5.0]
+    assert shares[0, int(ContactRegime.DOUBLE_SIDED)] > 0.5  # chaotic rattle with back-flank impacts
+    assert shares[1, int(ContactRegime.SINGLE_SIDED)] == pytest.approx(1.0 - reg["no_attractor"][1])
+    assert (out / "regimes.png").exists()

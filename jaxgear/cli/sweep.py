@@ -45,7 +45,7 @@ from .common import (
 KINDS = ("bifurcation", "basins", "continuation")
 
 OWNED = ("bifurcation.nc", "basins.nc", "basin_map.nc", "branch.nc", "summary.json", "bifurcation.png",
-         "bifurcation_x3.png", "shares.png", "basin_map.png", "basin_map_shares.png", "branch.png")
+         "bifurcation_x3.png", "shares.png", "regimes.png", "basin_map.png", "basin_map_shares.png", "branch.png")
 """Files ``jaxgear sweep`` writes into ``--out`` (replaced as a whole by the next run; the
 resume state ``parts/`` and ``manifest.json`` is kept)."""
 
@@ -536,14 +536,14 @@ def _sweep(args, plan: _Plan, work: Path, head: str, t0: float) -> list[str]:
         print(head + f", {len(_starts(args, plan.user))} starts, direction {args.direction}")
         result = _diagram(args, plan, progress=not args.quiet)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
-        name, figs = "bifurcation.nc", _report_diagram(args, plan, result)
+        name, figs, extra = "bifurcation.nc", _report_diagram(args, plan, result), {}
     else:
         print(head + f", {args.method} on {plan.grid.n_cells} cells per value")
         result = _basins(args, plan, progress=not args.quiet)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
-        name, figs = _report_basins(args, plan, result)
+        name, figs, extra = _report_basins(args, plan, result)
     result.save(work / name)
-    summary = result.summary()
+    summary = {**result.summary(), **extra}
     summary["runtime_s"] = time.perf_counter() - t0  # in summary.json only, never in the result file
     write_json(summary, work / "summary.json", indent=1)
     for fname, fig in figs.items():
@@ -567,26 +567,50 @@ def _report_diagram(args, plan: _Plan, result) -> dict:
     return {"bifurcation.png": plot_bifurcation(result, plan.system.state_names[0])}  # the system's first coordinate
 
 
-def _report_basins(args, plan: _Plan, result) -> tuple[str, dict]:
-    """Print the basin sweep's (or map's) tables; its file name and figures."""
+def _report_basins(args, plan: _Plan, result) -> tuple[str, dict, dict]:
+    """Print the basin sweep's (or map's) tables; its file name, figures and what the
+    summary adds (the contact regimes' shares)."""
     if plan.values2 is not None:
         print(with_uncertainty_line(result.table(), result, "points"))
         if args.no_figures:
-            return "basin_map.nc", {}
+            return "basin_map.nc", {}, {}
         from ..plotting import plot_basin_map
 
         return "basin_map.nc", {"basin_map.png": plot_basin_map(result),
-                                "basin_map_shares.png": plot_basin_map(result, "all")}
+                                "basin_map_shares.png": plot_basin_map(result, "all")}, {}
     print(result.shares_table())
     print()
     print(with_uncertainty_line(result.table(), result))
     if shares_uncertainty_line(result):
         print(shares_uncertainty_line(result))
+    regimes = _regimes(plan, result)
+    extra = {} if regimes is None else {"contact_regimes": regimes.summary()}
     if args.no_figures:
-        return "basins.nc", {}
-    from ..plotting import plot_basin_shares
+        return "basins.nc", {}, extra
+    from ..plotting import plot_basin_shares, plot_regime_shares
 
-    return "basins.nc", {"shares.png": plot_basin_shares(result)}
+    figs = {"shares.png": plot_basin_shares(result)}
+    if regimes is not None:
+        figs["regimes.png"] = plot_regime_shares(regimes)
+    return "basins.nc", figs, extra
+
+
+def _regimes(plan: _Plan, result):
+    """Print the share of the cells in each contact regime per mesh and value
+    (:func:`jaxgear.regime_shares`); ``None`` (nothing printed) for a system without
+    meshes."""
+    from .._contact import regime_shares
+
+    if plan.system.switching is None:
+        return None
+    try:
+        regimes = regime_shares(result, plan.system, plan.params)
+    except ValueError as exc:  # a user system whose switching functions are not meshes
+        print(f"\ncontact regimes not shown: {exc}")
+        return None
+    print("\nshare of the cells in each contact regime (jaxgear.regime_shares):")
+    print(regimes.table())
+    return regimes
 
 
 def _continuation(args, plan: _Plan, out: Path, head: str) -> list[str]:

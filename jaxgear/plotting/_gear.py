@@ -9,7 +9,7 @@ from .._contact import GearView, _layout, _switching_at
 from .._poincare import sample_trajectory
 from ._style import attractor_color, new_figure
 
-__all__ = ["plot_gear_view"]
+__all__ = ["plot_gear_view", "plot_regime_shares"]
 
 GAP_COLOR = "#fdd49e"
 BACK_COLOR = "#d7301f"
@@ -70,4 +70,34 @@ def plot_gear_view(view: GearView, system, params, *, periods: int | None = None
     axes[-1][0].set_xlabel("time [forcing periods]")
     axes[0][0].legend(fontsize="small", loc="upper right", ncols=2)
     fig.suptitle(f"attractor {view.attractor_id} ({view.label})", fontsize="medium")
+    return fig
+
+
+REGIME_COLORS = ("#2ca02c", "#ff7f0e", "#d62728")
+"""No impact, single-sided impact, double-sided impact."""
+
+
+def plot_regime_shares(shares):
+    """The share of the state space in each contact regime against the swept parameter, one
+    panel per mesh (a :class:`~jaxgear.RegimeShares` of :func:`~jaxgear.regime_shares`):
+    stacked no impact, single-sided and double-sided impact, and the cells on no attractor
+    in grey. Returns a Figure."""
+    from .._contact import ContactRegime, RegimeShares
+    from ._style import SINK_COLOR
+
+    if not isinstance(shares, RegimeShares):
+        raise ValueError(f"shares={type(shares).__name__} must be a jaxgear.RegimeShares (from jaxgear.regime_shares).")
+    n = len(shares.meshes)
+    fig = new_figure(figsize=(6.0, 2.4 * n + 0.6), layout="constrained")
+    axes = fig.subplots(n, 1, squeeze=False, sharex=True)[:, 0]
+    x = np.asarray(shares.values)
+    for ax, j, name in zip(axes, range(n), shares.meshes):
+        ys = [shares.shares[:, j, int(r)] for r in ContactRegime] + [shares.no_attractor]
+        ax.stackplot(x, ys, labels=[r.text for r in ContactRegime] + ["no attractor"],
+                     colors=[*REGIME_COLORS, SINK_COLOR], step=None)
+        ax.set_ylim(0, 1)
+        ax.set_ylabel("share of the cells")
+        ax.set_title(name, fontsize="medium")
+    axes[-1].set_xlabel(shares.param)
+    axes[0].legend(fontsize="small", loc="upper right")
     return fig
