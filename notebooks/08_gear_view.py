@@ -17,7 +17,7 @@
 #    newtons: contact regime, dynamic transmission error, dynamic factor;
 # 2. one figure per attractor: the transmission error with the gap and back-flank contact
 #    shaded, and its spectrum in orders of the mesh frequency and in Hz;
-# 3. a backlash sweep in micrometres: the share of the state space whose motion keeps
+# 3. a sweep of the half backlash in micrometres: the share of the state space whose motion keeps
 #    contact, rattles (single-sided impacts) or hits the back flanks.
 #
 # `FULL = False` runs a tiny grid and three backlash values (about a minute on two idle
@@ -88,7 +88,7 @@ for view in views:
 # %% [markdown]
 # ## 3. Backlash in micrometres: where the teeth start to hit the back flanks
 #
-# The paper preset has 50 um of backlash on both meshes (half backlash `b = 5` in units
+# The paper preset has a half backlash of 50 um on both meshes (`b = 5` in units
 # of `b_c` = 10 um). Each value below changes the physical gear set
 # (`paper_gear_set(b_sp=..., b_rp=...)`), converts it again, analyses the grid and takes
 # the gear view of every attractor; the share of the state space in each contact regime
@@ -111,7 +111,7 @@ assert np.allclose(shares.sum(axis=1), 1.0)  # every cell is counted once
 fig, ax = plt.subplots(figsize=(6, 3.5), layout="constrained")
 ax.stackplot(backlash_um, shares.T, labels=[r.text for r in regimes] + ["no attractor"],
              colors=["#2ca02c", "#ff7f0e", "#d62728", "#d9d9d9"])
-ax.set_xlabel("backlash [um] (both meshes)")
+ax.set_xlabel("half backlash [um] (both meshes)")
 ax.set_ylabel("share of the state space")
 ax.set_title("ring-planet mesh: contact regime of the motion each start ends on", fontsize="medium")
 ax.legend(fontsize="small", loc="lower right")
