@@ -293,9 +293,13 @@ def test_kill_and_resume_bifurcation(tmp_path, monkeypatch, direction):
     assert sorted(computed) == values[2 * B:].tolist()  # every unfinished value once, no finished one again
     _assert_same_file(tmp_path / "full" / "bifurcation.nc", tmp_path / "run" / "bifurcation.nc")
     np.testing.assert_array_equal(resumed.points, full.points)
-    computed.clear()  # a finished sweep: nothing is computed again
-    bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+    computed.clear()  # a finished sweep: nothing is computed again, its exponents neither
+    with monkeypatch.context() as m:
+        m.setattr(bifurcation_module, "aperiodic_types", lambda *a, **k: pytest.fail("exponents computed again"))
+        again = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
     assert computed == []
+    np.testing.assert_array_equal(again.points, full.points)
+    np.testing.assert_array_equal(again.largest_exponent, full.largest_exponent)
     # the same folder with another setting: a clear error, or a restart
     with pytest.raises(ValueError, match="transient"):
         bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **dict(kw, transient=31))

@@ -390,6 +390,10 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                     tol=float(opts.tol), merge_tol=float(opts.merge_tol), escape_bound=float(opts.escape_bound),
                     block_values=blocks, version=__version__)
     ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
+    done = None if restart else _finished(out, param, vals, X0, dirs, params_to_dict(params),
+                                          SequenceSettings(options=opts, integrator=integrator))
+    if done is not None:  # the same diagram, already whole in out: nothing is recomputed
+        return done
     run = _Run(system, params, (param,), vals, X0, opts, integrator)
     points = _record_passes(run, passes, dirs, blocks, ck, progress, f"sweep {param}")
     period = classify_sequences(points, opts.max_period, float(opts.tol), float(opts.escape_bound))
@@ -404,6 +408,23 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     if out is not None and save and cell_processes()[0] == 0:  # one process writes
         diagram.save(Path(out) / "bifurcation.nc")
     return diagram
+
+
+def _finished(out, param, values, starts, directions, params: dict, settings: SequenceSettings):
+    """The diagram saved as ``out/bifurcation.nc`` when it is the one these arguments ask
+    for (same parameter, values, starts, directions, base parameters and settings; the
+    checkpoint already refused a folder of other settings), else ``None``."""
+    if out is None or not (Path(out) / "bifurcation.nc").is_file():
+        return None
+    from .._io import load
+
+    try:
+        d = load(Path(out) / "bifurcation.nc", expected="BifurcationDiagram")
+    except (OSError, ValueError):  # unreadable or of another kind: computed again and replaced
+        return None
+    same = (d.param == param and np.array_equal(d.values, values) and np.array_equal(d.starts, starts)
+            and tuple(d.directions) == tuple(directions) and d.params == params and d.settings == settings)
+    return d if same else None
 
 
 def _check_diagram(system, params, param, values, x0s, integrator, restart, save):
