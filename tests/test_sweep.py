@@ -676,3 +676,36 @@ def test_cli_sweep_killed_and_restarted(tmp_path):
     assert subprocess.run(cmd(run), cwd=ROOT, capture_output=True, timeout=600).returncode == 0
     assert all((run / "parts" / n).stat().st_mtime_ns == t for n, t in stamps.items())  # not recomputed
     _assert_same_file(tmp_path / "full" / "bifurcation.nc", run / "bifurcation.nc")
+
+
+def test_kill_and_resume_parameter_map(tmp_path, monkeypatch):
+    """A parameter map killed after two blocks resumes from its parts: every unfinished
+    grid point computed once, no finished one again, and the file equals that of an
+    uninterrupted run; the same folder with another setting is refused, naming it."""
+    from jaxgear.sweep import _parameter_map as map_module
+
+    p = jg.DuffingParams(**DUFF, omega=1.0)
+    kw = dict(transient=30, record=17, integrator=jg.RK4(32), max_period=8, chunk_size=4, progress=False)
+    args = (jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 4), "gamma", [0.2, 0.3, 0.4], [[0.0, 0.0], [2.0, 0.0]])
+    full = parameter_map(*args, out=tmp_path / "full", **kw)
+    with monkeypatch.context() as m:
+        _interrupt_after(m, 2)
+        with pytest.raises(_Kill):
+            parameter_map(*args, out=tmp_path / "run", **kw)
+    assert len(list((tmp_path / "run" / "parts").glob("*.npz"))) == 2
+    B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_points"]
+    assert B == 2  # (4 lanes, 2 starts) six blocks of two points
+    seen = []
+    real = map_module.independent_points
+
+    def counting(system, params, names, V, *a, **k):
+        seen.extend(map(tuple, np.asarray(V).tolist()))
+        return real(system, params, names, V, *a, **k)
+
+    monkeypatch.setattr(map_module, "independent_points", counting)
+    resumed = parameter_map(*args, out=tmp_path / "run", **kw)
+    assert len(seen) == 12 - 2 * B  # every unfinished point once, no finished one again
+    _assert_same_file(tmp_path / "full" / "parameter_map.nc", tmp_path / "run" / "parameter_map.nc")
+    np.testing.assert_array_equal(resumed.period, full.period)
+    with pytest.raises(ValueError, match="transient"):
+        parameter_map(*args, out=tmp_path / "run", **dict(kw, transient=31))
