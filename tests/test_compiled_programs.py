@@ -4,6 +4,7 @@ the programs that differ in what they compute (the label uncertainty's halved st
 its one pool of start moves)."""
 
 import numpy as np
+import pytest
 
 import jaxgear as jg
 from tests.conftest import count_compilations
@@ -30,3 +31,21 @@ def test_the_extra_measures_add_only_the_programs_that_differ():
     # one pool with the halved step, one pool for every start move: not a program per move
     assert len(extra) <= 2, extra
     assert u.samples == 32 and len(u.start_fractions) == 4
+
+
+@pytest.mark.slow  # about 10 s: two pools of 10,000 cells
+def test_the_pilot_and_the_tail_of_the_main_pool_are_one_program(monkeypatch):
+    """On 10,000 cells the main pool (9,216 lanes) drains into a pool of the pilot's 1,024
+    lanes over the same queue shape: two pool programs in all (a ladder ending on 1,152
+    lanes would compile a third), and the labels do not depend on it (those of a pool
+    that never shrinks)."""
+    from jaxgear.analysis import _pool
+
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (100, 100), names=("x", "v"))
+    method = jg.Direct(integrator=jg.RK4(44))  # a step count no other test compiles
+    with count_compilations("_run_one") as programs:
+        r = jg.analyze_global(jg.DUFFING, PARAMS, grid, method=method, progress=False, uncertainty=0)
+    assert len(programs) == 2, programs
+    monkeypatch.setattr(_pool, "_next_pool", lambda L: L)
+    q = jg.analyze_global(jg.DUFFING, PARAMS, grid, method=method, progress=False, uncertainty=0)
+    np.testing.assert_array_equal(q.labels, r.labels)

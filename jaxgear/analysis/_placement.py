@@ -78,13 +78,15 @@ class OneDevice:
     def __init__(self, device=None):
         self.device = device
 
-    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, attractors: AttractorTable):
+    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, attractors: AttractorTable,
+              queue: int = 0):
         """The pool over the one queue block ``X (n, dim)`` (rows ``(n,)``), padded to
-        :func:`queue_length`, starting from the attractor tables ``attractors``, and the
-        arrays it reads."""
+        :func:`queue_length` (or to ``queue`` when longer: the shape of another pool whose
+        compiled program this one shares), starting from the attractor tables
+        ``attractors``, and the arrays it reads."""
         (X,), (Xrow,) = X_blocks, row_blocks
         self.n_real = len(X)
-        n = queue_length(len(X))
+        n = max(queue_length(len(X)), int(queue))
         data = put((params, boxes, pad_rows(X, n), pad_rows(Xrow, n), np.int32(len(X))), self.device)
         return _init_one(L, M, data[2], data[3], data[4], data[1], put(attractors, self.device)), data
 
@@ -154,13 +156,15 @@ class DeviceMesh:
     def __init__(self, mesh):
         self.mesh = mesh
 
-    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, attractors: AttractorTable):
+    def start(self, params, boxes, X_blocks, row_blocks, L: int, M: int, attractors: AttractorTable,
+              queue: int = 0):
         """The pools over the blocks ``[X (n_d, dim)]`` (rows ``[(n_d,)]``), padded to one
-        shape (:func:`queue_length` of the longest) with copies of each block's first entry
-        (never taken into a lane), each starting from the attractor tables ``attractors``."""
+        shape (:func:`queue_length` of the longest, or ``queue`` when longer) with copies of
+        each block's first entry (never taken into a lane), each starting from the
+        attractor tables ``attractors``."""
         D = len(X_blocks)
         n_real = np.array([len(b) for b in X_blocks], np.int32)
-        n = queue_length(int(n_real.max()))
+        n = max(queue_length(int(n_real.max())), int(queue))
         split, rep = NamedSharding(self.mesh, P(BATCH)), NamedSharding(self.mesh, P())
 
         def padded(blocks):

@@ -47,18 +47,24 @@ is one more compiled shape)."""
 
 
 def _next_pool(L: int) -> int:
-    """The pool size the lanes move to once they fit (``L`` itself: no smaller pool)."""
-    return max(TAIL_LANES, L // SHRINK) if L > 2 * TAIL_LANES else L
+    """The pool size the lanes move to once they fit (``L`` itself: no smaller pool): the
+    ladder ends on :data:`TAIL_LANES`, the pilot's size, so that a value's pilot and the
+    tail of its main pool are one compiled program."""
+    if L <= TAIL_LANES:
+        return L
+    return L // SHRINK if L // SHRINK >= 2 * TAIL_LANES else TAIL_LANES
 
 
 def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: PoolOptions, boxes,
-          attractors: AttractorTable, bar) -> list[tuple]:
+          attractors: AttractorTable, bar, queue: int = 0) -> list[tuple]:
     """Run the pools of ``placement`` over the queue blocks ``X_blocks`` (one per device;
     value rows ``row_blocks``) from the attractor tables ``attractors`` until every state
-    is decided: ``[(labels, used, attractor tables)]`` per block (numpy)."""
+    is decided: ``[(labels, used, attractor tables)]`` per block (numpy). ``queue``: pad
+    the queue to at least this length (the shape of the pool that follows, whose tail
+    then shares this pool's compiled program)."""
     n = np.array([len(b) for b in X_blocks])
     s, data = placement.start(params, boxes, X_blocks, row_blocks, min(o.lanes, queue_length(int(n.max()))),
-                              o.max_period, attractors)
+                              o.max_period, attractors, queue=queue)
     done, rounds, compiled = 0, 4, o.compiled()
     while True:
         L = s.Y.shape[-1]
@@ -139,8 +145,9 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         o_phase = dataclasses.replace(o, lanes=min(o.lanes, queue_length(max(len(p) for p in parts))))
         run = functools.partial(drive, system=system, params=params, integrator=integrator, o=o_phase, boxes=boxes,
                                 attractors=tables, bar=bar)
-        if phase == 0:  # the pilot, on the first device
-            lab, use, tables = run(OneDevice(), [Xp], [rows])[0]
+        if phase == 0:  # the pilot, on the first device, in the queue shape of the main pool (its tail's program)
+            rest = sum(len(order) - n_p for order, n_p in zip(orders, n_ps))
+            lab, use, tables = run(OneDevice(), [Xp], [rows], queue=queue_length(rest) if rest else 0)[0]
         else:  # one pool per device over a block of the queue, the attractors merged
             lab, use, tables = run_blocks(run, Xp, rows, tables, o.merge_tol,
                                           None if boxes is None else boxes.partition)
