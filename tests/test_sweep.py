@@ -709,3 +709,26 @@ def test_kill_and_resume_parameter_map(tmp_path, monkeypatch):
     np.testing.assert_array_equal(resumed.period, full.period)
     with pytest.raises(ValueError, match="transient"):
         parameter_map(*args, out=tmp_path / "run", **dict(kw, transient=31))
+
+
+def test_a_matched_attractor_keeps_its_decided_type_where_the_test_cannot_decide():
+    """Along a sweep an attractor left undetermined at a value takes the type decided for
+    it at the nearest value (the earlier on a tie); one never decided stays undetermined,
+    and a decided type is never replaced."""
+    from jaxgear import AttractorType as T
+    from jaxgear.sweep._classify import carry_decided_types
+
+    C, Q, U, P, X = (int(T.CHAOTIC), int(T.QUASI_PERIODIC), int(T.UNDETERMINED), int(T.PERIODIC), int(T.UNKNOWN))
+    kind = np.array([[C, Q, U, X],
+                     [U, U, U, X],
+                     [U, C, U, P],
+                     [C, U, U, X]])
+    got = carry_decided_types(kind)
+    want = np.array([[C, Q, U, X],
+                     [C, Q, U, X],
+                     [C, C, U, P],
+                     [C, C, U, X]])  # attractor 1 at value 1: values 0 (Q) and 2 (C) are as near: the earlier
+    np.testing.assert_array_equal(got, want)
+    tie = carry_decided_types(np.array([[Q], [U], [C]]))
+    assert tie[1, 0] == Q  # the earlier of two equally near values
+    np.testing.assert_array_equal(carry_decided_types(kind)[kind != U], kind[kind != U])

@@ -44,7 +44,7 @@ from ..analysis import (
 from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._bifurcation import read_only
 from ._checkpoint import open_shared_checkpoint
-from ._classify import type_label
+from ._classify import carry_decided_types, type_label
 from ._options import BasinOptions
 from ._values import check_values, coord_name, sorted_values
 
@@ -231,7 +231,9 @@ class BasinSweep(GlobalShares):
             value (0 where it does not exist); sink_share, unresolved_share: ``(V,)``.
         period: ``(V, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
         attractor_type: ``(V, G)`` its type there (an :class:`~jaxgear.AttractorType` value:
-            periodic 0, quasi-periodic 1, chaotic 2; -1 where absent or unknown).
+            periodic 0, quasi-periodic 1, chaotic 2, undetermined 3; -1 where absent or
+            unknown); where the test left it undetermined, the type decided for the same
+            attractor at the nearest value (:func:`~jaxgear.sweep._classify.carry_decided_types`).
         largest_exponent, exponent_error: ``(V, G)`` its largest Lyapunov exponent of the
             stroboscopic map per forcing period and the exponent's standard error (NaN
             where absent or not measured, and in older files).
@@ -605,6 +607,7 @@ def _assemble_basins(results, param: str, values, grid, method, options: BasinOp
     """The :class:`BasinSweep` of the analyses ``results`` at ``values`` of ``param``, their
     attractors matched from value to value (``options.match_tol`` resolved)."""
     arrays = global_arrays(results, match_across_values(results, options.match_tol), grid, system.dim)
+    arrays["attractor_type"] = carry_decided_types(arrays["attractor_type"])
     return BasinSweep(param=param, fields=tuple(param_targets(params, param)), values=values, **arrays, grid=grid,
                       method=method, match_tol=float(options.match_tol), uncertainty_samples=options.uncertainty,
                       system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),

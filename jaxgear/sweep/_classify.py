@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._lyapunov import attractor_label
+from .._lyapunov import AttractorType, attractor_label
 from .._matching import pairwise_hausdorff
 from ..analysis import detect_period
 
@@ -79,3 +79,22 @@ def label_order(label: str):
     if label.startswith("P-"):
         return (0, int(label[2:]))
     return (1, _APERIODIC_ORDER[label]) if label in _APERIODIC_ORDER else (2, 0)
+
+
+def carry_decided_types(kind: np.ndarray) -> np.ndarray:
+    """The types ``(V, G)`` (:class:`~jaxgear.AttractorType` values) of the globally matched
+    attractors of a sweep, where one the test left ``UNDETERMINED`` at a value takes the
+    type the test decided for the same attractor at the nearest value (the earlier one on
+    a tie); one never decided stays undetermined. A matched attractor keeps its type
+    along the sweep unless the test says otherwise (its exponent and error stay as
+    measured at every value)."""
+    kind = np.asarray(kind)
+    out = kind.copy()
+    und = int(AttractorType.UNDETERMINED)
+    decided = np.isin(kind, [int(AttractorType.PERIODIC), int(AttractorType.QUASI_PERIODIC),
+                             int(AttractorType.CHAOTIC)])
+    for v, g in zip(*np.nonzero(kind == und)):
+        at = np.flatnonzero(decided[:, g])
+        if len(at):
+            out[v, g] = kind[at[np.argmin(np.abs(at - v) * 2 + (at > v))], g]  # nearest, the earlier on a tie
+    return out
