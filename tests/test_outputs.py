@@ -176,6 +176,8 @@ def _state(out: Path, kind: str):
     if not files:
         return None
     if kind == "analyze":
+        views = {f for f in files if f.startswith("gear_view_")}  # one per attractor, checked below
+        files = sorted(set(files) - views)
         assert set(files) in ({"result.nc", "summary.json"},
                               {"result.nc", "summary.json", "domains.png", "shares.png", "domains_3d.png",
                                "attractors.png"}, {"result.nc", "summary.json", "domains.png", "shares.png",
@@ -184,6 +186,7 @@ def _state(out: Path, kind: str):
         s = json.loads((out / "summary.json").read_text())
         counts = tuple(r.grid.counts)
         assert tuple(s["grid"]["counts"]) == counts
+        assert views == {f"gear_view_{a['id']}.nc" for a in s["attractors"]}, (views, files)  # of this run only
         assert ("domains.png" in files) == (counts == (4, 2, 3)), (files, counts)  # the new run draws figures
         return counts
     assert set(files) in ({"bifurcation.nc", "summary.json"},), files

@@ -32,7 +32,7 @@ from .common import (
 )
 
 OWNED = ("result.nc", "summary.json", "compare.json", "domains.png", "shares.png", "domains_3d.png",
-         "attractors.png", "basin_measures.png")
+         "attractors.png", "basin_measures.png", "gear_view_*.nc")
 """Files ``jaxgear analyze`` writes into ``--out`` (replaced as a whole by the next run)."""
 
 
