@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._batching import SMALL_BATCH, power_of_two_at_least
+from ._batching import SMALL_BATCH, pad_rows, power_of_two_at_least
 from ._checks import check_int, check_number, with_changes
 from ._codec import array_field, custom_field, items_field, result_type
 from ._format import format_table
@@ -450,16 +450,11 @@ class _Stretch:
     force_end: np.ndarray | None
 
 
-def _padded(n: int, least: int = SMALL_BATCH) -> int:
-    """Rows of a batch of the gear view: a power of two, at least ``least`` (the cycles'
-    samples and the contact changes of every attractor share the compiled programs of the
-    analysis's section points, :data:`~jaxgear._batching.SMALL_BATCH`)."""
-    return power_of_two_at_least(n, least)
-
-
-def _pad_rows(a: np.ndarray, size: int) -> np.ndarray:
-    """``a`` with its first row repeated to ``size`` rows (padding lanes stay finite)."""
-    return np.concatenate([a, np.repeat(a[:1], size - len(a), axis=0)]) if size > len(a) else a
+def _small_batch(X: np.ndarray) -> np.ndarray:
+    """The starts ``X (n, dim)`` padded to the analysis's small batches
+    (:data:`~jaxgear._batching.SMALL_BATCH`): the cycles' samples share the compiled
+    program of the section points."""
+    return pad_rows(X, power_of_two_at_least(len(X), SMALL_BATCH))
 
 
 def _stretches(system, params, layout: _Layout, stepper, n_iter: int,
@@ -472,8 +467,8 @@ def _stretches(system, params, layout: _Layout, stepper, n_iter: int,
     T_all = np.concatenate([ts for ts, _, _ in pieces])
     X_all = np.concatenate([xs for _, xs, _ in pieces])
     n_all = len(T_all)
-    rows = _padded(n_all, 256)
-    Tp, Xp = jnp.asarray(_pad_rows(T_all, rows)), jnp.asarray(_pad_rows(X_all, rows))
+    rows = power_of_two_at_least(n_all, 256)
+    Tp, Xp = jnp.asarray(pad_rows(T_all, rows)), jnp.asarray(pad_rows(X_all, rows))
     S_all = np.asarray(_switching_at(system, params, Tp, Xp))[:n_all]
     if not np.all(np.isfinite(S_all)):
         raise ValueError(f"{system.name}: the trajectory from the attractor's point is not finite (it blew up); "
@@ -492,8 +487,8 @@ def _stretches(system, params, layout: _Layout, stepper, n_iter: int,
     tau_all = np.zeros(0)
     if len(jj):
         n = len(jj)
-        size = _padded(n)
-        jp, wp = _pad_rows(jj, size), _pad_rows(ww, size)
+        size = power_of_two_at_least(n, SMALL_BATCH)  # the section points' shapes: one bisection program
+        jp, wp = pad_rows(jj, size), pad_rows(ww, size)
         H = T_all[jp + 1] - T_all[jp]
         tau_all = np.asarray(locate_sign_changes(system, stepper, n_iter, params, jnp.asarray(T_all[jp]),
                                                  jnp.asarray(X_all[jp]).T, jnp.asarray(H),
@@ -634,7 +629,7 @@ def gear_views(system: ForcedSystem, params, attractors, gear_set: GearSet | Non
         # one period from every point of every cycle, one batch; a cycle's stretch is its k
         # periods end to end (each ends on the next point to the cycle's residual)
         X = np.concatenate([starts[i] for i in cyc])
-        ts, xs = sample_trajectory(system, params, _pad_rows(X, _padded(len(X))), periods=1,
+        ts, xs = sample_trajectory(system, params, _small_batch(X), periods=1,
                                    samples_per_period=s, integrator=integrator)
         ts, xs = np.asarray(ts), np.asarray(xs)
         T = float(ts[-1] - ts[0])
@@ -649,7 +644,7 @@ def gear_views(system: ForcedSystem, params, attractors, gear_set: GearSet | Non
     if aper:
         X = np.stack([starts[i][0] for i in aper])
         for _ in range(opts.stretches):
-            ts, xs = sample_trajectory(system, params, _pad_rows(X, _padded(len(X))), periods=opts.stretch_periods,
+            ts, xs = sample_trajectory(system, params, _small_batch(X), periods=opts.stretch_periods,
                                        samples_per_period=s, integrator=integrator)
             ts, xs = np.asarray(ts), np.asarray(xs)
             for r, i in enumerate(aper):

@@ -89,31 +89,25 @@ for view in views:
 # ## 3. Backlash in micrometres: where the teeth start to hit the back flanks
 #
 # The paper preset has a half backlash of 50 um on both meshes (`b = 5` in units
-# of `b_c` = 10 um). Each value below changes the physical gear set
-# (`paper_gear_set(b_sp=..., b_rp=...)`), converts it again, analyses the grid and takes
-# the gear view of every attractor; the share of the state space in each contact regime
-# of the ring-planet mesh is the sum of the shares of the attractors in that regime.
+# of `b_c` = 10 um). Each value in micrometres goes through the physical gear set
+# (`paper_gear_set(b_sp=..., b_rp=...)`) to the dimensionless `b` it means; a basin sweep
+# over those values analyses the grid at each, and `regime_shares` takes the gear view of
+# every attractor found: the share of the state space in each contact regime is the sum of
+# the shares of the attractors in that regime.
 
 # %%
-regimes = list(ContactRegime)
-shares = np.zeros((len(backlash_um), len(regimes) + 1))  # + the cells on no attractor (sink, unresolved)
-for i, um in enumerate(backlash_um):
-    gs = jg.paper_gear_set(b_sp=float(um), b_rp=float(um))
-    p = gs.to_params()
-    r = jg.analyze_global(REDUCED, p, grid, progress=False, uncertainty=0)
-    for a, v in zip(r.attractors, jg.gear_views(REDUCED, p, r.attractors, gs)):
-        shares[i, regimes.index(v.mesh("ring-planet").regime)] += a.share
-    shares[i, -1] = (r.n_sink + r.n_unresolved) / r.n_cells
-    print(f"{um:5.1f} um: " + ", ".join(f"{reg.text} {100 * s:5.1f} %" for reg, s in zip(regimes, shares[i]))
-          + f", on no attractor {100 * shares[i, -1]:.1f} %   ({', '.join(a.label for a in r.attractors)})")
-assert np.allclose(shares.sum(axis=1), 1.0)  # every cell is counted once
+b_values = [float(jg.paper_gear_set(b_sp=float(um), b_rp=float(um)).to_params().b_sp) for um in backlash_um]
+sweep = jg.basin_sweep(REDUCED, params, "b", b_values, grid, progress=False, uncertainty=0)
+regimes = jg.regime_shares(sweep, REDUCED, params, gear_set)
+ring = regimes.meshes.index("ring-planet")
+for um, b, row, rest in zip(backlash_um, b_values, regimes.shares[:, ring], regimes.no_attractor):
+    print(f"{um:5.1f} um (b = {b:g}): " + ", ".join(f"{r.text} {100 * s:5.1f} %" for r, s in zip(ContactRegime, row))
+          + f", on no attractor {100 * rest:.1f} %")
+assert np.allclose(regimes.shares.sum(axis=2) + regimes.no_attractor[:, None], 1.0)  # every cell counted once
+assert regimes.shares[0, ring, ContactRegime.DOUBLE_SIDED] > 0.5  # the chaotic motion at 20 um hits the back flanks
+assert regimes.shares[-1, ring, ContactRegime.SINGLE_SIDED] > 0.5  # the paper's P-4 and P-8 rattle
 
-fig, ax = plt.subplots(figsize=(6, 3.5), layout="constrained")
-ax.stackplot(backlash_um, shares.T, labels=[r.text for r in regimes] + ["no attractor"],
-             colors=["#2ca02c", "#ff7f0e", "#d62728", "#d9d9d9"])
-ax.set_xlabel("half backlash [um] (both meshes)")
-ax.set_ylabel("share of the state space")
-ax.set_title("ring-planet mesh: contact regime of the motion each start ends on", fontsize="medium")
-ax.legend(fontsize="small", loc="lower right")
+fig = plotting.plot_regime_shares(regimes)
+fig.axes[-1].set_xlabel("half backlash b (units of b_c = 10 um)")
 display(fig)
 plt.close(fig)

@@ -337,7 +337,14 @@ def test_regime_shares_across_a_sweep_partition_the_state_space():
     from jaxgear.plotting import plot_regime_shares
 
     fig = plot_regime_shares(rs)
-    assert len(fig.axes) == 1
+    (ax,) = fig.axes
+    bands = ax.collections  # stacked: no impact, single-sided, double-sided, no attractor
+    assert len(bands) == 4
+    top = np.cumsum(np.concatenate([rs.shares[:, 0], rs.no_attractor[:, None]], axis=1), axis=1)  # (V, 4)
+    for j, band in enumerate(bands):
+        verts = np.concatenate([path.vertices for path in band.get_paths()])
+        for x, y in zip(rs.values, top[:, j]):  # each band's upper edge passes through its cumulative share
+            assert np.any(np.isclose(verts[:, 0], x) & np.isclose(verts[:, 1], y)), (j, x, y)
     with pytest.raises(ValueError, match="must be a jaxgear.BasinSweep"):
         jg.regime_shares("sweep", SPUR, P2_PARAMS)
 
