@@ -66,11 +66,21 @@ def _plain(markdown: str) -> str:
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("site")
-    env = dict(os.environ, NO_MKDOCS_2_WARNING="1")  # keep the log to the build itself
+    return _build_site(tmp_path_factory.mktemp("site"))
+
+
+def _build_site(out: Path, config: Path | None = None, execute: bool = False) -> Path:
+    """``mkdocs build --strict`` into ``out`` (with ``config`` instead of mkdocs.yml);
+    the notebooks are rendered without running them unless ``execute``."""
+    env = dict(os.environ, NO_MKDOCS_2_WARNING="1",  # keep the log to the build itself
+               JAXGEAR_DOCS_EXECUTE="true" if execute else "false",
+               # a notebook's kernel imports this checkout, with strict dtype promotion as every test
+               PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+               JAX_NUMPY_DTYPE_PROMOTION="strict")
     proc = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600,
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)]
+        + (["--config-file", str(config)] if config else []),
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=1200,
     )
     log = proc.stdout + proc.stderr
     if proc.returncode != 0:
@@ -86,6 +96,63 @@ def test_site_builds_in_strict_mode(site):
                  "howto/cli/index.html", "api/global-analysis/index.html", "benchmarks/index.html"):
         assert (site / page).is_file(), page
     assert (site / "domains.png").is_file()
+
+
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+
+
+def _notebook_page(site: Path, notebook: Path) -> Path:
+    return site / "notebooks" / notebook.stem / "index.html"
+
+
+def test_every_notebook_is_a_page_of_the_site(site):
+    """Each notebook is rendered (its first heading and its code), listed in the navigation,
+    and downloadable; its paired script is not copied into the site."""
+    import nbformat
+
+    nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    assert NOTEBOOKS
+    for nb_path in NOTEBOOKS:
+        nb = nbformat.read(nb_path, as_version=4)
+        page = _notebook_page(site, nb_path)
+        assert page.is_file(), f"{nb_path.name} has no page"
+        text = _page_text(page)
+        title = next(c.source for c in nb.cells if c.cell_type == "markdown").splitlines()[0].lstrip("# ")
+        code = " ".join(next(c.source for c in nb.cells if c.cell_type == "code").splitlines()[0].split())
+        assert title in text and code in text, nb_path.name
+        assert f"notebooks/{nb_path.name}" in nav, f"{nb_path.name} is missing from the navigation"
+        assert (page.parent / nb_path.name).is_file(), "no download of the notebook"
+    assert not list((site / "notebooks").rglob("*.py")), "the paired scripts are not pages"
+
+
+@pytest.mark.slow  # runs one notebook (about 1 min on two cores); the slow tier also runs each notebook itself
+def test_the_site_shows_a_notebooks_outputs(tmp_path):
+    """Built as published (JAXGEAR_DOCS_EXECUTE unset: true), a notebook's page holds what
+    its cells printed and drew. One notebook is run here; the configuration inherits
+    mkdocs.yml and leaves only the others unexecuted."""
+    shown = ROOT / "notebooks" / "04_custom_gear_set.ipynb"
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_constructor("!ENV", lambda loader, node: loader.construct_sequence(node)[-1])  # its default
+    plugins = yaml.load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"), Loader)["plugins"]
+    options = next(p["mkdocs-jupyter"] for p in plugins if isinstance(p, dict) and "mkdocs-jupyter" in p)
+    assert options["execute"] is True, "the published site runs the notebooks"
+    # INHERIT replaces a plugin's options whole: all of mkdocs.yml's, and the others not run
+    options = dict(options, execute_ignore=[f"*/{p.name}" for p in NOTEBOOKS if p != shown])
+    config = tmp_path / "mkdocs.yml"
+    config.write_text(yaml.safe_dump({"INHERIT": str(ROOT / "mkdocs.yml"), "docs_dir": str(DOCS),
+                                      "plugins": {"mkdocs-jupyter": options}}), encoding="utf-8")
+    site = _build_site(tmp_path / "site", config, execute=True)
+    figure, printed = re.compile(r'<img [^>]*src="data:image/png;base64'), "phases per planet: ["
+    raw = _notebook_page(site, shown).read_text(encoding="utf-8")
+    assert figure.search(raw), "no figure in the rendered notebook"
+    assert printed in _page_text(_notebook_page(site, shown)), "no printed output in the rendered notebook"
+    unexecuted = _notebook_page(site, NOTEBOOKS[0]).read_text(encoding="utf-8")
+    assert not figure.search(unexecuted)  # the others were left unexecuted
+    assert not (ROOT / ".cache").exists(), "the build wrote into the repository"
 
 
 def test_api_page_shows_the_docstring(site):
