@@ -18,6 +18,9 @@ ratios hold on a busy machine too:
   compilation cache (``jaxgear.enable_compilation_cache()``; the import apart);
 - what the extra measures (label uncertainty, uncertainty exponent, exponents, basin
   entropy) add, as a share of the analysis without them;
+- what the gear view of every attractor (contact regimes, transmission error, mesh forces,
+  spectra in physical units: ``jaxgear.gear_views``, as ``jaxgear analyze`` prints it)
+  adds, warm, as a share of the analysis;
 - a 10-value basin sweep over the backlash on the paper grid, per value;
 - (``--cold``) the README's first command, ``jaxgear analyze``, with empty caches.
 """
@@ -121,6 +124,14 @@ def main(argv=None) -> None:
     extra = (t_unc - t_plain) / t_plain
     rows.append(("extra measures / analysis without them", extra, None, "<= 25 %", ""))
     print(f"extra measures: {extra:.0%} of the analysis without them (goal <= 25 %)", flush=True)
+
+    result = jg.analyze_global(progress=False, uncertainty=0)
+    views = lambda: jg.gear_views(jg.REDUCED, jg.paper_params(), result.attractors, jg.paper_gear_set())  # noqa: E731
+    views()  # compiles its programs
+    t_views = min(_timed(views) for _ in range(3))
+    rows.append(("gear view of every attractor / analysis", t_views / t_unc, None, "within the quarter", ""))
+    print(f"gear view of the {len(result.attractors)} attractors: {t_views:.2f} s = {t_views / t_unc:.0%} of the "
+          "analysis", flush=True)
 
     if not args.no_sweep:
         values = np.linspace(1.0, 3.0, 10)

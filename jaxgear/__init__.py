@@ -103,6 +103,8 @@ from .analysis import (
     uncertainty_exponent as uncertainty_exponent,
     UncertaintyExponent as UncertaintyExponent,
     uncertain_fraction as uncertain_fraction,
+    scaling_range as scaling_range,
+    ScalingRange as ScalingRange,
 )
 from .shooting import (
     periodic_orbit as periodic_orbit,
@@ -146,6 +148,8 @@ from .sweep import (
     ParameterMap as ParameterMap,
     SweepDirection as SweepDirection,
     MapQuantity as MapQuantity,
+    SweepAxis as SweepAxis,
+    sweep_axis as sweep_axis,
 )
 from .design import (
     design as design,
@@ -171,6 +175,7 @@ from ._contact import (
     gear_views as gear_views,
     regime_shares as regime_shares,
     RegimeShares as RegimeShares,
+    RegimeMap as RegimeMap,
     GearView as GearView,
     MeshView as MeshView,
     ContactRegime as ContactRegime,

@@ -53,7 +53,7 @@ from .design import mesh_forces
 from .integrate import DEFAULT_STEPS_PER_PERIOD, AbstractIntegrator, KinkAwareRK4, integrator_from_dict
 
 __all__ = ["ContactRegime", "MeshSpec", "GearViewOptions", "MeshView", "GearView", "gear_view", "gear_views",
-           "RegimeShares", "regime_shares"]
+           "RegimeShares", "RegimeMap", "regime_shares"]
 
 
 class ContactRegime(enum.IntEnum):
@@ -786,11 +786,12 @@ def _mesh_views(layout: _Layout, parts: list[_Stretch], *, periodic: bool, k: in
 # ----------------------------------------------------------------------- across a sweep
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class RegimeShares:
-    """Result of :func:`regime_shares`: at every value of a basin sweep, the share of the
+    """Result of :func:`regime_shares` for a basin sweep: at every value, the share of the
     state space (of the grid's cells) whose motion is in each contact regime, mesh by mesh.
 
     Attributes:
-        param: the swept parameter; values: ``(V,)`` its values.
+        param: the swept parameter; values: ``(V,)`` its values; label: its axis label
+            (with the unit of a physical sweep, ``"b [µm, half]"``).
         meshes: the meshes' names.
         shares: ``(V, n_meshes, 3)`` the share of the cells whose attractor's mesh is in
             regime ``r`` (:class:`ContactRegime` order: no impact, single-sided,
@@ -803,68 +804,147 @@ class RegimeShares:
     meshes: tuple[str, ...]
     shares: np.ndarray
     no_attractor: np.ndarray
+    label: str = ""
 
     def share(self, mesh: str, regime: ContactRegime) -> np.ndarray:
         """``(V,)`` the share of the cells in ``regime`` on ``mesh``."""
-        if mesh not in self.meshes:
-            raise ValueError(f"mesh {mesh!r}: the meshes are {', '.join(self.meshes)}.")
-        return self.shares[:, self.meshes.index(mesh), int(ContactRegime(regime))]
+        return self.shares[..., _mesh_index(self.meshes, mesh), int(ContactRegime(regime))]
 
     def table(self) -> str:
         """One row per value and mesh: the share in each regime (%)."""
         rows = [(f"{v:.6g}", name, *(f"{100 * s:.2f}" for s in self.shares[i, j]), f"{100 * self.no_attractor[i]:.2f}")
                 for i, v in enumerate(self.values) for j, name in enumerate(self.meshes)]
-        return format_table(rows, (self.param, "mesh", *(f"{r.text} %" for r in ContactRegime), "no attractor %"))
+        return format_table(rows, (self.label or self.param, "mesh", *(f"{r.text} %" for r in ContactRegime),
+                                   "no attractor %"))
 
     def summary(self) -> dict[str, Any]:
         """JSON-able description."""
-        return dict(param=self.param, values=np.asarray(self.values).tolist(), meshes=list(self.meshes),
-                    regimes=[r.text for r in ContactRegime], shares=np.asarray(self.shares).tolist(),
-                    no_attractor=np.asarray(self.no_attractor).tolist())
+        return dict(param=self.param, label=self.label or self.param, values=np.asarray(self.values).tolist(),
+                    meshes=list(self.meshes), regimes=[r.text for r in ContactRegime],
+                    shares=np.asarray(self.shares).tolist(), no_attractor=np.asarray(self.no_attractor).tolist())
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RegimeMap:
+    """Result of :func:`regime_shares` for a basin map (:func:`~jaxgear.basin_map`): at
+    every point of the grid of two parameters, the share of the state space in each
+    contact regime, mesh by mesh, and the regime of the attractor with the largest basin.
+
+    Attributes:
+        param_x, values_x ``(nx,)``, param_y, values_y ``(ny,)``: the parameters;
+        label_x, label_y: their axis labels (with units for physical parameters).
+        meshes: the meshes' names.
+        shares: ``(ny, nx, n_meshes, 3)`` the share of the cells whose attractor's mesh is
+            in each regime (:class:`ContactRegime` order); with ``no_attractor`` a point's
+            shares of one mesh add to 1.
+        no_attractor: ``(ny, nx)`` the share of the cells on no attractor.
+        dominant_regime: ``(ny, nx, n_meshes)`` the regime code of the map's
+            :attr:`~jaxgear.BasinMap.dominant` attractor on each mesh; -1 where the sink
+            or the unresolved cells hold more than any attractor.
+    """
+
+    param_x: str
+    values_x: np.ndarray
+    param_y: str
+    values_y: np.ndarray
+    label_x: str = ""
+    label_y: str = ""
+    meshes: tuple[str, ...]
+    shares: np.ndarray
+    no_attractor: np.ndarray
+    dominant_regime: np.ndarray
+
+    def share(self, mesh: str, regime: ContactRegime) -> np.ndarray:
+        """``(ny, nx)`` the share of the cells in ``regime`` on ``mesh``."""
+        return self.shares[..., _mesh_index(self.meshes, mesh), int(ContactRegime(regime))]
+
+    def table(self) -> str:
+        """One row per mesh and regime: at how many points the dominant attractor is in it,
+        and the least, mean and largest share of the cells in it over the map (%)."""
+        rows = []
+        n = self.no_attractor.size
+        for j, name in enumerate(self.meshes):
+            for r in ContactRegime:
+                s = self.shares[..., j, int(r)]
+                rows.append((name, r.text, f"{int((self.dominant_regime[..., j] == int(r)).sum())}/{n}",
+                             f"{100 * s.min():.1f}", f"{100 * s.mean():.1f}", f"{100 * s.max():.1f}"))
+        return format_table(rows, ("mesh", "regime", "dominant at", "min %", "mean %", "max %"))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able description (arrays as nested lists, ``[iy][ix][mesh][regime]``)."""
+        return dict(param_x=self.param_x, label_x=self.label_x or self.param_x,
+                    values_x=np.asarray(self.values_x).tolist(), param_y=self.param_y,
+                    label_y=self.label_y or self.param_y, values_y=np.asarray(self.values_y).tolist(),
+                    meshes=list(self.meshes), regimes=[r.text for r in ContactRegime],
+                    shares=np.asarray(self.shares).tolist(), no_attractor=np.asarray(self.no_attractor).tolist(),
+                    dominant_regime=np.asarray(self.dominant_regime).tolist())
+
+
+def _mesh_index(meshes, mesh: str) -> int:
+    if mesh not in meshes:
+        raise ValueError(f"mesh {mesh!r}: the meshes are {', '.join(meshes)}.")
+    return list(meshes).index(mesh)
 
 
 def regime_shares(sweep, system: ForcedSystem, params, gear_set: GearSet | None = None, *,
                   meshes: MeshSpec | None = None, options: GearViewOptions | None = None,
-                  **changes) -> RegimeShares:
+                  **changes) -> RegimeShares | RegimeMap:
     """The share of the state space whose motion is in each contact regime, for every mesh
     at every value of a basin sweep (:func:`~jaxgear.basin_sweep`: for example the share of
-    the starts that end in double-sided impacts against the backlash).
+    the starts that end in double-sided impacts against the backlash), or at every point
+    of a basin map (:func:`~jaxgear.basin_map`, a :class:`RegimeMap`).
 
-    At each value, the :func:`gear_views` of the attractors present there (from the
-    sweep's stroboscopic points: a cycle's points, a point of an aperiodic attractor's
-    cloud) give each one's regime per mesh; a regime's share is the sum of the shares of
-    its attractors. ``params``: the sweep's base parameters (each value is set on them as
-    the sweep did); ``gear_set``, ``meshes``, ``options``: as in :func:`gear_view`. The
-    programs are compiled once for all values (the parameters are arguments of them).
+    At each value (point), the :func:`gear_views` of the attractors present there (from
+    the result's stroboscopic points: a cycle's points, a point of an aperiodic
+    attractor's cloud) give each one's regime per mesh; a regime's share is the sum of the
+    shares of its attractors. ``params``: the sweep's base parameters (each value's
+    dimensionless fields, ``field_values``, are set on them as the sweep did);
+    ``gear_set``, ``meshes``, ``options``: as in :func:`gear_view`. The programs are
+    compiled once for all values (the parameters are arguments of them).
     """
-    from .sweep import BasinSweep
+    from .sweep import BasinMap, BasinSweep
     from .sweep._values import apply_values
 
-    if not isinstance(sweep, BasinSweep):
-        raise ValueError(f"sweep={type(sweep).__name__} must be a jaxgear.BasinSweep (from jaxgear.basin_sweep); "
-                         "the map of two parameters is not supported.")
-    values = np.asarray(sweep.values, dtype=float)
-    names: tuple[str, ...] = ()
-    shares = None
-    for i, v in enumerate(values):
-        p = apply_values(params, tuple(sweep.fields), np.full(len(sweep.fields), v))
-        present = np.flatnonzero(np.asarray(sweep.present[i]))
+    if isinstance(sweep, BasinSweep):
+        names, rows = tuple(sweep.fields), np.asarray(sweep.field_values, dtype=float)
+    elif isinstance(sweep, BasinMap):
+        names = tuple(sweep.fields_x) + tuple(sweep.fields_y)
+        rows = sweep.point_rows().reshape(-1, len(names))
+    else:
+        raise ValueError(f"sweep={type(sweep).__name__} must be a jaxgear.BasinSweep or jaxgear.BasinMap (from "
+                         "jaxgear.basin_sweep or jaxgear.basin_map).")
+    lead = np.shape(sweep.sink_share)
+    G = sweep.n_attractors
+    flat = lambda a: np.asarray(a).reshape(-1, *np.shape(a)[len(lead):])  # noqa: E731
+    present, period, points, n_points, kind, share = (flat(a) for a in (
+        sweep.present, sweep.period, sweep.points, sweep.n_points, sweep.attractor_type, sweep.shares))
+    names_m, regime = None, None  # regime: (n, G, n_meshes) code of each attractor on each mesh, -1 absent
+    for i, row in enumerate(rows):
+        p = apply_values(params, names, row)
+        here = np.flatnonzero(present[i])
         attractors = []
-        for g in present:
-            k = int(sweep.period[i, g])
-            pts = np.asarray(sweep.points[i, g, : max(int(sweep.n_points[i, g]), 1)], dtype=float)
-            attractors.append(Attractor(id=int(g), period=k, points=pts, section_points=np.zeros((0, pts.shape[1])),
-                                        kind=int(sweep.attractor_type[i, g])))
+        for g in here:
+            pts = np.asarray(points[i, g, : max(int(n_points[i, g]), 1)], dtype=float)
+            attractors.append(Attractor(id=int(g), period=int(period[i, g]), points=pts,
+                                        section_points=np.zeros((0, pts.shape[1])), kind=int(kind[i, g])))
         views = gear_views(system, p, attractors, gear_set, meshes=meshes, options=options, **changes)
-        if shares is None and views:
-            names = tuple(m.name for m in views[0].meshes)
-            shares = np.zeros((len(values), len(names), len(ContactRegime)))
-        for g, view in zip(present, views):
-            for j, m in enumerate(view.meshes):
-                shares[i, j, int(m.regime)] += float(sweep.shares[i, g])
-    if shares is None:  # no attractor at any value
-        layout = _layout(system, params, np.zeros(system.dim), meshes)
-        names = layout.names
-        shares = np.zeros((len(values), len(names), len(ContactRegime)))
+        if regime is None and views:
+            names_m = tuple(m.name for m in views[0].meshes)
+            regime = np.full((len(rows), G, len(names_m)), -1, dtype=np.int64)
+        for g, view in zip(here, views):
+            regime[i, g] = [int(m.regime) for m in view.meshes]
+    if regime is None:  # no attractor anywhere
+        names_m = _layout(system, params, np.zeros(system.dim), meshes).names
+        regime = np.full((len(rows), G, len(names_m)), -1, dtype=np.int64)
+    onehot = regime[..., None] == np.arange(len(ContactRegime))  # (n, G, M, 3)
+    shares = np.einsum("ng,ngmr->nmr", share, onehot.astype(float)).reshape(*lead, len(names_m), len(ContactRegime))
     no_attractor = np.asarray(sweep.sink_share, float) + np.asarray(sweep.unresolved_share, float)
-    return RegimeShares(param=sweep.param, values=values, meshes=names, shares=shares, no_attractor=no_attractor)
+    if isinstance(sweep, BasinSweep):
+        return RegimeShares(param=sweep.param, values=np.asarray(sweep.values, dtype=float), meshes=names_m,
+                            shares=shares, no_attractor=no_attractor, label=sweep.axis_label)
+    dom = np.asarray(sweep.dominant).reshape(-1)
+    top = np.where(dom[:, None] >= 0, regime[np.arange(len(dom)), np.maximum(dom, 0)], -1)
+    label_x, label_y = sweep.axis_labels
+    return RegimeMap(param_x=sweep.param_x, values_x=np.asarray(sweep.values_x, float), param_y=sweep.param_y,
+                     values_y=np.asarray(sweep.values_y, float), label_x=label_x, label_y=label_y, meshes=names_m,
+                     shares=shares, no_attractor=no_attractor, dominant_regime=top.reshape(*lead, len(names_m)))

@@ -461,7 +461,8 @@ def _entropy_by_definition(labels: np.ndarray, box: int) -> tuple[float, float]:
 def test_basin_measures_of_an_analysis_and_their_figure(duffing_result):
     """The analysis's basin entropies equal those of its labels counted box by box from the
     definition; the figure draws the stored uncertain fractions at the stored start moves
-    and, for fractions that follow a power law, the fit line of slope alpha through them."""
+    and, for fractions that follow a power law, the fit line of slope alpha through them
+    over the scaling range only, the points outside it apart."""
     from jaxgear.plotting import plot_basin_measures
 
     r = duffing_result
@@ -478,19 +479,50 @@ def test_basin_measures_of_an_analysis_and_their_figure(duffing_result):
     assert S_bb3 > S_b3 > 0
     assert (e3.S_b, e3.S_bb) == (pytest.approx(S_b3, rel=1e-12), pytest.approx(S_bb3, rel=1e-12))
     u = jaxgear.with_label_uncertainty(r, DUFFING, DuffingParams(**DUFF), METHOD, 64).uncertainty
-    assert len(u.perturbations) == 4 and u.perturbations[0] == u.perturbation and u.start_fractions[0] == u.start
+    assert len(u.perturbations) == 6 and u.perturbations[0] == u.perturbation and u.start_fractions[0] == u.start
+    assert np.allclose(np.asarray(u.perturbations) / u.perturbation, 10.0 ** -np.arange(6), rtol=1e-12)
     assert all(0.0 <= f <= 1.0 for f in u.start_fractions)
-    fig = plot_basin_measures(dataclasses.replace(r, uncertainty=u))
-    (points,) = fig.axes[0].containers
-    keep = np.asarray(u.start_fractions) > 0
-    assert keep.any()
-    np.testing.assert_allclose(points.lines[0].get_xdata(), np.asarray(u.perturbations)[keep])
-    np.testing.assert_allclose(points.lines[0].get_ydata(), np.asarray(u.start_fractions)[keep])
-    # fractions on a power law 0.2 eps^0.5, with that exponent: the fit line has slope 0.5 through them
+    # 64 cells of a smooth boundary: too few uncertain ones at moves of 1e-8 to 1e-3 cell
+    assert np.isnan(u.alpha) and u.alpha_range is None and u.alpha_reason.startswith("no scaling range")
     eps = np.asarray(u.perturbations)
-    law = dataclasses.replace(u, start_fractions=tuple(0.2 * eps**0.5), alpha=0.5, alpha_error=0.01)
+    # fractions on a power law 0.2 eps^0.5 below 1e-4 cell and flat above, with the exponent
+    # and the range of such data: the fit line has slope 0.5 through the points of the range
+    # (filled), the two flat ones drawn apart (open)
+    f = np.minimum(0.2 * eps**0.5, 0.2 * 1e-4**0.5)
+    law = dataclasses.replace(u, start_fractions=tuple(f), alpha=0.5, alpha_error=0.01, alpha_range=(1e-8, 1e-4),
+                              alpha_chi2=0.0, alpha_reason=None)
     fig = plot_basin_measures(dataclasses.replace(r, uncertainty=law))
+    inside, outside = fig.axes[0].containers
+    assert inside.lines[0].get_markerfacecolor() != "none" and outside.lines[0].get_markerfacecolor() == "none"
+    np.testing.assert_allclose(sorted(inside.lines[0].get_xdata()), eps[eps <= 1e-4 * 1.001][::-1])
+    np.testing.assert_allclose(sorted(outside.lines[0].get_xdata()), eps[eps > 1e-4 * 1.001][::-1])
     fit = next(line for line in fig.axes[0].get_lines() if line.get_label().startswith("fit"))
     x, y = np.asarray(fit.get_xdata()), np.asarray(fit.get_ydata())
+    assert x.min() == pytest.approx(1e-8) and x.max() == pytest.approx(1e-4)  # over the range only
     np.testing.assert_allclose(np.diff(np.log(y)) / np.diff(np.log(x)), 0.5, rtol=1e-12)
     np.testing.assert_allclose(y, 0.2 * x**0.5, rtol=1e-12)
+    # no scaling range: every fraction above zero drawn open, no fit line
+    fig = plot_basin_measures(dataclasses.replace(r, uncertainty=dataclasses.replace(law, alpha=np.nan,
+                                                                                       alpha_range=None)))
+    (points,) = fig.axes[0].containers
+    assert points.lines[0].get_markerfacecolor() == "none" and len(points.lines[0].get_xdata()) == 6
+    assert not [line for line in fig.axes[0].get_lines() if line.get_label().startswith("fit")]
+
+
+@pytest.mark.slow  # about 50 s of CPU on 2 cores (16,384 cells analysed, then 8 x 16,384 lanes relabelled)
+def test_a_smooth_basin_boundary_has_uncertainty_exponent_one():
+    """The unforced damped double-well Duffing: two wells, their basins bounded by the
+    stable manifolds of the saddle, smooth curves, so alpha = 1 (Grebogi et al. 1983).
+    Every cell of a 128 x 128 grid is sampled (alpha = 1 needs about 10^4 samples for
+    counts over three decades) with start moves up to 10 cells (1e-4 to 10 cells): the
+    exponent over its scaling range is within 3 errors of 1."""
+    from jaxgear.analysis import label_uncertainty
+
+    p = DuffingParams(delta=0.25, alpha=-1.0, beta=1.0, gamma=0.0, omega=1.0)
+    grid = jaxgear.CellGrid.box([DUFF_BOX, DUFF_BOX], (128, 128))
+    method = jaxgear.Direct(integrator=RK4(16))
+    r = jaxgear.analyze_global(DUFFING, p, grid, method, progress=False, uncertainty=0)
+    assert sorted(a.label for a in r.attractors) == ["P-1", "P-1"] and r.n_sink == r.n_unresolved == 0
+    u = label_uncertainty(DUFFING, p, grid, r.labels, r.attractors, method, samples=grid.n_cells, perturbation=10.0)
+    assert u.alpha_reason is None and u.alpha_range[1] >= 999 * u.alpha_range[0], u
+    assert abs(u.alpha - 1.0) <= 3 * u.alpha_error and u.alpha_error < 0.2, u

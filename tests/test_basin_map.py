@@ -285,6 +285,11 @@ def test_cli(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())  # the per-point arrays, NaN as null
     for f in ("shares", "multiplier", "sink_share", "unresolved_share", "uncertainty_step", "uncertainty_start"):
         np.testing.assert_array_equal(np.array(summary[f], dtype=float), getattr(m, f), err_msg=f)
+    regimes = summary["contact_regimes"]  # the gear views of every point: regime shares per mesh, and the figure
+    assert np.shape(regimes["shares"]) == (2, 2, 2, 3) and np.shape(regimes["dominant_regime"]) == (2, 2, 2)
+    np.testing.assert_allclose(np.sum(regimes["shares"], axis=-1) + np.asarray(regimes["no_attractor"])[..., None],
+                               1.0, atol=1e-12)
+    assert (out / "regimes.png").is_file() and "dominant at" in text
     assert main(["sweep", "--param", "b", "--values", "4:5:2", "--param2", "b_sp", "--values2", "4:5:2",
                  "--kind", "basins", "--out", str(tmp_path / "x")]) == 2
     assert "same field" in capsys.readouterr().err

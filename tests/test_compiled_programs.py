@@ -30,7 +30,7 @@ def test_the_extra_measures_add_only_the_programs_that_differ():
         u = _analyze(32).uncertainty
     # one pool with the halved step, one pool for every start move: not a program per move
     assert len(extra) <= 2, extra
-    assert u.samples == 32 and len(u.start_fractions) == 4
+    assert u.samples == 32 and len(u.start_fractions) == 6
 
 
 @pytest.mark.slow  # about 10 s: two pools of 10,000 cells

@@ -372,3 +372,76 @@ def test_sweep_command_prints_and_keeps_the_regime_shares(tmp_path, capsys):
     assert shares[0, int(ContactRegime.DOUBLE_SIDED)] > 0.5  # chaotic rattle with back-flank impacts
     assert shares[1, int(ContactRegime.SINGLE_SIDED)] == pytest.approx(1.0 - reg["no_attractor"][1])
     assert (out / "regimes.png").exists()
+
+
+def _synthetic_map():
+    """A basin map of the spur mesh over ``e_amp x b`` (2 x 2 points) written by hand: the
+    P-2 of the double-sided motion everywhere, and a P-1 from a point near the static
+    deflection at two of the points, with shares that leave some cells on no attractor;
+    at b = 0.1 the motions hit the back flank, at b = 5 they stay in the gap (so each
+    point's regimes depend on its own parameters)."""
+    grid = jg.CellGrid.box([(-1.0, 1.5), (-2.0, 2.0)], (2, 2), names=("x", "v"))
+    vx, vy = np.array([0.25, 0.3]), np.array([0.1, 5.0])  # at b = 5 the orbits are in the gap
+    pts = np.full((2, 2, 2, 2, 2), np.nan)
+    pts[:, :, 0] = P2_POINTS
+    pts[:, :, 1, 0] = [0.2, 0.0]
+    period = np.array([[[2, 1], [2, -1]], [[2, -1], [2, 1]]])
+    n_points = np.where(period > 0, period, 0)
+    shares = np.where(period > 0, np.array([[[0.5, 0.25], [0.75, 0.0]], [[1.0, 0.0], [0.25, 0.5]]]), 0.0)
+    rest = 1.0 - shares.sum(axis=-1)
+    return jg.BasinMap(param_x="e_amp", fields_x=("e_amp",), values_x=vx, param_y="b", fields_y=("b",), values_y=vy,
+                       shares=shares, sink_share=rest, unresolved_share=np.zeros((2, 2)), period=period, points=pts,
+                       n_points=n_points, labels=np.zeros((2, 2, 2, 2), dtype=np.int16), grid=grid, method=jg.Direct(),
+                       system="spur-mesh", state_names=("x", "v"))
+
+
+def test_regime_map_is_each_points_gear_views():
+    """On a basin map (here written by hand), every point's regime shares are those of the
+    gear views of that point's attractors at that point's parameters (computed here with
+    gear_views and with_param, not through the map), the regime of the dominant attractor
+    is that attractor's, and the figure draws both panels per mesh."""
+    bmap = _synthetic_map()
+    spec = MeshSpec(force=spur_force, static_force=0.1)
+    rm = jg.regime_shares(bmap, SPUR, P2_PARAMS, meshes=spec)
+    assert isinstance(rm, jg.RegimeMap) and rm.meshes == ("mesh 1",) and rm.shares.shape == (2, 2, 1, 3)
+    for iy, b in enumerate(bmap.values_y):
+        for ix, e in enumerate(bmap.values_x):
+            p = jg.with_param(jg.with_param(P2_PARAMS, "e_amp", e), "b", b)
+            here = [g for g in range(2) if bmap.period[iy, ix, g] > 0]
+            views = jg.gear_views(SPUR, p, [attractor(bmap.points[iy, ix, g, : bmap.period[iy, ix, g]],
+                                                      int(bmap.period[iy, ix, g]), id=g) for g in here], meshes=spec)
+            expect = np.zeros(3)
+            for g, v in zip(here, views):
+                expect[int(v.meshes[0].regime)] += bmap.shares[iy, ix, g]
+            np.testing.assert_allclose(rm.shares[iy, ix, 0], expect, atol=1e-15, err_msg=f"point {iy}, {ix}")
+            dom = int(bmap.dominant[iy, ix])
+            assert rm.dominant_regime[iy, ix, 0] == int(views[here.index(dom)].meshes[0].regime)
+    np.testing.assert_allclose(rm.shares.sum(axis=-1)[..., 0] + rm.no_attractor, 1.0, atol=1e-12)
+    assert set(rm.summary()) >= {"values_x", "values_y", "shares", "no_attractor", "dominant_regime"}
+    assert "dominant at" in rm.table()
+    from jaxgear.plotting import plot_regime_map
+
+    fig = plot_regime_map(rm)
+    left, right = fig.axes[0], fig.axes[1]
+    np.testing.assert_array_equal(left.collections[0].get_array().reshape(2, 2), rm.dominant_regime[..., 0] + 1)
+    np.testing.assert_allclose(right.collections[0].get_array().reshape(2, 2),
+                               100 * rm.share("mesh 1", ContactRegime.DOUBLE_SIDED))
+    assert left.get_xlabel() == "e_amp" and left.get_ylabel() == "b"
+    with pytest.raises(ValueError, match="must be a jaxgear.RegimeMap"):
+        plot_regime_map(rm.summary())
+
+
+@pytest.mark.slow  # about 30 s: a 2 x 2 basin map and a basin sweep of the spur mesh
+def test_regime_map_row_is_the_regime_shares_of_a_basin_sweep():
+    """A row of a real basin map is a basin sweep: its regime shares equal regime_shares of
+    the basin sweep over the same values at the row's parameter."""
+    grid = jg.CellGrid.box([(-1.0, 1.5), (-2.0, 2.0)], (6, 6), names=("x", "v"))
+    spec = MeshSpec(force=spur_force, static_force=0.1)
+    bmap = jg.basin_map(SPUR, P2_PARAMS, "e_amp", [0.01, 0.3], "zeta", [0.05, 0.06], grid, progress=False,
+                        uncertainty=0)
+    rm = jg.regime_shares(bmap, SPUR, P2_PARAMS, meshes=spec)
+    sweep = jg.basin_sweep(SPUR, jg.with_param(P2_PARAMS, "zeta", 0.06), "e_amp", [0.01, 0.3], grid, progress=False,
+                           uncertainty=0)
+    rs = jg.regime_shares(sweep, SPUR, jg.with_param(P2_PARAMS, "zeta", 0.06), meshes=spec)
+    np.testing.assert_allclose(rm.shares[1], rs.shares, atol=1e-12)
+    np.testing.assert_allclose(rm.no_attractor[1], rs.no_attractor, atol=1e-12)

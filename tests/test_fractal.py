@@ -13,7 +13,7 @@ import pytest
 from scipy.stats import binom
 
 import jaxgear as jg
-from jaxgear.analysis._fractal import LOG2, basin_entropy, uncertain_fraction, uncertainty_exponent
+from jaxgear.analysis._fractal import LOG2, basin_entropy, scaling_range, uncertain_fraction, uncertainty_exponent
 
 
 def _h(p):
@@ -123,6 +123,49 @@ def test_newton_basins_are_fractal():
     # the Julia set of z -> z - (z^3 - 1)/(3 z^2) has box dimension ~1.42: alpha ~ 0.6
     assert u.alpha + 3 * u.alpha_err < 0.9
     assert 0.3 < u.alpha
+
+
+def test_the_scaling_range_leaves_out_the_saturated_fractions():
+    """f = min(c eps^a, f_sat) counted on n samples (binomial), eps one a decade from 1e-8
+    to 1: the range is the power law's, 1e-8 to 1e-3 (the three saturated points left
+    out), with alpha within 3 errors of a and a consistent fit; a fit of every point
+    misses a by many errors. (A bend that the counting errors hide, f_sat reached between
+    two points, can be taken into the range; here f saturates at a point.)"""
+    a, c, n = 0.3, 0.8, 4000
+    eps = 10.0 ** np.arange(-8, 1)
+    truth = np.minimum(c * eps**a, c * 1e-3**a)  # saturated from eps = 1e-3
+    for seed in range(5):
+        f = np.random.default_rng(seed).binomial(n, truth) / n
+        r = scaling_range(eps, f, n)
+        assert r.reason is None and (r.eps_min, r.eps_max) == (1e-8, 1e-3), (seed, r)
+        np.testing.assert_array_equal(r.used, eps <= 1e-3)
+        assert abs(r.alpha - a) <= 3 * r.alpha_err and r.alpha_err < 0.02, (seed, r)
+        assert r.reduced_chi2 <= jg.analysis._fractal.MAX_REDUCED_CHI2
+        assert r.fit.alpha == r.alpha and r.fit.reduced_chi2 == r.reduced_chi2
+        every = uncertainty_exponent(eps, f, n_samples=n)
+        assert abs(every.alpha - a) > 3 * every.alpha_err  # what the range avoids
+    # the order of the points does not matter
+    back = scaling_range(eps[::-1], f[::-1], n)
+    assert back.alpha == pytest.approx(r.alpha, rel=1e-12) and np.array_equal(back.used, r.used[::-1])
+
+
+def test_no_power_law_gives_no_scaling_range():
+    """A flat f (saturated everywhere), too few fractions above zero, and an f that jumps
+    up and down give no exponent (NaN) and the reason."""
+    eps = 10.0 ** np.arange(-8, 1)
+    n = 4000
+    flat = np.random.default_rng(0).binomial(n, np.full(len(eps), 0.2)) / n
+    few = np.array([0, 0, 0, 0, 0, 0, 0.01, 0.1, 0.2])  # three above zero
+    gap = np.array([0.001, 0.002, 0.004, 0, 0.01, 0.02, 0.05, 0.1, 0.2])  # runs of 3 and 5 (over 4 decades)
+    zigzag = np.tile([0.01, 0.2], 5)[:9]
+    for f, why in ((flat, "does not rise"), (few, "fewer than 4"), (zigzag, "fits a power law")):
+        r = scaling_range(eps, f, n)
+        assert np.isnan(r.alpha) and np.isnan(r.alpha_err) and np.isnan(r.eps_min) and not r.used.any(), r
+        assert r.fit is None and r.reason.startswith("no scaling range: ") and why in r.reason, r.reason
+    r = scaling_range(eps, gap, n)  # the run after the zero, 1e-4 to 1
+    assert (r.eps_min, r.eps_max) == (1e-4, 1.0) and r.reason is None
+    with pytest.raises(ValueError, match="in \\[0, 1\\]"):
+        scaling_range(eps, -flat, n)
 
 
 def test_bad_input_is_refused():

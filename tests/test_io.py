@@ -77,9 +77,10 @@ def duffing_results():
     strobe = _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.StroboscopicCellMap(settle_periods=50),
                     progress=False, uncertainty=0)
     u = LabelUncertainty(samples=30, step=1 / 30, start=2 / 30, perturbation=1e-3,
-                         refined_integrator=strobe.method.integrator.refined(), perturbations=(1e-3, 1e-2, 0.1, 1.0),
-                         start_fractions=(2 / 30, 4 / 30, 7 / 30, 0.6), alpha=0.3141592653589793,
-                         alpha_error=0.02718281828459045)
+                         refined_integrator=strobe.method.integrator.refined(),
+                         perturbations=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
+                         start_fractions=(2 / 30, 2 / 30, 1 / 30, 1 / 30, 1 / 30, 0.0), alpha=0.3141592653589793,
+                         alpha_error=0.02718281828459045, alpha_range=(1e-7, 1e-3), alpha_chi2=0.7071067811865476)
     return {
         "direct": _quiet(jg.analyze_global, jg.DUFFING, DOUBLE_WELL, g2, method=jg.Direct(), progress=False,
                          uncertainty=0),
@@ -182,6 +183,32 @@ def test_a_file_written_before_a_field_existed_loads_with_its_default(duffing_re
     broken.to_netcdf(tmp_path / "broken.nc", engine="h5netcdf")
     with pytest.raises(ValueError, match="'mean_periods': missing"):
         jg.load(tmp_path / "broken.nc")
+
+
+def test_the_uncertainty_exponents_range_round_trips_and_older_files_load_without_it(duffing_results, tmp_path):
+    """The scaling range of the uncertainty exponent, its reduced chi^2 and the reason for
+    no exponent round-trip exactly; a file written before they were recorded loads with
+    them unknown (None, NaN) and its alpha (then fitted to every fraction) as saved."""
+    r = duffing_results["stroboscopic"]
+    u = r.uncertainty
+    nan = float("nan")
+    none = dataclasses.replace(r, uncertainty=dataclasses.replace(
+        u, alpha=nan, alpha_error=nan, alpha_range=None, alpha_chi2=nan,
+        alpha_reason="no scaling range: fewer than 4 nonzero fractions in a row over 3 decades"))
+    for i, res in enumerate((r, none)):
+        assert_same(jg.load(res.save(tmp_path / f"r{i}.nc")), res)
+    assert "over start moves 1e-07 to 1e-03 cell (reduced chi^2 0.71)" in r.table()
+    assert "uncertainty exponent: no scaling range: fewer than 4" in jg.load(tmp_path / "r1.nc").table()
+    new = ("uncertainty__alpha_range", "uncertainty__alpha_chi2", "uncertainty__alpha_reason")
+    with xr.open_dataset(tmp_path / "r0.nc", engine="h5netcdf") as ds:
+        schema = json.loads(ds.attrs["jaxgear_schema"])
+        assert all(k in ds.attrs or k in schema for k in new)
+    old = _rewrite(tmp_path / "r0.nc", tmp_path / "old.nc", **dict.fromkeys(new),
+                   jaxgear_schema=json.dumps({k: v for k, v in schema.items() if k not in new}))
+    q = jg.load(old).uncertainty
+    assert q.alpha_range is None and np.isnan(q.alpha_chi2) and q.alpha_reason is None
+    assert_same(q, dataclasses.replace(u, alpha_range=None, alpha_chi2=nan))
+    assert q.describe().endswith(f"alpha = {u.alpha:.2f} +- {u.alpha_error:.2f} (1: smooth boundary)")
 
 
 def test_orbit_search_round_trip_exact(duffing_search, tmp_path):

@@ -386,6 +386,9 @@ def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
     np.testing.assert_array_equal(with_u.labels, without.labels)
     np.testing.assert_array_equal(with_u.shares, without.shares)
     assert "unc. step" in with_u.shares_table() and "unc. step" not in without.shares_table()
+    # 16 samples of 36 cells: too few uncertain ones for an uncertainty exponent, which the table says
+    assert np.isnan(with_u.uncertainty_exponent).all() and np.isnan(with_u.uncertainty_exponent_low).all()
+    assert "no scaling range" in with_u.shares_table() or not np.isfinite(with_u.boundary_basin_entropy).any()
     assert with_u.uncertainty_note() and not without.uncertainty_note()
     path = with_u.save(tmp_path / "new.nc")
     with xr.open_dataset(path, engine="h5netcdf") as ds:

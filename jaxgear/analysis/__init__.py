@@ -21,7 +21,15 @@
 from ._cellmap import PoincareCellMap, StroboscopicCellMap, cell_images
 from ._compare import compare_with_direct
 from ._direct import Direct
-from ._fractal import BasinEntropy, UncertaintyExponent, basin_entropy, uncertain_fraction, uncertainty_exponent
+from ._fractal import (
+                       BasinEntropy,
+                       ScalingRange,
+                       UncertaintyExponent,
+                       basin_entropy,
+                       scaling_range,
+                       uncertain_fraction,
+                       uncertainty_exponent,
+)
 from ._global import (
                       DEFAULT_METHOD,
                       analyze_global,
@@ -45,4 +53,4 @@ __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCel
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty", "DEFAULT_SAMPLES",
            "with_label_uncertainty", "PoolOptions", "RecurrenceOptions", "RecurrenceResult",
            "classify_by_recurrence", "basin_entropy", "BasinEntropy", "uncertainty_exponent", "UncertaintyExponent",
-           "uncertain_fraction"]
+           "uncertain_fraction", "scaling_range", "ScalingRange"]

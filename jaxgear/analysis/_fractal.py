@@ -12,7 +12,9 @@ How unpredictable the final state is near the basin boundaries of a global resul
   state sensitivity: an obstruction to predictability", Phys. Lett. A 99, 415, 1983);
 - :func:`uncertainty_exponent` — ``alpha`` of ``f(eps) ~ eps^alpha`` by a log-log least
   squares fit with its standard error; ``alpha = D - d`` (state dimension minus the box
-  dimension of the boundary): 1 for a smooth boundary, below 1 for a fractal one.
+  dimension of the boundary): 1 for a smooth boundary, below 1 for a fractal one;
+- :func:`scaling_range` — that fit over the widest run of ``eps`` where the power law
+  holds within the counting errors (not where ``f`` saturates), or no exponent at all.
 
 Plain numpy: these read label arrays (any number of dimensions) or call a labelling
 function; the expensive part, the labels, comes from the global analysis.
@@ -28,7 +30,7 @@ import numpy as np
 from .._checks import check_finite_array, check_int
 
 __all__ = ["BasinEntropy", "basin_entropy", "UncertaintyExponent", "uncertainty_exponent", "uncertain_fraction",
-           "LOG2"]
+           "ScalingRange", "scaling_range", "LOG2", "MAX_REDUCED_CHI2"]
 
 LOG2 = float(np.log(2.0))
 """``ln 2``: a boundary basin entropy above it proves a fractal boundary (Daza et al. 2016)."""
@@ -134,6 +136,8 @@ class UncertaintyExponent(NamedTuple):
         log_prefactor: the intercept ``ln c`` of ``f = c eps^alpha``, with ``log_prefactor_err``.
         eps, fraction: the data fitted, ``(m,)`` each.
         n_samples: samples behind each fraction ``(m,)`` (``None``: unweighted fit).
+        reduced_chi2: ``chi^2 / (m - 2)`` of the weighted fit with the binomial errors
+            (about 1 where the power law holds; NaN for the unweighted fit).
 
     ``state_dim - alpha`` is the box dimension of the boundary (:meth:`dimension`).
     """
@@ -145,6 +149,7 @@ class UncertaintyExponent(NamedTuple):
     eps: np.ndarray
     fraction: np.ndarray
     n_samples: np.ndarray | None
+    reduced_chi2: float = float("nan")
 
     def dimension(self, state_dim: int) -> float:
         """Box dimension of the basin boundary, ``state_dim - alpha`` (Grebogi et al. 1983;
@@ -194,7 +199,7 @@ def uncertainty_exponent(eps, f_uncertain, n_samples=None) -> UncertaintyExponen
         r = ly - A @ coef
         s2 = float(r @ r) / (m - 2)
         cov = s2 * np.linalg.inv(A.T @ A)
-        n = None
+        n, chi2 = None, float("nan")
     else:
         n = np.broadcast_to(np.asarray(n_samples), x.shape)
         if not np.issubdtype(n.dtype, np.integer) or np.any(n < 1):
@@ -209,7 +214,113 @@ def uncertainty_exponent(eps, f_uncertain, n_samples=None) -> UncertaintyExponen
         cov = cov * max(1.0, chi2)
         n = n.copy()
     return UncertaintyExponent(float(coef[1]), float(np.sqrt(cov[1, 1])), float(coef[0]), float(np.sqrt(cov[0, 0])),
-                               x, f, n)
+                               x, f, n, chi2)
+
+
+MAX_REDUCED_CHI2 = 3.0
+"""The largest reduced ``chi^2`` of a power-law fit that :func:`scaling_range` accepts
+(about the 95 % point of ``chi^2 / nu`` for ``nu = 2`` degrees of freedom, 99 % for 6)."""
+
+
+class ScalingRange(NamedTuple):
+    """Result of :func:`scaling_range`.
+
+    Attributes:
+        alpha, alpha_err: the uncertainty exponent over the range and its standard error
+            (NaN: no range).
+        eps_min, eps_max: the smallest and the largest ``eps`` of the range (NaN: none).
+        reduced_chi2: ``chi^2 / (points - 2)`` of the fit over the range (NaN: none).
+        used: ``(m,)`` bool, the points of the range (in the order given).
+        reason: ``None`` when a range was found, else why none was
+            (``"no scaling range: ..."``).
+        fit: the :class:`UncertaintyExponent` over the range (``None``: none).
+    """
+
+    alpha: float
+    alpha_err: float
+    eps_min: float
+    eps_max: float
+    reduced_chi2: float
+    used: np.ndarray
+    reason: str | None
+    fit: UncertaintyExponent | None
+
+    def __repr__(self) -> str:
+        if self.fit is None:
+            return f"ScalingRange({self.reason})"
+        return (f"ScalingRange(alpha={self.alpha:.4f} +- {self.alpha_err:.4f}, eps={self.eps_min:.3g}..{self.eps_max:.3g}, "
+                f"reduced_chi2={self.reduced_chi2:.2f}, points={int(self.used.sum())})")
+
+
+def scaling_range(eps, f_uncertain, n_samples, *, min_points: int = 4, min_decades: float = 3.0,
+                  max_chi2: float = MAX_REDUCED_CHI2) -> ScalingRange:
+    """The uncertainty exponent over the scaling range of ``f(eps)`` (Grebogi, McDonald, Ott
+    & Yorke 1983).
+
+    ``f ~ eps^alpha`` holds only for moves small against the basins' structure; at larger
+    ``eps`` the uncertain fraction saturates (and at smaller ones it may drop to zero
+    samples). The range is the widest run of consecutive ``eps`` (sorted) with at least
+    ``min_points`` points over at least ``min_decades`` decades, every fraction above zero,
+    where the weighted fit of :func:`uncertainty_exponent` (binomial errors from
+    ``n_samples``) is consistent, ``chi^2 / (points - 2) <= max_chi2``, and ``f`` rises,
+    ``alpha > 3`` standard errors (a flat ``f`` is saturation, not scaling). The widest
+    run has the most decades, then the most points, then the smallest ``chi^2``. Where
+    none qualifies, ``alpha`` is NaN and ``reason`` says why. A bend of ``f`` smaller than
+    its counting errors cannot be told from the power law and may end up in the range.
+
+    Args:
+        eps: perturbation sizes ``(m,)``, positive.
+        f_uncertain: uncertain fractions ``(m,)`` in ``[0, 1]``.
+        n_samples: samples per fraction (int or ``(m,)`` ints >= 1).
+        min_points, min_decades, max_chi2: what a scaling range needs (see above).
+    Returns:
+        a :class:`ScalingRange`.
+    """
+    x = check_finite_array(eps, "eps", ndim=1)
+    f = check_finite_array(f_uncertain, "f_uncertain", ndim=1)
+    if x.shape != f.shape:
+        raise ValueError(f"eps and f_uncertain must have the same length, got {x.shape[0]} and {f.shape[0]}.")
+    if np.any(x <= 0) or np.any(f < 0) or np.any(f > 1):
+        raise ValueError(f"eps must be positive and f_uncertain in [0, 1], got {x.tolist()} and {f.tolist()}.")
+    n = np.broadcast_to(np.asarray(n_samples), x.shape)
+    if not np.issubdtype(n.dtype, np.integer) or np.any(n < 1):
+        raise ValueError(f"n_samples must be integers >= 1, got {n_samples!r}.")
+    min_points = check_int(min_points, "min_points", 3)
+    order = np.argsort(x, kind="stable")
+    xs, fs, ns = x[order], f[order], n[order]
+    m = len(xs)
+    best, best_key, candidates, consistent = None, None, 0, 0
+    for i in range(m):
+        for j in range(i + min_points, m + 1):  # the run xs[i:j]
+            if np.any(fs[i:j] <= 0):
+                break  # a zero fraction ends every run through it
+            decades = float(np.log10(xs[j - 1] / xs[i]))
+            if decades < min_decades - 1e-9:
+                continue
+            candidates += 1
+            u = uncertainty_exponent(xs[i:j], fs[i:j], n_samples=ns[i:j])
+            if not u.reduced_chi2 <= max_chi2:
+                continue
+            consistent += 1
+            if not u.alpha > 3.0 * u.alpha_err:
+                continue
+            key = (round(decades, 9), j - i, -u.reduced_chi2)
+            if best_key is None or key > best_key:
+                best, best_key = (i, j, u), key
+    if best is None:
+        if candidates == 0:
+            why = f"fewer than {min_points} nonzero fractions in a row over {min_decades:g} decades"
+        elif consistent == 0:
+            why = (f"no run of {min_points} or more fractions over {min_decades:g} decades fits a power law "
+                   f"(reduced chi^2 above {max_chi2:g})")
+        else:
+            why = "f(eps) does not rise where a power law fits (alpha within 3 errors of 0: saturated)"
+        return ScalingRange(float("nan"), float("nan"), float("nan"), float("nan"), float("nan"),
+                            np.zeros(m, bool), f"no scaling range: {why}", None)
+    i, j, u = best
+    used = np.zeros(m, bool)
+    used[order[i:j]] = True
+    return ScalingRange(u.alpha, u.alpha_err, float(xs[i]), float(xs[j - 1]), u.reduced_chi2, used, None, u)
 
 
 def uncertain_fraction(label_fn: Callable[[np.ndarray], np.ndarray], low, high, eps, *, n_samples: int = 2000,

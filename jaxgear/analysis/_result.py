@@ -138,9 +138,14 @@ class LabelUncertainty:
             and ``start_fractions`` the share of sampled cells whose label changes at each:
             the uncertain fraction ``f(eps)`` of Grebogi, McDonald, Ott & Yorke (1983).
         alpha, alpha_error: the uncertainty exponent, ``f(eps) ~ eps**alpha``, from a
-            log-log fit of those fractions (:func:`~jaxgear.uncertainty_exponent`) and its
-            standard error: 1 for a smooth basin boundary, below 1 for a fractal one (NaN
-            when fewer than three fractions are above zero).
+            log-log fit of those fractions over their scaling range
+            (:func:`~jaxgear.scaling_range`) and its standard error: 1 for a smooth basin
+            boundary, below 1 for a fractal one (NaN where there is no scaling range).
+        alpha_range: the smallest and the largest start move of that range (cell sizes;
+            ``None`` where there is none, and in files written before the range was chosen,
+            whose ``alpha`` is fitted to every fraction above zero).
+        alpha_chi2: the fit's reduced ``chi^2`` over the range (NaN where none).
+        alpha_reason: ``None``, or why there is no exponent (``"no scaling range: ..."``).
     """
 
     samples: int
@@ -152,6 +157,20 @@ class LabelUncertainty:
     start_fractions: tuple[float, ...] = ()
     alpha: float = float("nan")
     alpha_error: float = float("nan")
+    alpha_range: tuple[float, float] | None = later_field(None)
+    alpha_chi2: float = later_field(float("nan"))
+    alpha_reason: str | None = later_field(None)
+
+    def alpha_text(self) -> str:
+        """The uncertainty exponent in words: its value, error, range and fit quality, or
+        why there is none (``""`` where not measured)."""
+        if np.isfinite(self.alpha):
+            text = f"alpha = {self.alpha:.2f} +- {self.alpha_error:.2f}"
+            if self.alpha_range is not None:
+                text += (f" over start moves {self.alpha_range[0]:.0e} to {self.alpha_range[1]:.0e} cell "
+                         f"(reduced chi^2 {self.alpha_chi2:.2f})")
+            return text
+        return self.alpha_reason or ""
 
     def describe(self) -> str:
         """One line for the printed table."""
@@ -160,8 +179,9 @@ class LabelUncertainty:
                    else "16x smaller integration error")
         line = (f"label uncertainty ({self.samples} sampled cells): {_percent(self.step, self.samples)} change with a "
                 f"{refined}, {_percent(self.start, self.samples)} when the start moves by {self.perturbation:g} cell")
-        if np.isfinite(self.alpha):
-            line += f"\nuncertainty exponent alpha = {self.alpha:.2f} +- {self.alpha_error:.2f} (1: smooth boundary)"
+        if self.alpha_text():
+            line += f"\nuncertainty exponent: {self.alpha_text()}" + (" (1: smooth boundary)" if np.isfinite(self.alpha)
+                                                                       else "")
         return line
 
 
@@ -174,7 +194,9 @@ def _percent(share: float, samples: int) -> str:
 def _uncertainty_summary(u: LabelUncertainty) -> dict[str, Any]:
     return dict(samples=u.samples, step=u.step, start=u.start, perturbation=u.perturbation,
                 refined_integrator=u.refined_integrator.to_dict(), perturbations=list(u.perturbations),
-                start_fractions=list(u.start_fractions), alpha=u.alpha, alpha_error=u.alpha_error)
+                start_fractions=list(u.start_fractions), alpha=u.alpha, alpha_error=u.alpha_error,
+                alpha_range=None if u.alpha_range is None else list(u.alpha_range), alpha_chi2=u.alpha_chi2,
+                alpha_reason=u.alpha_reason)
 
 
 def _grid_dims(r: GlobalResult) -> tuple[str, ...]:

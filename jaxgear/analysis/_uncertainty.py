@@ -14,9 +14,12 @@ result's attractors as the known ones:
 - ``start``: the share whose label changes when the start moves by ``perturbation``
   cell widths (uniformly in that box along the gridded coordinates): the basin-boundary
   uncertainty at that scale. The same samples moved by :data:`EXPONENT_SCALES` times
-  that (three decades, all in one pool) give the uncertain fraction ``f(eps)`` and the
-  uncertainty exponent ``alpha`` of ``f ~ eps**alpha`` (Grebogi, McDonald, Ott & Yorke,
-  Phys. Lett. A 99, 415, 1983): 1 for a smooth basin boundary, below 1 for a fractal one.
+  that (five decades below it, all in one pool) give the uncertain fraction ``f(eps)``
+  and the uncertainty exponent ``alpha`` of ``f ~ eps**alpha`` (Grebogi, McDonald, Ott &
+  Yorke, Phys. Lett. A 99, 415, 1983): 1 for a smooth basin boundary, below 1 for a
+  fractal one. It is fitted over the scaling range of :func:`~jaxgear.scaling_range`
+  (moves well below a cell, where ``f`` has not saturated), or not at all: NaN with the
+  reason ``"no scaling range: ..."``.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_int, check_number
-from ._fractal import uncertainty_exponent
+from ._fractal import scaling_range
 from ._pool import run_pools
 from ._result import LabelUncertainty
 
@@ -35,9 +38,10 @@ DEFAULT_SAMPLES = 1024
 """Cells sampled for the estimate (the direct method's pilot size: the same compiled pool)."""
 DEFAULT_PERTURBATION = 1e-3
 """Start perturbation, in cell widths."""
-EXPONENT_SCALES = (1.0, 10.0, 100.0, 1000.0)
-"""The start moves of the uncertainty exponent, in multiples of the perturbation (three
-decades: ``1e-3`` to ``1`` cell with the default)."""
+EXPONENT_SCALES = (1.0, 1e-1, 1e-2, 1e-3, 1e-4, 1e-5)
+"""The start moves of the uncertainty exponent, in multiples of the perturbation (one a
+decade, five decades: ``1e-8`` to ``1e-3`` cell with the default, well below the cell
+size, where ``f(eps)`` saturates)."""
 
 
 def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attractors, direct, *,
@@ -45,8 +49,9 @@ def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attrac
                       progress: bool = False) -> LabelUncertainty:
     """The label uncertainty of a result (see the module): a
     :class:`~jaxgear.analysis.LabelUncertainty` with ``samples``, ``step`` and ``start``
-    (shares of the sampled cells whose label changes), ``perturbation`` (cell widths)
-    and ``refined_integrator``.
+    (shares of the sampled cells whose label changes), ``perturbation`` (cell widths),
+    ``refined_integrator``, and the uncertain fractions with their exponent over its
+    scaling range (Grebogi et al. 1983).
 
     Args:
         labels: the result's labels (any shape with ``grid.n_cells`` entries): attractor
@@ -109,19 +114,14 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
     out = []
     for v, (step, ref) in enumerate(zip(steps, refs)):
         f = np.array([float(np.mean(starts[j][v] != ref)) for j in range(len(scales))])
-        alpha, alpha_err = _exponent(scales, f, S) if perturbation > 0 else (np.nan, np.nan)
+        if perturbation > 0:
+            s = scaling_range(scales, f, S)
+            fit = dict(alpha=s.alpha, alpha_error=s.alpha_err, alpha_chi2=s.reduced_chi2, alpha_reason=s.reason,
+                       alpha_range=None if s.reason else (s.eps_min, s.eps_max))
+        else:
+            fit = dict(alpha_reason="no scaling range: no start move (perturbation 0)")
         out.append(LabelUncertainty(samples=S, step=float(np.mean(step != ref)), start=float(f[0]),
                                     perturbation=float(perturbation), refined_integrator=fine,
                                     perturbations=tuple(float(e) for e in scales),
-                                    start_fractions=tuple(float(x) for x in f), alpha=alpha, alpha_error=alpha_err))
+                                    start_fractions=tuple(float(x) for x in f), **fit))
     return out
-
-
-def _exponent(eps: np.ndarray, f: np.ndarray, samples: int) -> tuple[float, float]:
-    """The uncertainty exponent and its error from the fractions ``f`` at the moves ``eps``
-    that changed some label (NaN with fewer than three of them)."""
-    keep = f > 0
-    if keep.sum() < 3:
-        return float("nan"), float("nan")
-    u = uncertainty_exponent(eps[keep], f[keep], n_samples=samples)
-    return float(u.alpha), float(u.alpha_err)

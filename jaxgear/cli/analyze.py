@@ -284,7 +284,7 @@ def _figures(result, out) -> list[str]:
         figures.append(("attractors.png", lambda: plot_attractors(result, coords=tuple(range(min(dim, 3))),
                                                                   section=isinstance(result.method, PoincareCellMap))))
     u = result.uncertainty
-    if u is not None and u.alpha == u.alpha:  # (not NaN) the uncertain fraction over three decades and its fit
+    if u is not None and any(f > 0 for f in u.start_fractions):  # the uncertain fraction, its fit where it scales
         figures.append(("basin_measures.png", lambda: plot_basin_measures(result)))
     names = []
     for name, plot in figures:

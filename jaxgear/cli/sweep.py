@@ -96,16 +96,21 @@ def add_parser(sub) -> None:
         "sweep", help="parameter sweeps: bifurcation diagrams, basin shares, orbit continuation",
         description="Sweep one parameter of the reduced gear model (any canonical name: b_sp, kappa_sp_amp, "
         "Omega, c_sp, f_D, e_sp_amp, ...; or b = b_sp and b_rp, kappa_amp = both stiffness amplitudes, "
-        "e_amp = both error amplitudes), or, with --kind basins and --param2, two (a basin map). Writes the "
+        "e_amp = both error amplitudes; or a field of the preset's physical gear set in its units, see jaxgear "
+        "params: k_sp_amp [N/m], input_rpm, T_D [N m], ..., and gear.NAME for the names both share, e.g. "
+        "gear.b_sp [um], gear.b = both half backlashes), or, with --kind basins and --param2, two (a basin map). "
+        "Writes the "
         "result (bifurcation.nc, basins.nc, basin_map.nc or branch.nc), "
         "summary.json and figures into --out. Run the same command again after an interruption to resume.",
     )
     add_param_options(p)
     add_system_option(p)
     p.add_argument("--param", required=True, metavar="NAME",
-                   help="the parameter to sweep (with --system a field of the system's parameters)")
+                   help="the parameter to sweep: a dimensionless name, or a physical gear-set field in its units "
+                   "(a name only the gear set has, such as input_rpm, k_sp_amp, T_D, or gear.NAME for any: "
+                   "gear.b_sp, gear.b, gear.Omega); with --system a field of the system's parameters")
     p.add_argument("--values", required=True, metavar="START:STOP:COUNT",
-                   help="COUNT evenly spaced values from START to STOP (COUNT >= 2)")
+                   help="COUNT evenly spaced values from START to STOP (COUNT >= 2), in the parameter's units")
     p.add_argument("--param2", default=None, metavar="NAME",
                    help="basins: a second parameter; the global analysis then runs at every point of the grid "
                    "--values2 x --values (a basin map, basin_map.nc)")
@@ -173,6 +178,9 @@ class _Plan(NamedTuple):
     integ: Any
     grid: Any = None
     method: Any = None
+    param: str = ""
+    param2: str | None = None
+    gear_set: Any = None
 
 
 def run(args) -> int:
@@ -236,7 +244,6 @@ def _plan(args) -> _Plan:
     import numpy as np
 
     from .._model import REDUCED
-    from .._params import param_targets
     from ..integrate import default_integrator
 
     start, stop, count = _range(args.values)
@@ -250,10 +257,85 @@ def _plan(args) -> _Plan:
     values2 = None if args.values2 is None else np.linspace(*_range(args.values2, "--values2"))
     check_output_folder(args.out)
     params = _cli_params(args, user)
-    param_targets(params, args.param)  # unknown name -> the list of valid ones
+    param, param2, gear_set = _names(args, user, params)  # unknown name -> the list of valid ones
     plan = _Plan(user, system, params, start, stop, count, values, values2, default_integrator(args.steps_per_period),
-                 grid)
+                 grid, param=param, param2=param2, gear_set=gear_set)
     return _check_values(args, plan)
+
+
+PHYSICAL_PREFIX = "gear."
+"""``--param gear.NAME``: the gear set's physical field NAME (needed for the names the
+physical and the dimensionless tables share: ``b_sp``, ``e_sp_amp``, ``Omega``, ...)."""
+
+
+def _names(args, user, params) -> tuple[str, str | None, Any]:
+    """``--param`` and ``--param2`` as the sweep functions take them, and the gear set when
+    they are physical (:func:`jaxgear.sweep.sweep_axis`): a dimensionless name (or alias)
+    of ``params``; a field only the gear set has (``input_rpm``, ``k_sp_amp``, ``T_D``); or
+    ``gear.NAME`` for any gear-set field. ``ValueError`` listing the valid names, for a
+    physical name with ``--system`` or next to a dimensionless one, and for a physical
+    sweep of a field that a dimensionless ``--set`` overrides."""
+    from .._params import param_names
+    from .._presets import resolve_params
+    from ..sweep import physical_names
+
+    given = [n for n in (args.param, args.param2) if n is not None]
+    kinds = []
+    for n in given:
+        physical_only = user is None and n not in param_names(params) and n in physical_names()
+        if n.startswith(PHYSICAL_PREFIX) or physical_only:  # a user system's unknown name is just unknown
+            if user is not None:
+                raise ValueError(f"--param {n}: physical gear-set names need the gear model (no --system {user.spec}).")
+            name = n.removeprefix(PHYSICAL_PREFIX)
+            if name not in physical_names():
+                raise ValueError(f"unknown gear-set parameter {name!r}; physical names (gear.NAME): "
+                                 f"{', '.join(physical_names())}.")
+            kinds.append((name, True))
+        elif n in param_names(params):
+            kinds.append((n, False))
+        else:
+            extra = "" if user is not None else f"; physical gear-set names: {', '.join(physical_names())}"
+            raise ValueError(f"unknown parameter {n!r}; valid names: dimensionless {', '.join(param_names(params))}"
+                             f"{extra}.")
+    if len({k for _, k in kinds}) > 1:
+        raise ValueError(f"--param {args.param} and --param2 {args.param2}: give both in physical units (gear.NAME) "
+                         "or both dimensionless.")
+    names = [k for k, _ in kinds] + [None]
+    if not kinds[0][1]:
+        return names[0], names[1], None
+    gear_set, _ = resolve_params(args.preset, args.overrides)
+    return names[0], names[1], gear_set
+
+
+def _axes(args, plan: _Plan):
+    """The parameter(s) as the sweep functions apply them: ``(axes, names, rows)`` (the
+    :class:`~jaxgear.sweep.SweepAxis` of ``--param`` and of ``--param2``, the fields set and
+    one row of values per value or map point); ``ValueError`` where a dimensionless ``--set``
+    overrides a field the physical sweep sets."""
+    import numpy as np
+
+    from ..sweep import sweep_axis
+    from ..sweep._physical import joint_rows
+
+    axes = [sweep_axis(plan.params, plan.param, plan.values, plan.gear_set)]
+    if plan.values2 is not None:
+        axes.append(sweep_axis(plan.params, plan.param2, plan.values2, plan.gear_set))
+        if set(axes[0].fields) & set(axes[1].fields):
+            raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
+    if plan.gear_set is not None:
+        base = plan.gear_set.to_params().uniform()
+        for ax in axes:
+            kept = [f for f in ax.fields if not np.array_equal(np.asarray(getattr(base, f)),
+                                                               np.asarray(getattr(plan.params, f)))]
+            if kept:
+                raise ValueError(f"--param {ax.name} sets {', '.join(kept)}, which --set overrides: give each "
+                                 "parameter once.")
+    if len(axes) == 1:
+        return axes, *axes[0].applied()
+    VV = np.stack(np.meshgrid(axes[0].values, axes[1].values), axis=-1).reshape(-1, 2)
+    if plan.gear_set is not None:
+        return axes, axes[0].fields + axes[1].fields, joint_rows(plan.gear_set, tuple(axes), VV)
+    return axes, (plan.param, plan.param2), VV
 
 
 def _check_flags(args, user, system, start: float, stop: float) -> int | None:
@@ -318,32 +400,33 @@ def _check_values(args, plan: _Plan) -> _Plan:
     import numpy as np
 
     from .._checks import check_int
-    from .._params import param_targets
     from ..sweep import check_values
 
-    system, params, values = plan.system, plan.params, plan.values
+    system, params = plan.system, plan.params
     if args.kind == "continuation":
         if not args.points or len(args.points) != 1:
             raise ValueError("--kind continuation needs one --from x1,x2,x3,x4: a point on or near the P-K orbit "
                              "at the start value (e.g. from jaxgear shoot).")
-        check_values(system, params, (args.param,), np.array([[plan.start], [plan.stop]]))
+        if plan.gear_set is not None:
+            from ..sweep import sweep_axis
+
+            fields = sweep_axis(params, plan.param, [plan.start, plan.stop], plan.gear_set).fields
+            raise ValueError(f"--kind continuation follows one dimensionless parameter; {args.param} sets "
+                             f"{', '.join(fields)}: continue in {fields[0]} (jaxgear params shows the conversion).")
+        check_values(system, params, (plan.param,), np.array([[plan.start], [plan.stop]]))
         return plan
     if args.kind == "bifurcation":
         check_int(args.record, "--record", 2 * args.max_period + 1)
-        check_values(system, params, (args.param,), values[:, None])
+        _, names, rows = _axes(args, plan)
+        check_values(system, params, names, rows)
         return plan
     grid, method = _basins_grid(args, plan)
     if hasattr(method, "round_periods"):  # the direct method's lane pool (analyze checks the same)
         check_pool_history("--max-period", int(method.max_period), min(int(method.chunk_size), grid.n_cells),
                            system.dim)
     method.check(system, grid)
-    if plan.values2 is None:
-        check_values(system, params, (args.param,), values[:, None])
-    else:
-        if set(param_targets(params, args.param)) & set(param_targets(params, args.param2)):
-            raise ValueError(f"--param {args.param} and --param2 {args.param2} set the same field.")
-        check_values(system, params, (args.param, args.param2),
-                     np.stack(np.meshgrid(values, plan.values2), axis=-1).reshape(-1, 2))
+    _, names, rows = _axes(args, plan)
+    check_values(system, params, names, rows)
     return plan._replace(grid=grid, method=method)
 
 
@@ -376,10 +459,19 @@ def _head(args, plan: _Plan) -> str:
     """The first line the command prints."""
     from .._model import REDUCED
 
-    head = f"jaxgear sweep: {args.kind} in {args.param} = {plan.start:g} .. {plan.stop:g} ({plan.count} values)"
+    axes = _axes(args, plan)[0] if args.kind != "continuation" else []
+
+    def span(name, lo, hi, count, i):
+        if i >= len(axes) or not axes[i].physical:
+            return f"{name} = {lo:g} .. {hi:g} ({count} values)"
+        ax = axes[i]  # physical: the unit, and the dimensionless fields it sets
+        dims = ", ".join(f"{f} = {ax.rows[0, j]:.4g} .. {ax.rows[-1, j]:.4g}" for j, f in enumerate(ax.fields))
+        return f"{name} = {lo:g} .. {hi:g} {ax.unit} ({count} values; {dims})"
+
+    head = f"jaxgear sweep: {args.kind} in " + span(plan.param, plan.start, plan.stop, plan.count, 0)
     if plan.values2 is not None:
         v2 = plan.values2
-        head += f" x {args.param2} = {v2[0]:g} .. {v2[-1]:g} ({len(v2)} values)"
+        head += " x " + span(plan.param2, v2[0], v2[-1], len(v2), 1)
     return head + (f", preset {args.preset}, {REDUCED.name} model" if plan.user is None
                    else f", system {plan.user.spec} ({plan.system.name})")
 
@@ -395,9 +487,10 @@ def _diagram(args, plan: _Plan, progress: bool):
     """The bifurcation diagram, resumable in ``--out`` (the result file is written by the caller)."""
     from ..sweep import bifurcation_diagram
 
-    return bifurcation_diagram(plan.system, plan.params, args.param, plan.values, _starts(args, plan.user),
+    return bifurcation_diagram(plan.system, plan.params, plan.param, plan.values, _starts(args, plan.user),
                                direction=args.direction, integrator=plan.integ, options=_sequence_options(args),
-                               progress=progress, out=Path(args.out), restart=args.restart, save=False)
+                               progress=progress, out=Path(args.out), restart=args.restart, save=False,
+                               gear_set=plan.gear_set)
 
 
 def _share(args, plan: _Plan) -> None:
@@ -475,8 +568,11 @@ def _resume_settings(args, plan: _Plan) -> dict:
 
     s = {"system": plan.system.name, "params": params_to_dict(plan.params)}
     values, values2 = plan.values, plan.values2
+    if plan.gear_set is not None:  # as the sweep functions record a physical sweep
+        axes = _axes(args, plan)[0]
+        s["physical"] = axes[0].unit if len(axes) == 1 else [ax.unit for ax in axes]
     if args.kind == "bifurcation":
-        s.update(kind="bifurcation", param=args.param, values=values.tolist(),
+        s.update(kind="bifurcation", param=plan.param, values=values.tolist(),
                  starts=_starts(args, plan.user).tolist(), transient=int(args.transient), record=int(args.record),
                  direction=args.direction, max_period=int(args.max_period), integrator=plan.integ.to_dict())
         return s
@@ -484,9 +580,9 @@ def _resume_settings(args, plan: _Plan) -> dict:
     if args.uncertainty_samples is not None:
         s.update(uncertainty_setting(args.uncertainty_samples))
     if values2 is None:
-        s.update(kind="basins", param=args.param, values=values.tolist())
+        s.update(kind="basins", param=plan.param, values=values.tolist())
     else:
-        s.update(kind="basin_map", param_x=args.param, values_x=values.tolist(), param_y=args.param2,
+        s.update(kind="basin_map", param_x=plan.param, values_x=values.tolist(), param_y=plan.param2,
                  values_y=values2.tolist())
     return s
 
@@ -523,10 +619,10 @@ def _basins(args, plan: _Plan, progress: bool):
     samples = {} if args.uncertainty_samples is None else {"uncertainty": args.uncertainty_samples}
     opts = BasinOptions(batched=args.one_pool, **samples)
     kw = dict(method=plan.method, options=opts, progress=progress, out=Path(args.out), restart=args.restart,
-              save=False)
+              save=False, gear_set=plan.gear_set)
     if plan.values2 is None:
-        return basin_sweep(plan.system, plan.params, args.param, plan.values, plan.grid, **kw)
-    return basin_map(plan.system, plan.params, args.param, plan.values, args.param2, plan.values2, plan.grid, **kw)
+        return basin_sweep(plan.system, plan.params, plan.param, plan.values, plan.grid, **kw)
+    return basin_map(plan.system, plan.params, plan.param, plan.values, plan.param2, plan.values2, plan.grid, **kw)
 
 
 def _sweep(args, plan: _Plan, work: Path, head: str, t0: float) -> list[str]:
@@ -556,7 +652,7 @@ def _report_diagram(args, plan: _Plan, result) -> dict:
     print(result.table())
     if SweepDirection.UP in result.directions and SweepDirection.DOWN in result.directions:
         diff = result.values[result.differs(SweepDirection.UP, SweepDirection.DOWN)]
-        print(f"\nup and down sweeps differ (hysteresis) at {args.param} = "
+        print(f"\nup and down sweeps differ (hysteresis) at {result.axis_label} = "
               + (", ".join(f"{v:.5g}" for v in diff) if len(diff) else "none of the values"))
     if args.no_figures:
         return {}
@@ -572,12 +668,16 @@ def _report_basins(args, plan: _Plan, result) -> tuple[str, dict, dict]:
     summary adds (the contact regimes' shares)."""
     if plan.values2 is not None:
         print(with_uncertainty_line(result.table(), result, "points"))
+        regimes = _regimes(plan, result)
+        extra = {} if regimes is None else {"contact_regimes": regimes.summary()}
         if args.no_figures:
-            return "basin_map.nc", {}, {}
-        from ..plotting import plot_basin_map
+            return "basin_map.nc", {}, extra
+        from ..plotting import plot_basin_map, plot_regime_map
 
-        return "basin_map.nc", {"basin_map.png": plot_basin_map(result),
-                                "basin_map_shares.png": plot_basin_map(result, "all")}, {}
+        figs = {"basin_map.png": plot_basin_map(result), "basin_map_shares.png": plot_basin_map(result, "all")}
+        if regimes is not None:
+            figs["regimes.png"] = plot_regime_map(regimes)
+        return "basin_map.nc", figs, extra
     print(result.shares_table())
     print()
     print(with_uncertainty_line(result.table(), result))
@@ -596,9 +696,9 @@ def _report_basins(args, plan: _Plan, result) -> tuple[str, dict, dict]:
 
 
 def _regimes(plan: _Plan, result):
-    """Print the share of the cells in each contact regime per mesh and value
-    (:func:`jaxgear.regime_shares`); ``None`` (nothing printed) for a system without
-    meshes."""
+    """Print the share of the cells in each contact regime per mesh and value, or over the
+    points of a map (:func:`jaxgear.regime_shares`); ``None`` (nothing printed) for a
+    system without meshes."""
     from .._contact import regime_shares
 
     if plan.system.switching is None:
@@ -623,18 +723,18 @@ def _continuation(args, plan: _Plan, out: Path, head: str) -> list[str]:
 
     x0 = np.asarray(args.points[0], dtype=float)
     start, stop, params = plan.start, plan.stop, plan.params
-    p0 = with_param(params, args.param, start)
+    p0 = with_param(params, plan.param, start)
     ds = abs(stop - start) / (plan.count - 1)
     print(head + f", P-{args.period} orbit from {x0.tolist()}, step {ds:g}")
     t0 = time.perf_counter()
-    branch = continue_orbit(plan.system, p0, x0, param=args.param, stop=stop, period=args.period,
+    branch = continue_orbit(plan.system, p0, x0, param=plan.param, stop=stop, period=args.period,
                             integrator=plan.integ, options=ContinuationOptions(ds=ds, max_steps=args.max_steps),
                             progress=not args.quiet)
     print(f"done in {time.perf_counter() - t0:.1f} s\n")
     table = branch.table()
     print(table)
     branch.save(out / "branch.nc")
-    summary = dict(kind="continuation", param=args.param, start=start, stop=stop, ds=ds, period=args.period,
+    summary = dict(kind="continuation", param=plan.param, start=start, stop=stop, ds=ds, period=args.period,
                    seed_point=x0.tolist(), params=params_to_dict(params), table=table,
                    runtime_s=time.perf_counter() - t0)
     if hasattr(branch, "summary"):

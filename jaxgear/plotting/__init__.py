@@ -21,6 +21,7 @@ from ._basins import (
 )
 from ._branch import plot_branch as plot_branch
 from ._gear import plot_gear_view as plot_gear_view
+from ._gear import plot_regime_map as plot_regime_map
 from ._gear import plot_regime_shares as plot_regime_shares
 from ._orbit import plot_multipliers as plot_multipliers
 from ._orbit import plot_orbit as plot_orbit

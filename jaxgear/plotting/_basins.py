@@ -195,8 +195,9 @@ def plot_basin_measures(result):
     a :class:`~jaxgear.BasinSweep`.
 
     For one result: the uncertain fraction ``f(eps)`` of its label uncertainty against the
-    start move ``eps`` (cell sizes) on log-log axes, with the fit ``f ~ eps**alpha`` and
-    the slope 1 of a smooth boundary for comparison (Grebogi et al. 1983), and the basin
+    start move ``eps`` (cell sizes) on log-log axes, with the fit ``f ~ eps**alpha`` drawn
+    over its scaling range only (the points outside it open) and the slope 1 of a smooth
+    boundary for comparison (Grebogi et al. 1983), or "no scaling range", and the basin
     entropies in the title (Daza et al. 2016). For a sweep: ``S_b``, ``S_bb`` (with the
     log 2 line) and ``alpha`` (with its error) against the parameter. Returns a Figure.
     """
@@ -211,13 +212,27 @@ def plot_basin_measures(result):
     ax = fig.add_subplot()
     eps, f = np.asarray(u.perturbations), np.asarray(u.start_fractions)
     keep = f > 0
+    lo, hi = u.alpha_range if u.alpha_range is not None else (eps[keep].min(initial=np.inf), eps.max())
+    fitted = keep & (eps >= lo * (1 - 1e-9)) & (eps <= hi * (1 + 1e-9))  # a file without a range: every f > 0
+    if not np.isfinite(u.alpha):
+        fitted[:] = False
     err = np.sqrt(f * (1 - f) / u.samples)
-    ax.errorbar(eps[keep], f[keep], yerr=err[keep], fmt="o", color="k", label=f"f(eps), {u.samples} cells")
-    if np.isfinite(u.alpha) and keep.any():
-        c = np.exp(np.mean(np.log(f[keep]) - u.alpha * np.log(eps[keep])))
-        ax.plot(eps, c * eps ** u.alpha, "-", color=attractor_color(0),
+    if fitted.any():
+        ax.errorbar(eps[fitted], f[fitted], yerr=err[fitted], fmt="o", color="k", label=f"f(eps), {u.samples} cells")
+    outside = keep & ~fitted
+    if outside.any():
+        ax.errorbar(eps[outside], f[outside], yerr=err[outside], fmt="o", mfc="none", color="grey",
+                    label="outside the scaling range" if fitted.any() else f"f(eps), {u.samples} cells: no scaling range")
+    if fitted.sum() >= 3:
+        # the fit's line: its slope alpha and its intercept, that of the weighted fit over the range
+        from ..analysis import uncertainty_exponent
+
+        x = eps[fitted]
+        c = np.exp(uncertainty_exponent(x, f[fitted], n_samples=u.samples).log_prefactor
+                   if u.alpha_range is not None else np.mean(np.log(f[fitted]) - u.alpha * np.log(x)))
+        ax.plot(x, c * x ** u.alpha, "-", color=attractor_color(0),
                 label=f"fit: alpha = {u.alpha:.2f} +- {u.alpha_error:.2f}")
-        ax.plot(eps, c * eps[0] ** u.alpha * (eps / eps[0]), ":", color="grey", label="slope 1 (smooth boundary)")
+        ax.plot(x, c * x[0] ** u.alpha * (x / x[0]), ":", color="grey", label="slope 1 (smooth boundary)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_ylim(top=1.0)  # a share
@@ -228,7 +243,8 @@ def plot_basin_measures(result):
     if e is not None and np.isfinite(e.S_b):
         title += f"; S_b = {e.S_b:.3f}, S_bb = {e.S_bb:.3f}"
     ax.set_title(title, fontsize="medium")
-    ax.legend(fontsize="small")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize="small")
     return fig
 
 
@@ -244,6 +260,6 @@ def _sweep_measures(sweep):
     bottom.errorbar(v, sweep.uncertainty_exponent, yerr=sweep.uncertainty_exponent_error, fmt="o-", color="k")
     bottom.axhline(1.0, color="grey", ls=":")
     bottom.set_ylabel("uncertainty exponent alpha")
-    bottom.set_xlabel(sweep.param)
+    bottom.set_xlabel(sweep.axis_label)
     top.set_title("Fractal basin measures", fontsize="medium")
     return fig

@@ -9,7 +9,7 @@ from .._contact import GearView, _layout, _switching_at
 from .._poincare import sample_trajectory
 from ._style import attractor_color, new_figure
 
-__all__ = ["plot_gear_view", "plot_regime_shares"]
+__all__ = ["plot_gear_view", "plot_regime_shares", "plot_regime_map"]
 
 GAP_COLOR = "#fdd49e"
 BACK_COLOR = "#d7301f"
@@ -98,6 +98,47 @@ def plot_regime_shares(shares):
         ax.set_ylim(0, 1)
         ax.set_ylabel("share of the cells")
         ax.set_title(name, fontsize="medium")
-    axes[-1].set_xlabel(shares.param)
+    axes[-1].set_xlabel(shares.label or shares.param)
     axes[0].legend(fontsize="small", loc="upper right")
+    return fig
+
+
+def plot_regime_map(regimes, *, title: str | None = None):
+    """Contact regimes over two parameters (a :class:`~jaxgear.RegimeMap` of
+    :func:`~jaxgear.regime_shares` on a basin map), one row per mesh: left, the regime of
+    the attractor with the largest basin at each point (no impact, single-sided,
+    double-sided impact; grey where the sink or the unresolved cells hold most); right, the
+    share of the cells whose motion has double-sided impacts (percent). Returns a Figure."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    from .._contact import ContactRegime, RegimeMap
+    from ._style import SINK_COLOR
+    from ._sweep import _edges
+
+    if not isinstance(regimes, RegimeMap):
+        raise ValueError(f"regimes={type(regimes).__name__} must be a jaxgear.RegimeMap (from jaxgear.regime_shares "
+                         "of a basin map).")
+    X, Y = _edges(np.asarray(regimes.values_x)), _edges(np.asarray(regimes.values_y))
+    n = len(regimes.meshes)
+    fig = new_figure(figsize=(11.0, 3.8 * n + 0.6), layout="constrained")
+    axes = fig.subplots(n, 2, squeeze=False)
+    cmap = ListedColormap([SINK_COLOR, *REGIME_COLORS])
+    double = int(ContactRegime.DOUBLE_SIDED)
+    for j, name in enumerate(regimes.meshes):
+        ax, ax2 = axes[j]
+        ax.pcolormesh(X, Y, np.asarray(regimes.dominant_regime)[..., j] + 1, cmap=cmap, vmin=-0.5, vmax=3.5,
+                      shading="flat")
+        ax.set_title(f"{name}: regime of the largest basin", fontsize="medium")
+        m = ax2.pcolormesh(X, Y, 100 * np.asarray(regimes.shares)[..., j, double], cmap="Reds", vmin=0, vmax=100,
+                           shading="flat")
+        fig.colorbar(m, ax=ax2).set_label("double-sided impact [% of the cells]")
+        ax2.set_title(f"{name}: share with double-sided impacts", fontsize="medium")
+        for a in (ax, ax2):
+            a.set_xlabel(regimes.label_x or regimes.param_x)
+            a.set_ylabel(regimes.label_y or regimes.param_y)
+    handles = [Patch(color=c, label=r.text) for r, c in zip(ContactRegime, REGIME_COLORS)]
+    handles.append(Patch(color=SINK_COLOR, label="no attractor"))
+    axes[0][0].legend(handles=handles, fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.suptitle(title or "Contact regimes", fontsize="medium")
     return fig

@@ -117,7 +117,7 @@ def plot_bifurcation(diagram, coordinate="x1", *, directions=None, title: str | 
             marker, _, label, _ = _DIR_STYLE[name]
             handles.append(Line2D([], [], marker=marker, ls="none", color="k", ms=5, label=label))
     ax.legend(handles=handles, fontsize="small", loc="center left", bbox_to_anchor=(1.01, 0.5))
-    ax.set_xlabel(diagram.param + ("" if diagram.fields == (diagram.param,) else f"  ({', '.join(diagram.fields)})"))
+    ax.set_xlabel(diagram.axis_label)
     ax.set_ylabel(f"{diagram.state_names[j]} at forcing phase 0")
     ax.set_title(title or f"Bifurcation diagram of {diagram.system} ({len(diagram.starts)} starts per value)")
     return fig
@@ -173,7 +173,7 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
     if len(x) > 1:
         ax.set_xlim(x.min(), x.max())
     ax.set_ylim(0, f)
-    ax.set_xlabel(sweep.param)
+    ax.set_xlabel(sweep.axis_label)
     ax.set_ylabel("share of the grid [%]" if percent else "share of the grid")
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize="small")
     ax.set_title(title or f"Basin shares ({sweep.method.name}, {sweep.grid.n_cells} cells per value)")
@@ -196,7 +196,7 @@ def plot_basin_shares(sweep, *, percent: bool = True, mark_events: bool = True, 
         ax_l.set_ylabel("largest Lyapunov exponent\n[1/forcing period]")
     for a in axes[:-1]:
         a.set_xlabel("")
-    axes[-1].set_xlabel(sweep.param)
+    axes[-1].set_xlabel(sweep.axis_label)
     return fig
 
 
@@ -313,8 +313,8 @@ def plot_basin_map(bmap, attractor: int | str | None = None, *, title: str | Non
         fig.colorbar(m, ax=axes[: len(gs)]).set_label("share of the cell grid [%] (white: absent)")
         axes = axes[: len(gs)]
     for ax in axes:
-        ax.set_xlabel(bmap.param_x)
-        ax.set_ylabel(bmap.param_y)
+        ax.set_xlabel(bmap.axis_labels[0])
+        ax.set_ylabel(bmap.axis_labels[1])
     fig.suptitle(title or f"Basin shares over {bmap.param_x} x {bmap.param_y} ({bmap.method.name}, "
                  f"{bmap.grid.n_cells} cells per point)")
     return fig

@@ -8,6 +8,8 @@
 - :mod:`._kernels` — the batched (values x starts) kernels;
 - :mod:`._classify` — period codes and distinct attractors of recorded sequences;
 - :mod:`._values` — checking and applying parameter values;
+- :mod:`._physical` — :func:`sweep_axis`: a :class:`~jaxgear.GearSet` field in physical units
+  mapped to the dimensionless fields it changes;
 - :mod:`._checkpoint` — kill-and-resume of long sweeps.
 """
 
@@ -17,10 +19,11 @@ from ._bifurcation import DIRECTIONS, BifurcationDiagram, SequenceSettings, Swee
 from ._classify import APERIODIC, ESCAPED, period_label, type_label
 from ._options import BasinOptions, SequenceOptions
 from ._parameter_map import MapQuantity, ParameterMap, parameter_map
+from ._physical import PHYSICAL_ALIASES, SweepAxis, physical_names, sweep_axis
 from ._values import check_values
 
 __all__ = ["SequenceOptions", "BasinOptions", "BifurcationDiagram", "SequenceSettings", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram",
            "basin_sweep", "basin_map", "parameter_map", "match_on_grid", "ESCAPED", "APERIODIC", "DIRECTIONS",
            "SweepDirection", "MapQuantity",
            "period_label", "type_label", "match_across_values",
-           "check_values"]
+           "check_values", "SweepAxis", "sweep_axis", "physical_names", "PHYSICAL_ALIASES"]

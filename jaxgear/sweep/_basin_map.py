@@ -20,11 +20,12 @@ import numpy as np
 
 from .._cells import CellGrid
 from .._checks import check_bool, with_changes
-from .._codec import array_field, result_type
+from .._codec import array_field, later_field, result_type
 from .._devices import process_index
 from .._format import format_table
 from .._matching import match_attractors
-from .._params import param_targets, params_to_dict
+from .._model import REDUCED
+from .._params import params_to_dict
 from .._system import ForcedSystem
 from .._version import __version__
 from ..analysis import AbstractGlobalMethod
@@ -32,7 +33,8 @@ from ._basins import GlobalShares, analyses_at, global_arrays, resolve_basin_opt
 from ._bifurcation import read_only
 from ._classify import label_order
 from ._options import BasinOptions
-from ._values import apply_values, check_values, coord_name, sorted_values
+from ._physical import axis_label, joint_rows, physical_summary, resolve_gear_set, sweep_axis
+from ._values import apply_values, check_values, coord_name
 
 __all__ = ["BasinMap", "basin_map", "match_on_grid"]
 
@@ -44,7 +46,13 @@ class BasinMap(GlobalShares):
     grid of two parameters (``y`` rows, ``x`` columns).
 
     Attributes:
-        param_x, fields_x, values_x ``(nx,)``; param_y, fields_y, values_y ``(ny,)``.
+        param_x, fields_x, values_x ``(nx,)``; param_y, fields_y, values_y ``(ny,)``:
+            each parameter as given, the dimensionless fields it sets and its values (in
+            ``unit_x`` / ``unit_y`` when ``physical_x`` / ``physical_y``: a
+            :class:`~jaxgear.GearSet` field swept with ``gear_set=``).
+        field_values_x, field_values_y: ``(nx, len(fields_x))``, ``(ny, len(fields_y))``
+            the dimensionless value of each field at each value (the values repeated for a
+            dimensionless parameter).
         shares: ``(ny, nx, G)`` share of the cell grid in the domain of global attractor
             g at each parameter point (0 where it does not exist); sink_share,
             unresolved_share: ``(ny, nx)``.
@@ -75,11 +83,34 @@ class BasinMap(GlobalShares):
     param_y: str = ""
     fields_y: tuple[str, ...] = ()
     values_y: np.ndarray = array_field(lambda m: (m.coords_xy[1],))
+    unit_x: str = later_field("")
+    unit_y: str = later_field("")
+    physical_x: bool = later_field(False)
+    physical_y: bool = later_field(False)
+    field_values_x: np.ndarray | None = array_field(lambda m: (m.coords_xy[0], "field_x"), later=True, default=None)
+    field_values_y: np.ndarray | None = array_field(lambda m: (m.coords_xy[1], "field_y"), later=True, default=None)
 
     def __post_init__(self):
         super().__post_init__()
-        for f in ("values_x", "values_y"):
+        for a in ("x", "y"):  # a dimensionless parameter (or a file written before physical sweeps)
+            if getattr(self, f"field_values_{a}") is None:
+                v, fields = np.asarray(getattr(self, f"values_{a}"), float), getattr(self, f"fields_{a}")
+                object.__setattr__(self, f"field_values_{a}", np.repeat(v[:, None], len(fields), axis=1))
+        for f in ("values_x", "values_y", "field_values_x", "field_values_y"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def axis_labels(self) -> tuple[str, str]:
+        """The two parameters with their units (``"T_D [N m]"``) or the fields they set."""
+        return (axis_label(self.param_x, self.fields_x, self.unit_x, self.physical_x),
+                axis_label(self.param_y, self.fields_y, self.unit_y, self.physical_y))
+
+    def point_rows(self) -> np.ndarray:
+        """``(ny, nx, len(fields_x) + len(fields_y))``: the dimensionless values every point
+        sets on ``fields_x + fields_y``."""
+        ny, nx = len(self.values_y), len(self.values_x)
+        return np.concatenate([np.broadcast_to(self.field_values_x[None], (ny, nx, len(self.fields_x))),
+                               np.broadcast_to(self.field_values_y[:, None], (ny, nx, len(self.fields_y)))], axis=-1)
 
     @property
     def value_dims(self) -> tuple[str, ...]:
@@ -111,7 +142,10 @@ class BasinMap(GlobalShares):
     def summary(self) -> dict[str, Any]:
         return dict(kind="basin_map", param_x=self.param_x, fields_x=list(self.fields_x),
                     values_x=self.values_x.tolist(), param_y=self.param_y, fields_y=list(self.fields_y),
-                    values_y=self.values_y.tolist(), method=self.method.name, grid=self.grid.to_dict(),
+                    values_y=self.values_y.tolist(),
+                    **physical_summary(self.unit_x, self.physical_x, self.field_values_x, "_x"),
+                    **physical_summary(self.unit_y, self.physical_y, self.field_values_y, "_y"),
+                    method=self.method.name, grid=self.grid.to_dict(),
                     match_tol=self.match_tol, system=self.system, params=self.params,
                     settings=self.settings_summary(),
                     version=self.version,
@@ -124,7 +158,8 @@ class BasinMap(GlobalShares):
     @property
     def coords_xy(self) -> tuple[str, str]:
         """Names of the two parameter coordinates in the saved file."""
-        taken = list(self.state_names) + list(self.grid.axis_names) + ["attractor", "point", "state"]
+        taken = list(self.state_names) + list(self.grid.axis_names) + ["attractor", "point", "state", "field_x",
+                                                                          "field_y"]
         cx = coord_name(self.param_x, taken)
         cy = coord_name(self.param_y, taken + [cx])
         return cx, (f"{cy}_y" if cy == cx else cy)
@@ -132,8 +167,10 @@ class BasinMap(GlobalShares):
     def _coords(self) -> dict:
         cx, cy = self.coords_xy
         return self._cell_coords({
-            cx: (cx, np.asarray(self.values_x), {"long_name": self.param_x, "sets": ",".join(self.fields_x)}),
-            cy: (cy, np.asarray(self.values_y), {"long_name": self.param_y, "sets": ",".join(self.fields_y)})})
+            cx: (cx, np.asarray(self.values_x), {"long_name": self.param_x, "sets": ",".join(self.fields_x),
+                                                 **({"units": self.unit_x} if self.physical_x else {})}),
+            cy: (cy, np.asarray(self.values_y), {"long_name": self.param_y, "sets": ",".join(self.fields_y),
+                                                 **({"units": self.unit_y} if self.physical_y else {})})})
 
     def _attrs(self) -> dict:
         return dict(title="jaxgear basin shares over two parameters",
@@ -175,7 +212,7 @@ def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarra
 def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y,
               grid: CellGrid | None = None, *, method: AbstractGlobalMethod | str | None = None,
               options: BasinOptions | None = None, progress: bool = True, out=None, restart: bool = False,
-              save: bool = True, **changes) -> BasinMap:
+              save: bool = True, gear_set=None, **changes) -> BasinMap:
     """Basin shares over a grid of two parameters, attractors identified across the grid.
 
     At every point of ``values_y x values_x`` :func:`~jaxgear.analyze_global` runs
@@ -205,6 +242,9 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
             ``uncertainty``, cells sampled at each point for its label uncertainty, kept as
             ``uncertainty_step`` and ``uncertainty_start``, 0 skips it); ``None``: the defaults.
         progress: show a progress bar.
+        gear_set: a :class:`~jaxgear.GearSet`: both parameters are then its fields (as
+            in :func:`~jaxgear.basin_sweep`), in its physical units; each point sets the
+            dimensionless fields both conversions change.
         **changes: fields of ``options`` to change.
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), process ``p`` of
@@ -216,27 +256,35 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
         :class:`BasinMap`.
     """
     opts = with_changes(options, BasinOptions, changes)
+    if gear_set is not None:
+        params = resolve_gear_set(gear_set, params, system is None or system is REDUCED)
     system, params, method, grid, opts = resolve_basin_options(system, params, method, grid, opts)
-    fields_x, fields_y = param_targets(params, param_x), param_targets(params, param_y)
-    if set(fields_x) & set(fields_y):
+    ax_x, ax_y = sweep_axis(params, param_x, values_x, gear_set), sweep_axis(params, param_y, values_y, gear_set)
+    if set(ax_x.fields) & set(ax_y.fields):
         raise ValueError(f"param_x={param_x!r} and param_y={param_y!r} set the same field.")
-    vx, vy = sorted_values(values_x, param_x), sorted_values(values_y, param_y)
-    names = (param_x, param_y)
+    vx, vy = ax_x.values, ax_y.values
     VV = np.stack(np.meshgrid(vx, vy, indexing="xy"), axis=-1).reshape(-1, 2)  # (ny * nx, 2), y major
-    check_values(system, params, names, VV)
+    if ax_x.physical:  # every point's dimensionless fields, checked against the gear set at both values
+        names, rows = ax_x.fields + ax_y.fields, joint_rows(gear_set, (ax_x, ax_y), VV)
+    else:
+        names, rows = (param_x, param_y), VV
+    check_values(system, params, names, rows)
     check_bool(progress, "progress")
     check_bool(restart, "restart")
     check_bool(save, "save")
     settings = dict(kind="basin_map", system=system.name, param_x=param_x, values_x=vx.tolist(), param_y=param_y,
-                    values_y=vy.tolist(), params=params_to_dict(params), grid=grid.to_dict(),
+                    values_y=vy.tolist(), **({"physical": [ax_x.unit, ax_y.unit]} if ax_x.physical else {}),
+                    params=params_to_dict(params), grid=grid.to_dict(),
                     method=method.to_dict(), match_tol=opts.match_tol, **uncertainty_setting(opts.uncertainty),
                     version=__version__)
-    results = analyses_at(system, [apply_values(params, names, v) for v in VV], grid, method, opts, settings, out,
+    results = analyses_at(system, [apply_values(params, names, v) for v in rows], grid, method, opts, settings, out,
                           restart, progress)
     ny, nx = len(vy), len(vx)
     arrays = global_arrays(results, match_on_grid(results, ny, nx, opts.match_tol), grid, system.dim)
     bmap = BasinMap(
-        param_x=param_x, fields_x=fields_x, values_x=vx, param_y=param_y, fields_y=fields_y, values_y=vy,
+        param_x=param_x, fields_x=ax_x.fields, values_x=vx, param_y=param_y, fields_y=ax_y.fields, values_y=vy,
+        unit_x=ax_x.unit, unit_y=ax_y.unit, physical_x=ax_x.physical, physical_y=ax_y.physical,
+        field_values_x=ax_x.rows, field_values_y=ax_y.rows,
         **{k: a.reshape(ny, nx, *a.shape[1:]) for k, a in arrays.items()}, grid=grid, method=method,
         match_tol=opts.match_tol, uncertainty_samples=opts.uncertainty, system=system.name,
         state_names=tuple(system.state_names), params=params_to_dict(params), version=__version__)

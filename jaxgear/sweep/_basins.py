@@ -22,14 +22,14 @@ import numpy as np
 from .._batching import progress_bar
 from .._cells import CellGrid
 from .._checks import check_bool, check_int, with_changes
-from .._codec import array_field, custom_field, result_type
+from .._codec import array_field, custom_field, later_field, result_type
 from .._devices import process_count, process_index, values_over_processes, wait_for_parts
 from .._format import format_table
 from .._io import load, save_result
 from .._lyapunov import AttractorType
 from .._matching import match_attractors
 from .._model import REDUCED
-from .._params import param_targets, params_to_dict, with_param
+from .._params import params_to_dict
 from .._presets import paper_params
 from .._system import ForcedSystem
 from .._version import __version__
@@ -46,7 +46,8 @@ from ._bifurcation import read_only
 from ._checkpoint import open_shared_checkpoint
 from ._classify import carry_decided_types, type_label
 from ._options import BasinOptions
-from ._values import check_values, coord_name, sorted_values
+from ._physical import axis_label, physical_summary, resolve_gear_set, sweep_axis
+from ._values import apply_values, check_values, coord_name
 
 __all__ = ["BasinSweep", "GlobalShares", "basin_sweep", "match_across_values"]
 
@@ -107,6 +108,9 @@ class GlobalShares:
     boundary_basin_entropy: np.ndarray | None = array_field(_at(), later=True, default=None)
     uncertainty_exponent: np.ndarray | None = array_field(_at(), later=True, default=None)
     uncertainty_exponent_error: np.ndarray | None = array_field(_at(), later=True, default=None)
+    uncertainty_exponent_low: np.ndarray | None = array_field(_at(), later=True, default=None)
+    uncertainty_exponent_high: np.ndarray | None = array_field(_at(), later=True, default=None)
+    uncertainty_exponent_chi2: np.ndarray | None = array_field(_at(), later=True, default=None)
     grid: CellGrid = None  # type: ignore[assignment]
     method: AbstractGlobalMethod = custom_field(lambda m: m.to_dict(), method_from_dict)
     match_tol: float = 0.0
@@ -226,7 +230,13 @@ class BasinSweep(GlobalShares):
     """Result of :func:`basin_sweep`: basin shares of globally identified attractors.
 
     Attributes:
-        param, fields, values ``(V,)``.
+        param, fields, values ``(V,)``: the swept name as given, the dimensionless fields
+            it sets, its values (in ``unit`` when ``physical``: a
+            :class:`~jaxgear.GearSet` field swept with ``gear_set=``).
+        unit, physical: the unit of ``values`` and whether they are physical (``""``
+            and ``False`` for a dimensionless sweep).
+        field_values: ``(V, len(fields))`` the dimensionless value of each field at each
+            value (``values`` repeated for a dimensionless sweep).
         shares: ``(V, G)`` share of the grid in the domain of global attractor g at each
             value (0 where it does not exist); sink_share, unresolved_share: ``(V,)``.
         period: ``(V, G)`` its period there (k, 0 aperiodic), -1 where it does not exist.
@@ -258,10 +268,22 @@ class BasinSweep(GlobalShares):
     param: str
     fields: tuple[str, ...]
     values: np.ndarray = array_field(lambda b: (b.param_coord,))
+    unit: str = later_field("")
+    physical: bool = later_field(False)
+    field_values: np.ndarray | None = array_field(lambda b: (b.param_coord, "field"), later=True, default=None)
 
     def __post_init__(self):
         super().__post_init__()
-        object.__setattr__(self, "values", read_only(self.values))
+        if self.field_values is None:  # a dimensionless sweep (or a file written before physical sweeps)
+            object.__setattr__(self, "field_values", np.repeat(np.asarray(self.values, float)[:, None],
+                                                               len(self.fields), axis=1))
+        for f in ("values", "field_values"):
+            object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def axis_label(self) -> str:
+        """The swept parameter with its unit (``"b_sp [µm, half]"``) or the fields it sets."""
+        return axis_label(self.param, self.fields, self.unit, self.physical)
 
     @property
     def value_dims(self) -> tuple[str, ...]:
@@ -307,7 +329,7 @@ class BasinSweep(GlobalShares):
         """Printable table of the events (appear / vanish / period change / share change)."""
         rows = [(f"{e['value']:.5g}", e["id"], self.attractor_label(e["id"]), e["event"], e["detail"])
                 for e in self.events(share_step)]
-        return format_table(rows, (self.param, "attractor", "label", "event", "detail"))
+        return format_table(rows, (self._head(), "attractor", "label", "event", "detail"))
 
     def shares_table(self) -> str:
         """Shares (percent) of every global attractor and the sink at every value, and the
@@ -315,9 +337,9 @@ class BasinSweep(GlobalShares):
         unres = bool(np.any(self.unresolved_share > 0))
         unc = bool(np.isfinite(self.uncertainty_step).any())
         fractal = bool(np.isfinite(self.boundary_basin_entropy).any() or np.isfinite(self.uncertainty_exponent).any())
-        head = ((self.param,) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors))
+        head = ((self._head(),) + tuple(f"{g}: {self.attractor_label(g)}" for g in range(self.n_attractors))
                 + ("sink",) + (("unresolved",) if unres else ()) + (("unc. step", "unc. start") if unc else ())
-                + (("S_bb", "alpha") if fractal else ()))
+                + (("S_bb", "alpha", "alpha moves") if fractal else ()))
 
         def pct(x):
             return "-" if np.isnan(x) else f"{100 * x:.1f}"
@@ -326,12 +348,21 @@ class BasinSweep(GlobalShares):
                                       for g, s in enumerate(self.shares[i])) + (f"{100 * self.sink_share[i]:.1f}",)
                 + ((f"{100 * self.unresolved_share[i]:.1f}",) if unres else ())
                 + ((pct(self.uncertainty_step[i]), pct(self.uncertainty_start[i])) if unc else ())
-                + ((_num(self.boundary_basin_entropy[i]), _num(self.uncertainty_exponent[i])) if fractal else ())
+                + ((_num(self.boundary_basin_entropy[i]),) + self._alpha_cells(i) if fractal else ())
                 for i, v in enumerate(self.values)]
         return format_table(rows, head)
 
+    def _alpha_cells(self, i: int) -> tuple[str, str]:
+        """The uncertainty exponent at value ``i`` and the start moves of its scaling range
+        (cell sizes), ``"none"`` where the label uncertainty found no scaling range."""
+        a, lo, hi = self.uncertainty_exponent[i], self.uncertainty_exponent_low[i], self.uncertainty_exponent_high[i]
+        if np.isfinite(a):
+            return _num(a), (f"{lo:.0e}-{hi:.0e}" if np.isfinite(lo) else "-")
+        return ("none", "no scaling range") if np.isfinite(self.uncertainty_start[i]) else ("-", "-")
+
     def summary(self) -> dict[str, Any]:
         return dict(kind="basins", param=self.param, fields=list(self.fields), values=self.values.tolist(),
+                    **physical_summary(self.unit, self.physical, self.field_values),
                     method=self.method.name, grid=self.grid.to_dict(), match_tol=self.match_tol, system=self.system,
                     params=self.params, settings=self.settings_summary(), version=self.version,
                     attractors=[dict(id=g, label=self.attractor_label(g),
@@ -340,16 +371,20 @@ class BasinSweep(GlobalShares):
                                      max_share=float(self.shares[:, g].max())) for g in range(self.n_attractors)],
                     **self._per_value_summary(), events=self.events())
 
+    def _head(self) -> str:
+        return self.axis_label if self.physical else self.param
+
     @property
     def param_coord(self) -> str:
         """Name of the parameter's coordinate in the saved file."""
         return coord_name(self.param, list(self.state_names) + list(self.grid.axis_names)
-                          + ["attractor", "point", "state"])
+                          + ["attractor", "point", "state", "field"])
 
     def _coords(self) -> dict:
         c = self.param_coord
         return self._cell_coords({c: (c, np.asarray(self.values), {"long_name": self.param,
-                                                                    "sets": ",".join(self.fields)})})
+                                                                    "sets": ",".join(self.fields),
+                                                                    **({"units": self.unit} if self.physical else {})})})
 
     def _attrs(self) -> dict:
         return dict(title="jaxgear basin shares across a parameter",
@@ -372,7 +407,7 @@ def _analyze_values(system, params_list, grid, method, batched: bool = False, un
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
                 method: AbstractGlobalMethod | str | None = None, options: BasinOptions | None = None,
-                progress: bool = True, out=None, restart: bool = False, save: bool = True,
+                progress: bool = True, out=None, restart: bool = False, save: bool = True, gear_set=None,
                 **changes) -> BasinSweep:
     """Basin shares across a parameter, attractors continued from value to value.
 
@@ -421,6 +456,11 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``
             (``save=False``: only the parts; the command line writes the result with its
             summary and figures as one set); restart: discard a folder of other settings.
+        gear_set: a :class:`~jaxgear.GearSet`: ``param`` is then one of its fields (or
+            ``b``, ``e_amp``, ``k_amp``: both meshes) and ``values`` are in its physical
+            units (µm, N/m, rpm, N m, ...); each value sets the dimensionless fields its
+            conversion changes (:func:`~jaxgear.sweep.sweep_axis`, docs/model.md §3-§4)
+            on ``params`` (default: the gear set's own conversion).
         **changes: fields of ``options`` to change, e.g. ``uncertainty=0``.
 
     Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
@@ -434,20 +474,23 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
         :class:`BasinSweep`.
     """
     opts = with_changes(options, BasinOptions, changes)
+    if gear_set is not None:
+        params = resolve_gear_set(gear_set, params, system is None or system is REDUCED)
     system, params, method, grid, opts = resolve_basin_options(system, params, method, grid, opts)
-    param_targets(params, param)
-    vals = sorted_values(values, param)
-    check_values(system, params, (param,), vals[:, None])
+    axis = sweep_axis(params, param, values, gear_set)
+    names, rows = axis.applied()
+    check_values(system, params, names, rows)
     check_bool(progress, "progress")
     check_bool(restart, "restart")
     check_bool(save, "save")
-    settings = dict(kind="basins", system=system.name, param=param, values=vals.tolist(),
+    settings = dict(kind="basins", system=system.name, param=param, values=axis.values.tolist(),
+                    **({"physical": axis.unit} if axis.physical else {}),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
                     match_tol=float(opts.match_tol), **uncertainty_setting(opts.uncertainty), version=__version__)
     me = process_index()
-    results = analyses_at(system, [with_param(params, param, v) for v in vals], grid, method, opts, settings, out,
+    results = analyses_at(system, [apply_values(params, names, r) for r in rows], grid, method, opts, settings, out,
                           restart, progress)
-    sweep = _assemble_basins(results, param, vals, grid, method, opts, system, params)
+    sweep = _assemble_basins(results, param, axis.values, grid, method, opts, system, params, axis)
     if out is not None and save and me == 0:  # one process writes
         sweep.save(Path(out) / "basins.nc")
     return sweep
@@ -553,10 +596,13 @@ def _num(x) -> str:
     return "-" if not np.isfinite(x) else f"{x:.3f}"
 
 
-_MEASURES = ("basin_entropy", "boundary_basin_entropy", "uncertainty_exponent", "uncertainty_exponent_error")
+_MEASURES = ("basin_entropy", "boundary_basin_entropy", "uncertainty_exponent", "uncertainty_exponent_error",
+             "uncertainty_exponent_low", "uncertainty_exponent_high", "uncertainty_exponent_chi2")
 """The fractal basin measures of each value ``(V,)`` (NaN where not measured): basin
 entropy ``S_b`` and boundary basin entropy ``S_bb`` (:func:`~jaxgear.basin_entropy`) and
-the uncertainty exponent ``alpha`` with its error (:class:`~jaxgear.analysis.LabelUncertainty`)."""
+the uncertainty exponent ``alpha`` with its error, the smallest and largest start move of
+its scaling range and the fit's reduced chi^2 (:class:`~jaxgear.analysis.LabelUncertainty`;
+``alpha`` NaN where there is no scaling range)."""
 
 
 def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarray]:
@@ -598,17 +644,24 @@ def global_arrays(results, gids, grid: CellGrid, dim: int) -> dict[str, np.ndarr
             out["uncertainty_step"][i], out["uncertainty_start"][i] = r.uncertainty.step, r.uncertainty.start
             out["uncertainty_exponent"][i] = r.uncertainty.alpha
             out["uncertainty_exponent_error"][i] = r.uncertainty.alpha_error
+            out["uncertainty_exponent_chi2"][i] = r.uncertainty.alpha_chi2
+            if r.uncertainty.alpha_range is not None:
+                out["uncertainty_exponent_low"][i], out["uncertainty_exponent_high"][i] = r.uncertainty.alpha_range
         if r.basin_entropy is not None:
             out["basin_entropy"][i], out["boundary_basin_entropy"][i] = r.basin_entropy.S_b, r.basin_entropy.S_bb
     return out
 
 
-def _assemble_basins(results, param: str, values, grid, method, options: BasinOptions, system, params) -> BasinSweep:
-    """The :class:`BasinSweep` of the analyses ``results`` at ``values`` of ``param``, their
-    attractors matched from value to value (``options.match_tol`` resolved)."""
+def _assemble_basins(results, param: str, values, grid, method, options: BasinOptions, system, params,
+                     axis=None) -> BasinSweep:
+    """The :class:`BasinSweep` of the analyses ``results`` at ``values`` of ``param`` (of
+    ``axis``, a :class:`~jaxgear.sweep.SweepAxis`, for a physical sweep), their attractors
+    matched from value to value (``options.match_tol`` resolved)."""
+    axis = sweep_axis(params, param, values) if axis is None else axis
     arrays = global_arrays(results, match_across_values(results, options.match_tol), grid, system.dim)
     arrays["attractor_type"] = carry_decided_types(arrays["attractor_type"])
-    return BasinSweep(param=param, fields=tuple(param_targets(params, param)), values=values, **arrays, grid=grid,
+    return BasinSweep(param=axis.name, fields=axis.fields, values=axis.values, unit=axis.unit,
+                      physical=axis.physical, field_values=axis.rows, **arrays, grid=grid,
                       method=method, match_tol=float(options.match_tol), uncertainty_samples=options.uncertainty,
                       system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
                       version=__version__)

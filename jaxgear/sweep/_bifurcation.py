@@ -27,13 +27,13 @@ import numpy as np
 
 from .._batching import progress_bar
 from .._checks import check_bool, check_enum, with_changes
-from .._codec import array_field, custom_field, plain, result_type
+from .._codec import array_field, custom_field, later_field, plain, result_type
 from .._devices import cell_processes
 from .._format import format_table
 from .._io import save_result
 from .._lyapunov import AttractorType, LyapunovSpectrum, kaplan_yorke
 from .._model import REDUCED
-from .._params import param_targets, params_to_dict, with_param
+from .._params import params_to_dict
 from .._presets import paper_params
 from .._status import Status
 from .._system import ForcedSystem, check_system
@@ -44,7 +44,8 @@ from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import APERIODIC, ESCAPED, classify_sequences, group_starts, label_order, type_label
 from ._kernels import independent_points, sequential_points, values_exponent_estimates
 from ._options import DIAGRAM_RECORD, SequenceOptions
-from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
+from ._physical import axis_label, physical_summary, resolve_gear_set, sweep_axis
+from ._values import apply_values, check_starts, check_values, coord_name
 
 __all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "SweepDirection", "DIRECTIONS",
            "check_common", "read_only"]
@@ -110,8 +111,14 @@ class BifurcationDiagram:
     """Result of :func:`bifurcation_diagram` (a one-parameter sweep).
 
     Attributes:
-        param: the swept name as given (a field or an alias); fields: the fields it sets.
-        values: ``(V,)`` parameter values, increasing.
+        param: the swept name as given (a field or an alias, or a
+            :class:`~jaxgear.GearSet` field for a physical sweep); fields: the
+            dimensionless fields it sets.
+        values: ``(V,)`` parameter values, increasing (in ``unit`` when ``physical``).
+        unit, physical: the unit of ``values`` and whether they are a gear set's
+            physical values (``gear_set=``; ``""`` and ``False`` otherwise).
+        field_values: ``(V, len(fields))`` the dimensionless value of each field at each
+            value (``values`` repeated for a dimensionless sweep).
         directions: which sweeps (:class:`SweepDirection` members, equal to their texts):
             ``(INDEPENDENT,)``, ``(UP,)``, ``(DOWN,)``, ``(UP, DOWN)`` or
             ``(INDEPENDENT, UP, DOWN)`` (:attr:`SweepDirection.sweeps`).
@@ -136,6 +143,9 @@ class BifurcationDiagram:
     param: str
     fields: tuple[str, ...]
     values: np.ndarray = array_field(lambda d: (d.param_coord,))
+    unit: str = later_field("")
+    physical: bool = later_field(False)
+    field_values: np.ndarray | None = array_field(lambda d: (d.param_coord, "field"), later=True, default=None)
     directions: tuple[SweepDirection, ...] = ()
     starts: np.ndarray = array_field(("start", "state"))
     points: np.ndarray = array_field(lambda d: ("direction", d.param_coord, "start", "record", "state"))
@@ -162,14 +172,22 @@ class BifurcationDiagram:
         for f in ("largest_exponent", "exponent_error"):
             if getattr(self, f) is None:
                 object.__setattr__(self, f, np.full(np.shape(self.period), np.nan))
-        for f in ("values", "starts", "points", "period", "attractor", "attractor_type", "largest_exponent", "exponent_error"):
+        if self.field_values is None:  # a dimensionless sweep (or a file written before physical sweeps)
+            object.__setattr__(self, "field_values", np.repeat(np.asarray(self.values, float)[:, None],
+                                                               len(self.fields), axis=1))
+        for f in ("values", "field_values", "starts", "points", "period", "attractor", "attractor_type", "largest_exponent", "exponent_error"):
             object.__setattr__(self, f, read_only(getattr(self, f)))
+
+    @property
+    def axis_label(self) -> str:
+        """The swept parameter with its unit (``"b_sp [µm, half]"``) or the fields it sets."""
+        return axis_label(self.param, self.fields, self.unit, self.physical)
 
     @property
     def param_coord(self) -> str:
         """Name of the parameter's coordinate in the saved file (the parameter's name
         unless it clashes with another dimension)."""
-        return coord_name(self.param, list(self.state_names) + ["direction", "start", "record", "state"])
+        return coord_name(self.param, list(self.state_names) + ["direction", "start", "record", "state", "field"])
 
     def _d(self, direction: SweepDirection | str | None) -> int:
         if direction is None:
@@ -281,13 +299,14 @@ class BifurcationDiagram:
                 rng = f"{lo:.5g}" if len(idx) == 1 else f"{lo:.5g} .. {hi:.5g}"
                 text = ", ".join(f"{lab} ({100 * cnt[lab] / (S * len(idx)):.0f} %)" for lab in labels)
                 rows.append((rng, len(idx), name, text))
-        head = (f"{self.param}", "values", "sweep", f"attractors (share of {S} starts)")
+        head = (self.axis_label if self.physical else self.param, "values", "sweep", f"attractors (share of {S} starts)")
         return format_table(rows, head)
 
     def summary(self) -> dict[str, Any]:
         """JSON-able summary: settings, parameters and the attractors at every value."""
         return dict(
             kind="bifurcation", param=self.param, fields=list(self.fields), values=self.values.tolist(),
+            **physical_summary(self.unit, self.physical, self.field_values),
             directions=[str(d) for d in self.directions], n_starts=int(len(self.starts)), system=self.system,
             state_names=list(self.state_names), params=self.params, settings=plain(self.settings), version=self.version,
             transitions={str(d): self.transitions(d) for d in self.directions},
@@ -299,7 +318,8 @@ class BifurcationDiagram:
     def _coords(self) -> dict:
         return {"direction": ("direction", [str(d) for d in self.directions]),
                 self.param_coord: (self.param_coord, np.asarray(self.values),
-                                   {"long_name": self.param, "sets": ",".join(self.fields)}),
+                                   {"long_name": self.param, "sets": ",".join(self.fields),
+                                    **({"units": self.unit} if self.physical else {})}),
                 "state": ("state", list(self.state_names))}
 
     def _attrs(self) -> dict:
@@ -326,7 +346,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                         direction: SweepDirection | str = SweepDirection.INDEPENDENT,
                         integrator: AbstractIntegrator | None = None,
                         options: SequenceOptions | None = None, progress: bool = True, out=None,
-                        restart: bool = False, save: bool = True, **changes) -> BifurcationDiagram:
+                        restart: bool = False, save: bool = True, gear_set=None, **changes) -> BifurcationDiagram:
     """Bifurcation diagram: stroboscopic points against one parameter, classified by period.
 
     For each value of ``param`` and each initial state: ``transient`` forcing periods,
@@ -367,6 +387,11 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
             final ``DIR/bifurcation.nc``; restart: discard a folder of other settings;
             save: ``False`` keeps only the resume parts in ``out`` (the command line writes
             the result with its summary and figures as one set).
+        gear_set: a :class:`~jaxgear.GearSet`: ``param`` is then one of its fields (or
+            ``b``, ``e_amp``, ``k_amp``: both meshes) and ``values`` are in its physical
+            units; each value sets the dimensionless fields its conversion changes
+            (:func:`~jaxgear.sweep.sweep_axis`, docs/model.md §3-§4) on ``params``
+            (default: the gear set's own conversion).
         **changes: fields of ``options`` to change, e.g. ``transient=200, max_period=8``.
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), every process
@@ -381,26 +406,29 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     """
     opts = with_changes(options, SequenceOptions, changes).with_record(DIAGRAM_RECORD)
     direction = check_enum(direction, "direction", SweepDirection)
-    system, params, vals, X0, integrator = _check_diagram(system, params, param, values, x0s, integrator, restart,
-                                                          save)
+    system, params, axis, X0, integrator = _check_diagram(system, params, param, values, x0s, integrator, restart,
+                                                          save, gear_set)
+    vals = axis.values
     passes, dirs, blocks = _passes(direction, len(vals), len(X0), opts.chunk_size)
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
+                    **({"physical": axis.unit} if axis.physical else {}),
                     starts=X0.tolist(), params=params_to_dict(params), transient=opts.transient, record=opts.record,
                     direction=direction.value, integrator=integrator.to_dict(), max_period=opts.max_period,
                     tol=float(opts.tol), merge_tol=float(opts.merge_tol), escape_bound=float(opts.escape_bound),
                     block_values=blocks, version=__version__)
     ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
-    done = None if restart else _finished(out, param, vals, X0, dirs, params_to_dict(params),
+    done = None if restart else _finished(out, axis, X0, dirs, params_to_dict(params),
                                           SequenceSettings(options=opts, integrator=integrator))
     if done is not None:  # the same diagram, already whole in out: nothing is recomputed
         return done
-    run = _Run(system, params, (param,), vals, X0, opts, integrator)
+    run = _Run(system, params, *axis.applied(), X0, opts, integrator)
     points = _record_passes(run, passes, dirs, blocks, ck, progress, f"sweep {param}")
     period = classify_sequences(points, opts.max_period, float(opts.tol), float(opts.escape_bound))
     attractor = group_starts(points[..., -opts.max_period:, :], period, float(opts.merge_tol))
     kind, lam, err = aperiodic_types(run, points, period, attractor)
     diagram = BifurcationDiagram(
-        param=param, fields=param_targets(params, param), values=vals, directions=dirs, starts=X0, points=points,
+        param=param, fields=axis.fields, values=vals, unit=axis.unit, physical=axis.physical,
+        field_values=axis.rows, directions=dirs, starts=X0, points=points,
         period=period, attractor=attractor, attractor_type=kind, largest_exponent=lam, exponent_error=err,
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
         settings=SequenceSettings(options=opts, integrator=integrator), version=__version__,
@@ -410,7 +438,7 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     return diagram
 
 
-def _finished(out, param, values, starts, directions, params: dict, settings: SequenceSettings):
+def _finished(out, axis, starts, directions, params: dict, settings: SequenceSettings):
     """The diagram saved as ``out/bifurcation.nc`` when it is the one these arguments ask
     for (same parameter, values, starts, directions, base parameters and settings; the
     checkpoint already refused a folder of other settings), else ``None``."""
@@ -422,23 +450,25 @@ def _finished(out, param, values, starts, directions, params: dict, settings: Se
         d = load(Path(out) / "bifurcation.nc", expected="BifurcationDiagram")
     except (OSError, ValueError):  # unreadable or of another kind: computed again and replaced
         return None
-    same = (d.param == param and np.array_equal(d.values, values) and np.array_equal(d.starts, starts)
+    same = (d.param == axis.name and d.physical == axis.physical and np.array_equal(d.values, axis.values) and np.array_equal(d.starts, starts)
             and tuple(d.directions) == tuple(directions) and d.params == params and d.settings == settings)
     return d if same else None
 
 
-def _check_diagram(system, params, param, values, x0s, integrator, restart, save):
+def _check_diagram(system, params, param, values, x0s, integrator, restart, save, gear_set=None):
     """The defaults and checks of :func:`bifurcation_diagram` (but its ``direction``'s):
-    ``(system, params, values (sorted), starts (S, dim), integrator)``."""
+    ``(system, params, axis (a SweepAxis: values sorted), starts (S, dim), integrator)``."""
+    if gear_set is not None:
+        params = resolve_gear_set(gear_set, params, system is None or system is REDUCED)
     system, params = check_common(system, params)
     check_bool(restart, "restart")
     check_bool(save, "save")
-    param_targets(params, param)
-    vals = sorted_values(values, param)
+    axis = sweep_axis(params, param, values, gear_set)
+    names, rows = axis.applied()
     X0 = check_starts(system, x0s)
-    check_system(system, with_param(params, param, vals[0]), X0[0])
-    check_values(system, params, (param,), vals[:, None])
-    return system, params, vals, X0, resolve_integrator(integrator)
+    check_system(system, apply_values(params, names, rows[0]), X0[0])
+    check_values(system, params, names, rows)
+    return system, params, axis, X0, resolve_integrator(integrator)
 
 
 def _passes(direction: SweepDirection, V: int, S: int, chunk_size: int):
@@ -464,8 +494,8 @@ def _passes(direction: SweepDirection, V: int, S: int, chunk_size: int):
 @dataclasses.dataclass(frozen=True)
 class _Run:
     """What every block of a sweep integrates with: the system, base parameters, swept
-    names, sorted values ``(V,)`` (a diagram) or grid points ``(n, len(names))`` (a
-    parameter map), starts ``(S, dim)``, the options (``record`` set) and the integrator."""
+    names, and one row per value ``(V, len(names))`` (a diagram: the values in order) or
+    per grid point (a parameter map), starts ``(S, dim)``, the options (``record`` set) and the integrator."""
 
     system: Any
     params: Any
@@ -480,10 +510,10 @@ def _compute_block(run: _Run, name: str, B: int, orders, a: int, b: int, carry) 
     """Points of the values ``a:b`` of one pass (padded to ``B`` values), and the state
     carried out of the block (sequential passes; the carry in for independent ones)."""
     if name == "independent":
-        pts = independent_points(run.system, run.params, run.names, run.values[a:b, None], B, jnp.asarray(run.starts),
+        pts = independent_points(run.system, run.params, run.names, run.values[a:b], B, jnp.asarray(run.starts),
                                  run.options.transient, run.options.record, run.integrator)[:, None]
     else:
-        seq = np.stack([run.values[o[a:b]] for o in orders], axis=1)[..., None]  # (n, nd, 1)
+        seq = np.stack([run.values[o[a:b]] for o in orders], axis=1)  # (n, nd, m)
         pts, carry = sequential_points(run.system, run.params, run.names, seq, B, jnp.asarray(run.starts), carry,
                                        run.options.transient, run.options.record, run.integrator,
                                        run.options.escape_bound)
@@ -540,7 +570,7 @@ def aperiodic_types(run: _Run, points: np.ndarray, period: np.ndarray, attractor
     k = min(2, run.system.dim)
 
     def measure(i, x, periods, stretches):  # each lane at its own value
-        est, final = values_exponent_estimates(run.system, run.params, run.names, run.values[vv[i], None], x,
+        est, final = values_exponent_estimates(run.system, run.params, run.names, run.values[vv[i]], x,
                                                n_exponents=k, periods=periods, stretches=stretches,
                                                integrator=run.integrator, chunk_size=run.options.chunk_size)
         return exponent_spectrum(run, vv[i], est, final, periods=periods)
@@ -566,7 +596,7 @@ def exponent_spectrum(run: _Run, vv: np.ndarray, est: np.ndarray, final: np.ndar
     est = np.where(ok[:, None, None], est, np.nan)
     lam = est.mean(axis=1)
     err = est.std(axis=1, ddof=1) / np.sqrt(est.shape[1])
-    T = np.asarray([float(run.system.period(apply_values(run.params, run.names, [v])))
+    T = np.asarray([float(run.system.period(apply_values(run.params, run.names, v)))
                     for v in run.values[vv]])[:, None]
     return LyapunovSpectrum(
         exponents=jnp.asarray(lam), per_time=jnp.asarray(lam / T), errors=jnp.asarray(err),
