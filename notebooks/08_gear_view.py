@@ -89,25 +89,25 @@ for view in views:
 # ## 3. Backlash in micrometres: where the teeth start to hit the back flanks
 #
 # The paper preset has a half backlash of 50 um on both meshes (`b = 5` in units
-# of `b_c` = 10 um). Each value in micrometres goes through the physical gear set
-# (`paper_gear_set(b_sp=..., b_rp=...)`) to the dimensionless `b` it means; a basin sweep
-# over those values analyses the grid at each, and `regime_shares` takes the gear view of
-# every attractor found: the share of the state space in each contact regime is the sum of
-# the shares of the attractors in that regime.
+# of `b_c` = 10 um). With `gear_set=`, a basin sweep takes the backlash in micrometres
+# (`"b"`: both meshes' half backlash, a field of the gear set); each value goes through
+# `gear_set.replace(...).to_params()` to the dimensionless `b_sp`, `b_rp` it means
+# (`sweep.field_values`). The sweep analyses the grid at each value, and `regime_shares`
+# takes the gear view of every attractor found: the share of the state space in each
+# contact regime is the sum of the shares of the attractors in that regime.
 
 # %%
-b_values = [float(jg.paper_gear_set(b_sp=float(um), b_rp=float(um)).to_params().b_sp) for um in backlash_um]
-sweep = jg.basin_sweep(REDUCED, params, "b", b_values, grid, progress=False, uncertainty=0)
+sweep = jg.basin_sweep(REDUCED, params, "b", backlash_um, grid, gear_set=gear_set, progress=False, uncertainty=0)
 regimes = jg.regime_shares(sweep, REDUCED, params, gear_set)
 ring = regimes.meshes.index("ring-planet")
-for um, b, row, rest in zip(backlash_um, b_values, regimes.shares[:, ring], regimes.no_attractor):
+for um, b, row, rest in zip(sweep.values, sweep.field_values[:, 0], regimes.shares[:, ring], regimes.no_attractor):
     print(f"{um:5.1f} um (b = {b:g}): " + ", ".join(f"{r.text} {100 * s:5.1f} %" for r, s in zip(ContactRegime, row))
           + f", on no attractor {100 * rest:.1f} %")
+assert np.allclose(sweep.field_values[:, 0], backlash_um / gear_set.b_c)  # b_sp in units of b_c
 assert np.allclose(regimes.shares.sum(axis=2) + regimes.no_attractor[:, None], 1.0)  # every cell counted once
 assert regimes.shares[0, ring, ContactRegime.DOUBLE_SIDED] > 0.5  # the chaotic motion at 20 um hits the back flanks
 assert regimes.shares[-1, ring, ContactRegime.SINGLE_SIDED] > 0.5  # the paper's P-4 and P-8 rattle
 
-fig = plotting.plot_regime_shares(regimes)
-fig.axes[-1].set_xlabel("half backlash b (units of b_c = 10 um)")
+fig = plotting.plot_regime_shares(regimes)  # its axis: the half backlash in um
 display(fig)
 plt.close(fig)
