@@ -31,6 +31,18 @@ def pytest_configure(config):
 import jax  # noqa: E402
 import pytest  # noqa: E402
 
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """How the tests are spread over the worker processes (``--dist loadgroup`` in
+    ``addopts``): a file's tests stay on one worker, so its module fixtures are built once,
+    except the tests marked ``spread`` (each notebook run, each slow documentation page:
+    minutes each, sharing nothing), which go to whichever worker is free. Runs before
+    pytest-xdist reads the groups."""
+    for item in items:
+        if item.get_closest_marker("spread") is None:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
 import jaxgear  # noqa: E402, F401  (enables float64 before any test builds arrays)
 from jaxgear._cache import enable_compilation_cache  # noqa: E402
 

@@ -312,7 +312,7 @@ def _page_params():
         name = _page_id(page)
         if not page.is_file() or not any(b.lang in ("python", "py") for b in code_blocks(page.read_text("utf-8"))):
             continue
-        marks = [pytest.mark.slow] if name in SLOW_PAGES else []
+        marks = [pytest.mark.slow, pytest.mark.spread] if name in SLOW_PAGES else []
         yield pytest.param(page, id=name, marks=marks)
 
 

@@ -22,7 +22,7 @@ ROOT = Path(__file__).parent.parent
 NOTEBOOK_DIR = ROOT / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 IDS = [p.stem for p in NOTEBOOKS]
-RUNS = [pytest.param(p, id=p.stem, marks=pytest.mark.slow) for p in NOTEBOOKS]
+RUNS = [pytest.param(p, id=p.stem, marks=[pytest.mark.slow, pytest.mark.spread]) for p in NOTEBOOKS]
 """Every notebook runs in ``pytest -m slow``: each takes a minute or more on the 2-core CI
 machine even at its reduced size, and its asserts are checks that no other test makes, so
 none is left out."""
