@@ -65,6 +65,36 @@ def _strict_dtype_promotion():
             jax.config.update("jax_numpy_dtype_promotion", old)
 
 
+MAP_LIMIT = 30_000
+"""Memory mappings of a test process above which JAX's caches are dropped after a test."""
+
+
+def _mappings() -> int:
+    try:
+        with open("/proc/self/maps", "rb") as fh:
+            return sum(1 for _ in fh)
+    except OSError:  # not Linux: no such limit to guard
+        return 0
+
+
+@pytest.fixture(autouse=True)
+def _bounded_mappings():
+    """Keep a long-lived test process below the kernel's limit of memory mappings
+    (``vm.max_map_count``, 65,530 by default). Every program XLA compiles for the CPU
+    stays mapped (about three mappings each) while JAX's caches hold it, and a worker of
+    the slow tier compiles tens of thousands: at the limit a mapping fails and XLA's
+    compiler crashes the process (a segmentation fault, seen twice in 2026-12; pytest-xdist
+    then waits for ever). Past :data:`MAP_LIMIT` the caches are cleared after the test
+    (``jax.clear_caches``): later tests load their programs from the session's
+    compilation cache instead of compiling them again."""
+    yield
+    if _mappings() > MAP_LIMIT:
+        import gc
+
+        jax.clear_caches()
+        gc.collect()
+
+
 _CACHE_SETTINGS = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
                    "jax_persistent_cache_min_entry_size_bytes")
 

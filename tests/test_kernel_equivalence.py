@@ -12,9 +12,6 @@ gather's fallback) must give the states of a batch in which one lane does.
 """
 
 import math
-import os
-import subprocess
-import sys
 
 import jax
 import jax.numpy as jnp
@@ -411,20 +408,7 @@ def test_systems_without_switching_functions_take_plain_rk4_steps(system, params
 @pytest.mark.slow  # compiles both derivatives of the gathered step (~35 s on the loaded 2 cores)
 def test_gathered_lanes_are_differentiated_as_the_whole_batch_select():
     """Derivatives through the gathered path (forward and reverse mode) are those of the
-    same lanes stepped in a small batch (the select path), lane by lane.
-
-    Run in a fresh process: compiling the reverse-mode program (a large one) in a test
-    worker that had compiled for forty minutes crashed XLA's CPU compiler (a segmentation
-    fault in its compile or cache write, 2026-12-06, twice; the same test passes alone,
-    and the kernel runs clean under AddressSanitizer), and a crashed worker leaves
-    pytest-xdist waiting for ever."""
-    if os.environ.get("JAXGEAR_TEST_CHILD") != "1":
-        nodeid = f"{__file__}::test_gathered_lanes_are_differentiated_as_the_whole_batch_select"
-        p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider", "-m",
-                            "slow or not slow", nodeid], env=dict(os.environ, JAXGEAR_TEST_CHILD="1"),
-                           capture_output=True, text=True, timeout=900)
-        assert p.returncode == 0 and "1 passed" in p.stdout, p.stdout[-4000:] + p.stderr[-2000:]
-        return
+    same lanes stepped in a small batch (the select path), lane by lane."""
     rng = np.random.default_rng(11)
     p = random_params(rng)
     h = 2 * math.pi / float(p.Omega) / STEPS
