@@ -160,6 +160,25 @@ class UncertaintyExponent(NamedTuple):
         return f"UncertaintyExponent(alpha={self.alpha:.4f} +- {self.alpha_err:.4f}, points={len(self.eps)})"
 
 
+def _fractions(eps, f_uncertain, n_samples):
+    """``eps``, ``f_uncertain`` and ``n_samples`` (``None`` or broadcast to ``eps``) checked:
+    one length, ``eps > 0``, ``f`` in ``[0, 1]``, integer sample counts >= 1."""
+    x = check_finite_array(eps, "eps", ndim=1)
+    f = check_finite_array(f_uncertain, "f_uncertain", ndim=1)
+    if x.shape != f.shape:
+        raise ValueError(f"eps and f_uncertain must have the same length, got {x.shape[0]} and {f.shape[0]}.")
+    if np.any(x <= 0):
+        raise ValueError(f"eps must be positive, got {x.tolist()}.")
+    if np.any(f < 0) or np.any(f > 1):
+        raise ValueError(f"f_uncertain must lie in [0, 1], got {f.tolist()}.")
+    if n_samples is None:
+        return x, f, None
+    n = np.broadcast_to(np.asarray(n_samples), x.shape)
+    if not np.issubdtype(n.dtype, np.integer) or np.any(n < 1):
+        raise ValueError(f"n_samples must be None or integers >= 1, got {n_samples!r}.")
+    return x, f, n
+
+
 def uncertainty_exponent(eps, f_uncertain, n_samples=None) -> UncertaintyExponent:
     """The uncertainty exponent ``alpha`` of ``f(eps) ~ c eps^alpha`` (Grebogi et al. 1983).
 
@@ -180,15 +199,10 @@ def uncertainty_exponent(eps, f_uncertain, n_samples=None) -> UncertaintyExponen
     Returns:
         an :class:`UncertaintyExponent`.
     """
-    x = check_finite_array(eps, "eps", ndim=1)
-    f = check_finite_array(f_uncertain, "f_uncertain", ndim=1)
-    if x.shape != f.shape:
-        raise ValueError(f"eps and f_uncertain must have the same length, got {x.shape[0]} and {f.shape[0]}.")
+    x, f, n = _fractions(eps, f_uncertain, n_samples)
     if len(x) < 3:
         raise ValueError(f"eps must hold at least 3 perturbation sizes for a fit with an error, got {len(x)}.")
-    if np.any(x <= 0):
-        raise ValueError(f"eps must be positive, got {x.tolist()}.")
-    if np.any(f <= 0) or np.any(f > 1):
+    if np.any(f <= 0):
         raise ValueError(f"f_uncertain must lie in (0, 1] (a zero fraction has no logarithm: sample more states "
                          f"or use larger eps), got {f.tolist()}.")
     lx, ly = np.log(x), np.log(f)
@@ -201,9 +215,6 @@ def uncertainty_exponent(eps, f_uncertain, n_samples=None) -> UncertaintyExponen
         cov = s2 * np.linalg.inv(A.T @ A)
         n, chi2 = None, float("nan")
     else:
-        n = np.broadcast_to(np.asarray(n_samples), x.shape)
-        if not np.issubdtype(n.dtype, np.integer) or np.any(n < 1):
-            raise ValueError(f"n_samples must be None or integers >= 1, got {n_samples!r}.")
         var = (1.0 - f) / (n * f)
         w = 1.0 / np.maximum(var, 1.0 / (n * n))  # f = 1 has no binomial spread: one sample's worth
         Aw = A * w[:, None]
@@ -276,15 +287,9 @@ def scaling_range(eps, f_uncertain, n_samples, *, min_points: int = 4, min_decad
     Returns:
         a :class:`ScalingRange`.
     """
-    x = check_finite_array(eps, "eps", ndim=1)
-    f = check_finite_array(f_uncertain, "f_uncertain", ndim=1)
-    if x.shape != f.shape:
-        raise ValueError(f"eps and f_uncertain must have the same length, got {x.shape[0]} and {f.shape[0]}.")
-    if np.any(x <= 0) or np.any(f < 0) or np.any(f > 1):
-        raise ValueError(f"eps must be positive and f_uncertain in [0, 1], got {x.tolist()} and {f.tolist()}.")
-    n = np.broadcast_to(np.asarray(n_samples), x.shape)
-    if not np.issubdtype(n.dtype, np.integer) or np.any(n < 1):
-        raise ValueError(f"n_samples must be integers >= 1, got {n_samples!r}.")
+    if n_samples is None:
+        raise ValueError("n_samples must be given: the scaling range is judged by the counting errors.")
+    x, f, n = _fractions(eps, f_uncertain, n_samples)
     min_points = check_int(min_points, "min_points", 3)
     order = np.argsort(x, kind="stable")
     xs, fs, ns = x[order], f[order], n[order]
