@@ -1,9 +1,11 @@
 """The compiled CPU kernel of the kink-aware RK4 for the reduced gear model (XLA FFI).
 
 ``native/gear_kernel.cc`` is the kink-aware step of :mod:`._kink` for the reduced 2-DOF
-model of paper §4.1, written for the CPU (blocks of lanes kept in cache, time-only
-terms tabulated once per stage time, the trial step vectorised, the few lanes with a
-backlash crossing gathered and split together, eight at a time, blocks on every core). It is compiled with the
+model of paper §4.1, written for the CPU (blocks of lanes kept in cache; time-only terms
+tabulated once per stage time and kept for the next calls with the same parameters, the
+last 64 rows, since a call on a few lanes is mostly that tabulation; the trial step
+vectorised; the few lanes with a backlash crossing gathered and split together, eight at a
+time; blocks on every core). It is compiled with the
 machine's C++ compiler on first use, registered as an XLA FFI target, and called inside
 ``jit`` like any other operation. The pure-JAX path stays the reference: it runs on
 GPUs (:func:`jax.lax.platform_dependent`), it supplies the derivatives (a

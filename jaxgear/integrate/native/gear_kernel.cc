@@ -3,8 +3,8 @@
 // The same arithmetic as jaxgear's pure-JAX path (jaxgear/integrate/_kink.py with the
 // vector field of jaxgear/_model.py), written for the CPU: lanes in blocks of struct-of-
 // arrays that stay in cache for all steps of a call, the time-only terms of the vector
-// field (mesh stiffness, transmission errors) tabulated once per stage time and shared
-// by every lane with the same parameters, the trial step vectorised over a block (several
+// field (mesh stiffness, transmission errors) tabulated once per stage time, shared
+// by every lane with the same parameters and kept for the next calls, the trial step vectorised over a block (several
 // registers of lanes advanced together, the lanes with an event marked in bit masks), and
 // the few lanes whose step holds a backlash crossing gathered and split together
 // (vectorised over them; lane by lane for a known time break or a further event in the
@@ -18,9 +18,12 @@
 #pragma GCC optimize("no-trapping-math")
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include <omp.h>
@@ -513,6 +516,54 @@ Model make_model(const double* row, int shape) {
     }
   }
   return m;
+}
+
+
+// Tables of recent parameter rows. A period's table depends only on the row, the wave shape,
+// the start time and the steps, and a pool or a candidate's cloud asks for the same one every
+// period: tabulating (a few thousand sines) is most of what a call on a few lanes costs.
+// Bounded (kCachedTables, replaced in turn); a row is matched bit for bit, so a cached table
+// is exactly the one tabulate would compute.
+constexpr size_t kCachedTables = 64;
+using TableKey = std::array<uint64_t, NPARAM + 3>;
+
+TableKey table_key(const double* row, int shape, double t0, int64_t steps) {
+  TableKey k{};
+  std::memcpy(k.data(), row, NPARAM * sizeof(double));
+  std::memcpy(&k[NPARAM], &t0, sizeof(double));
+  k[NPARAM + 1] = static_cast<uint64_t>(steps);
+  k[NPARAM + 2] = static_cast<uint64_t>(shape);
+  return k;
+}
+
+class TableCache {
+ public:
+  std::shared_ptr<const Table> get(const Model& m, const TableKey& key, double t0, int steps) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      for (const auto& item : items_)
+        if (item.first == key) return item.second;
+    }
+    auto tb = std::make_shared<const Table>(tabulate(m, t0, m.T / steps, steps));
+    std::lock_guard<std::mutex> lock(mu_);
+    if (items_.size() < kCachedTables) {
+      items_.emplace_back(key, tb);
+    } else {
+      items_[next_] = {key, tb};
+      next_ = (next_ + 1) % kCachedTables;
+    }
+    return tb;
+  }
+
+ private:
+  std::mutex mu_;
+  std::vector<std::pair<TableKey, std::shared_ptr<const Table>>> items_;
+  size_t next_ = 0;
+};
+
+TableCache& table_cache() {
+  static TableCache cache;
+  return cache;
 }
 
 // The trial step's registers: eight lanes with AVX-512, four otherwise (a register of the
@@ -1138,7 +1189,7 @@ void split_block(const Model& m, const Coef& c, const Table& tb, int s, double t
 
 // Advance one block of lanes [a, b) by `periods` periods.
 void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, const int32_t* lane_row,
-               const std::vector<Model>& models, const std::vector<Coef>& coefs, const std::vector<Table>& tables,
+               const std::vector<Model>& models, const std::vector<Coef>& coefs, const std::vector<const Table*>& tables,
                double t0, int periods, int steps, int max_splits, SplitScratch& w) {
   const int L = static_cast<int>(b - a);
   const int rows = static_cast<int>(models.size());
@@ -1174,7 +1225,7 @@ void run_block(const double* Y, double* out, int64_t n, int64_t a, int64_t b, co
         const int r = row[j0];
         const Model& m = models[r];
         const Coef& c = coefs[r];
-        const Table& tb = tables[r];
+        const Table& tb = *tables[r];
         const double h = m.T / steps;
         const double t = t0 + s * h;
         auto at = [j0](double (*v)[kRow]) { return reinterpret_cast<double (*)[kRow]>(&v[0][j0]); };
@@ -1257,7 +1308,8 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     const double* pb = pp + (pbatch == 1 ? 0 : bi) * rows * NPARAM;
     std::vector<Model> models(rows);
     std::vector<Coef> coefs(rows);
-    std::vector<Table> tables(rows);
+    std::vector<std::shared_ptr<const Table>> held(rows);  // the tables in use, kept alive
+    std::vector<const Table*> tables(rows, nullptr);
     const double t0 = t0s[tbatch == 1 ? 0 : bi];
     const int32_t* rowp = lr + (rbatch == 1 ? 0 : bi) * n;
     const int64_t n_act = std::min<int64_t>(n, std::max<int32_t>(0, nas[abatch == 1 ? 0 : bi]));
@@ -1267,7 +1319,11 @@ ffi::Error AdvanceImpl(ffi::Buffer<ffi::F64> Y, ffi::Buffer<ffi::F64> P, ffi::Bu
     for (int64_t r = 0; r < rows; ++r) {
       models[r] = make_model(pb + r * NPARAM, static_cast<int>(shape));
       coefs[r] = coef(models[r]);
-      if (used[r]) tables[r] = tabulate(models[r], t0, models[r].T / steps, static_cast<int>(steps));
+      if (used[r]) {
+        held[r] = table_cache().get(models[r], table_key(pb + r * NPARAM, static_cast<int>(shape), t0, steps), t0,
+                                    static_cast<int>(steps));
+        tables[r] = held[r].get();
+      }
     }
     const double* yb = y + (ybatch == 1 ? 0 : bi) * 4 * n;
     double* ob = o + bi * 4 * n;
