@@ -1,7 +1,7 @@
 """What one analysis compiles: the pool's programs are shared by every pool of the same
 role and shapes, so repeating an analysis compiles nothing and the extra measures add only
-the programs that differ in what they compute (the label uncertainty's halved step and
-its one pool of start moves)."""
+the programs that differ in what they compute (the label uncertainty's halved step, and
+its one pool of start moves where the grid is smaller than that pool)."""
 
 import numpy as np
 import pytest
@@ -31,6 +31,28 @@ def test_the_extra_measures_add_only_the_programs_that_differ():
     # one pool with the halved step, one pool for every start move: not a program per move
     assert len(extra) <= 2, extra
     assert u.samples == 32 and len(u.start_fractions) == 6
+
+
+def test_the_start_moves_run_in_the_analysis_s_own_pool_programs(monkeypatch):
+    """On a grid larger than the pilot, the label uncertainty's pool of start moves takes the
+    queue shape and a lane count of the analysis's own pools, so it compiles no pool
+    program: the uncertainty adds only its halved step's. Its fractions are those of a
+    pool in its own shapes."""
+    from jaxgear.analysis import _uncertainty
+
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (45, 40), names=("x", "v"))  # 1,800 cells: a pilot, then 776
+    method = jg.Direct(integrator=jg.RK4(46))  # a step count no other test compiles
+    kw = dict(method=method, progress=False)
+    with count_compilations("_run_one") as analysis:
+        jg.analyze_global(jg.DUFFING, PARAMS, grid, uncertainty=0, **kw)
+    with count_compilations("_run_one") as extra:
+        u = jg.analyze_global(jg.DUFFING, PARAMS, grid, uncertainty=64, **kw).uncertainty
+    assert len(analysis) >= 1 and len(extra) == 1, (analysis, extra)  # the halved step's pool alone
+    monkeypatch.setattr(_uncertainty, "main_queue", lambda counts, pilot: 0)  # the start moves in their own shapes
+    with count_compilations("_run_one") as own:
+        v = jg.analyze_global(jg.DUFFING, PARAMS, grid, uncertainty=64, **kw).uncertainty
+    assert len(own) >= 1  # (the check above can fail)
+    assert v.start_fractions == u.start_fractions and v.step == u.step
 
 
 @pytest.mark.slow  # about 10 s: two pools of 10,000 cells

@@ -207,17 +207,20 @@ def _my_blocks(n: int):
 
 
 def run_blocks(drive, X: np.ndarray, rows: np.ndarray, attractors: AttractorTable, merge_tol: float,
-               partition=None):
+               partition=None, like: int = 0):
     """Label the queue ``X (n, dim)`` (value rows ``rows (n,)``) in one pool per device of
     every process (``drive(placement, X_blocks, row_blocks) -> [(labels, used, attractor
     tables)]`` runs this process's blocks), starting from the attractor tables
     ``attractors`` (numpy). Returns ``(labels (n,), periods used (n,), merged tables)``
     (numpy), the whole queue's in every process. ``partition``: the fine partition of the
-    pool's attractors of boxes (blocks' clouds that share boxes are one attractor)."""
+    pool's attractors of boxes (blocks' clouds that share boxes are one attractor).
+    ``like``: the length of another queue whose blocks' pool shapes these share when
+    they are no longer (``drive``'s ``queue``)."""
     me, procs = cell_processes()
     blocks, mine, placement = _my_blocks(len(X))
+    queue = queue_length(-(-int(like) // len(blocks))) if like > len(X) else 0
     local = drive(placement, [X[blocks[i][0]:blocks[i][1]] for i in mine],
-                  [rows[blocks[i][0]:blocks[i][1]] for i in mine]) if mine else []
+                  [rows[blocks[i][0]:blocks[i][1]] for i in mine], queue=queue) if mine else []
     results = dict(zip(mine, local))
     if procs > 1:
         results = _exchange(blocks, results, me, procs, len(local_devices()))

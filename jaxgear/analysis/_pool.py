@@ -30,7 +30,7 @@ from ._lanes import APERIODIC, AttractorTable, Boxes, SlotKind, seed_tables, slo
 from ._placement import OneDevice, queue_length, run_blocks
 from ._pool_options import PoolOptions
 
-__all__ = ["PoolOptions", "Boxes", "run_pool", "run_pools", "drive"]
+__all__ = ["PoolOptions", "Boxes", "run_pool", "run_pools", "drive", "first_pool", "main_queue"]
 
 CALL_SECONDS = 0.5
 """Wall time the host aims each call of a pool at (it sizes the next call's rounds by the
@@ -55,15 +55,35 @@ def _next_pool(L: int) -> int:
     return L // SHRINK if L // SHRINK >= 2 * TAIL_LANES else TAIL_LANES
 
 
+def first_pool(n: int, queue: int, lanes: int) -> int:
+    """The lanes a pool of ``n`` states starts with when its queue is padded to ``queue``
+    (the shape of another pool): the smallest size of that pool's ladder
+    (:func:`_next_pool` from ``min(lanes, queue)``) that holds all ``n``, so this pool's
+    programs are that pool's (a pilot's are its main pool's tail, the label uncertainty's
+    start moves a rung of the analysis's ladder)."""
+    need = min(lanes, queue_length(n))
+    L = min(lanes, max(queue_length(n), queue_length(queue) if queue else 0))
+    while need <= _next_pool(L) < L:
+        L = _next_pool(L)
+    return L
+
+
+def main_queue(counts, pilot: int) -> int:
+    """The states of the main phase of :func:`run_pools` over values of ``counts`` states
+    each: all but each value's pilot sample (``pilot`` states where ``0 < pilot < n``)."""
+    return sum(int(n) - (pilot if 0 < pilot < n else 0) for n in counts)
+
+
 def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: PoolOptions, boxes,
           attractors: AttractorTable, bar, queue: int = 0) -> list[tuple]:
     """Run the pools of ``placement`` over the queue blocks ``X_blocks`` (one per device;
     value rows ``row_blocks``) from the attractor tables ``attractors`` until every state
     is decided: ``[(labels, used, attractor tables)]`` per block (numpy). ``queue``: pad
-    the queue to at least this length (the shape of the pool that follows, whose tail
-    then shares this pool's compiled program)."""
+    the queue to at least this length and start on that pool's ladder
+    (:func:`first_pool`): the shape of another pool whose compiled programs this one
+    shares."""
     n = np.array([len(b) for b in X_blocks])
-    s, data = placement.start(params, boxes, X_blocks, row_blocks, min(o.lanes, queue_length(int(n.max()))),
+    s, data = placement.start(params, boxes, X_blocks, row_blocks, first_pool(int(n.max()), queue, o.lanes),
                               o.max_period, attractors, queue=queue)
     done, rounds, compiled = 0, 4, o.compiled()
     while True:
@@ -105,7 +125,7 @@ def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *,
 
 
 def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, boxes: Boxes | None = None,
-              attractors=None, progress: bool = False, label: str = "direct"):
+              attractors=None, progress: bool = False, label: str = "direct", like: int = 0):
     """:func:`run_pool` for ``V`` parameter sets at once, in one pool: the states
     ``X_list[v] (n_v, dim)`` under the parameters ``params_list[v]`` (one pytree
     structure). ``attractors``: per value, its known cycles. Returns ``[(labels,
@@ -115,7 +135,10 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     The pilots of all values run first in one pool on the first device, then all the
     other states in one pool per device (:func:`jaxgear.analysis._placement.run_blocks`),
     value after value: the compilation, the pilot's draining and the draining tail are
-    paid once.
+    paid once. ``like``: the main phase's states of another run (:func:`main_queue`), whose
+    compiled pools this one's main phase shares when it is no longer (its queue padded to
+    that run's, its lanes a size of that run's ladder: :func:`first_pool`); the labels do
+    not depend on it.
     """
     o = options
     V = len(params_list)
@@ -124,7 +147,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     params = params_list[0] if V == 1 else stack_params(params_list)
     orders, n_ps = [], []
     for X in Xs:
-        n_p = o.pilot if 0 < o.pilot < len(X) else 0
+        n_p = len(X) - main_queue([len(X)], o.pilot)
         first = np.sort(np.random.default_rng(0).choice(len(X), size=n_p, replace=False))
         rest = np.ones(len(X), dtype=bool)
         rest[first] = False
@@ -142,7 +165,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         Xp = np.concatenate([X[p] for X, p in zip(Xs, parts)])
         rows = np.concatenate([np.full(len(p), v, np.int32) for v, p in enumerate(parts)])
         # the pool of one value, refilled from the next
-        o_phase = dataclasses.replace(o, lanes=min(o.lanes, queue_length(max(len(p) for p in parts))))
+        o_phase = dataclasses.replace(o, lanes=min(o.lanes, queue_length(max([len(p) for p in parts] + [like]))))
         run = functools.partial(drive, system=system, params=params, integrator=integrator, o=o_phase, boxes=boxes,
                                 attractors=tables, bar=bar)
         if phase == 0:  # the pilot, on the first device, in the queue shape of the main pool (its tail's program)
@@ -150,7 +173,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
             lab, use, tables = run(OneDevice(), [Xp], [rows], queue=queue_length(rest) if rest else 0)[0]
         else:  # one pool per device over a block of the queue, the attractors merged
             lab, use, tables = run_blocks(run, Xp, rows, tables, o.merge_tol,
-                                          None if boxes is None else boxes.partition)
+                                          None if boxes is None else boxes.partition, like=like)
         start = 0
         for v, p in enumerate(parts):
             labels[v][p] = lab[start:start + len(p)]

@@ -29,7 +29,7 @@ import numpy as np
 from .._cells import CellGrid
 from .._checks import check_int, check_number
 from ._fractal import scaling_range
-from ._pool import run_pools
+from ._pool import main_queue, run_pools
 from ._result import LabelUncertainty
 
 __all__ = ["label_uncertainty", "label_uncertainties", "DEFAULT_SAMPLES", "DEFAULT_PERTURBATION"]
@@ -93,10 +93,10 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
             for atts in attractors_list]
     boxes = direct.boxes(grid.centres())
 
-    def relabel(X, integrator, name):
+    def relabel(X, integrator, name, like=0):
         """The labels of the states ``X`` under every value (one pool), in the result's ids."""
         pooled = run_pools(system, params_list, [X] * len(params_list), integrator, direct.pool_options(pilot=0),
-                           boxes=boxes, attractors=knowns, progress=progress, label=name)
+                           boxes=boxes, attractors=knowns, progress=progress, label=name, like=like)
         outs = []
         for (lab, _, _), ids in zip(pooled, idss):
             out = lab.copy()
@@ -109,7 +109,9 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
     fine = direct.integrator.refined()
     steps = relabel(X, fine, "uncertainty: step halved")
     # every start move in one pool (the samples moved by each scale, one after the other)
-    together = relabel(np.concatenate(moved), direct.integrator, "uncertainty: start moved")
+    # (in the shapes of the analysis's own pools, so it compiles none of its own)
+    main = main_queue([n] * len(params_list), direct.pool_options().pilot)
+    together = relabel(np.concatenate(moved), direct.integrator, "uncertainty: start moved", like=main)
     starts = [[lab[j * S:(j + 1) * S] for lab in together] for j in range(len(scales))]
     out = []
     for v, (step, ref) in enumerate(zip(steps, refs)):
