@@ -191,6 +191,34 @@ def test_a_long_chaotic_transient_is_no_attractor():
     assert covered.mean() >= 0.95
 
 
+def _gear_on_a_chaotic_transient(**options):
+    """The paper preset at b = 1.15 on 5 x 3 x 6 cells: its cells wander on a chaotic saddle
+    for thousands of periods (a lifetime of about 5,000) before they settle on the one P-6
+    cycle."""
+    p = jaxgear.with_param(jaxgear.paper_params(), "b", 1.15)
+    return jaxgear.analyze_global(jaxgear.REDUCED, p, jaxgear.CellGrid.paper((5, 3, 6)), jaxgear.Direct(**options),
+                                  progress=False, uncertainty=0)
+
+
+def test_a_gear_value_on_a_long_chaotic_transient_is_resolved():
+    """The pool finds the saddle and lets its value's cells run past ``max_periods``, up to
+    ``saddle_periods``: at most 1 % are left unresolved, all the others on the P-6."""
+    r = _gear_on_a_chaotic_transient()
+    assert r.n_unresolved <= 0.01 * r.n_cells and r.n_sink == 0
+    assert [a.period for a in r.attractors] == [6]
+    assert r.mean_periods > 2 * r.method.max_periods  # its cells did run past max_periods
+
+
+@pytest.mark.slow
+def test_without_the_longer_run_the_transient_leaves_cells_unresolved():
+    """The same with ``saddle_periods = max_periods``: a third or more of the cells are
+    still on the saddle after 2,000 periods, and the warning names ``saddle_periods`` (so
+    the test above can fail)."""
+    with pytest.warns(UserWarning, match="saddle_periods"):
+        cut = _gear_on_a_chaotic_transient(saddle_periods=2000)
+    assert cut.n_unresolved >= 0.3 * cut.n_cells
+
+
 def test_duffing_exponents_obey_liouville(duffing_result):
     """The divergence of the field is -delta: every period contracts areas by exp(-delta T),
     so the two exponents of each attractor sum to -delta T (to the RK4 map's error at 64

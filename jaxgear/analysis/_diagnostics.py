@@ -25,7 +25,7 @@ def warn_if_unreliable(r: GlobalResult) -> None:
     - an attractor's points on or beyond the region's edge -> enlarge the region;
     - period detection at its limit: an attractor with no period <= ``max_period``
       -> raise ``max_period`` / ``settle_periods``; many unresolved cells (> 1 %, direct)
-      -> raise ``max_periods`` / ``max_period``;
+      -> raise ``max_periods`` / ``saddle_periods`` / ``max_period``;
     - cell methods: an attractor resolved by fewer than ``MIN_CELLS`` cells, or a P-k
       whose k points share cells (stroboscopic) -> refine the grid (more cells).
     """
@@ -44,8 +44,10 @@ def warn_if_unreliable(r: GlobalResult) -> None:
                           f"escape_bound.", stacklevel=3)
     if r.n_unresolved > 0.01 * n:
         warnings.warn(f"{r.n_unresolved} cells ({100 * r.n_unresolved / n:.1f} %) were not resolved within "
-                      f"max_periods={getattr(m, 'max_periods', None)} periods: raise max_periods (slow transients), or "
-                      f"max_period (now {m.max_period}) if the motion has a longer period, or period_tol.",
+                      f"max_periods={getattr(m, 'max_periods', None)} periods ({_saddle_limit(m)} where a chaotic saddle "
+                      f"was found): raise max_periods (slow "
+                      f"transients), saddle_periods (a long chaotic transient), or max_period (now {m.max_period}) if "
+                      f"the motion has a longer period, or period_tol.",
                       stacklevel=3)
     g = r.grid
     for a in r.attractors:
@@ -78,3 +80,7 @@ def warn_if_unreliable(r: GlobalResult) -> None:
                           f"grid (more cells per axis, --grid).", stacklevel=3)
 
 
+def _saddle_limit(m) -> str:
+    """The periods a cell of a value with a chaotic saddle may run under the method ``m``."""
+    pool = getattr(m, "pool", None)
+    return f"saddle_periods={pool.saddle_limit}" if pool is not None else "saddle_periods"

@@ -16,7 +16,8 @@ decides happens on the device inside one ``lax.while_loop`` over rounds of
   of a known P-k attractor within the capture radius and did not move away from it over
   the ``k`` before (capture), when it recurs (a known attractor if its newest point lies
   on one, else a new attractor is registered, one per value and round), or when it
-  reached ``max_periods`` (unresolved);
+  reached ``max_periods`` (unresolved; ``saddle_periods`` for a value with a chaotic
+  saddle, whose cells' lanes may wander on that long transient for thousands of periods);
 - decided lanes write their cell's label and take the next cells of the queue; once the
   queue is empty, the busy lanes beyond the first ``c`` (the busy count) move into the
   free lanes below it (:func:`compact`), so only ``n_active = c`` lanes are integrated.
@@ -555,7 +556,8 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
     M, V = o.max_period, s.attractors.n_values
     mark, saddle = slot_code(SlotKind.BOXES, M), slot_code(SlotKind.SADDLE, M)
     eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
-                & (s.age - s.tried >= opt.transient) & (s.hits == 0))
+                & (s.age - s.tried >= opt.transient) & (s.hits == 0)
+                & (s.age < o.max_periods))  # past it, a lane on a chaotic saddle has been tried often enough
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
 
     def characterise(c):
@@ -626,12 +628,16 @@ def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: P
         s.attractors.points, s.attractors.codes), lambda: s.radius)
     tables, radius, label, overflow = _register_new(o, s, lanes, label, radius)
     s = s._replace(attractors=tables, radius=radius, overflow=overflow)
+    limit = o.max_periods
     if boxes is not None:
-        on_saddle = slot_kind(s.attractors.codes[s.row, jnp.maximum(s.hit_att, 0)], o.max_period) == SlotKind.SADDLE
+        kinds = slot_kind(s.attractors.codes, o.max_period)  # (V, A)
+        on_saddle = kinds[s.row, jnp.maximum(s.hit_att, 0)] == SlotKind.SADDLE
         hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
         label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
         s, label = _candidate(system, params, integrator, o, boxes, s, lanes, label)
-    unres = lanes.live & (label < 0) & (s.age >= o.max_periods)
+        # a value with a chaotic saddle: its cells' lanes may still be on that long transient
+        limit = jnp.where(jnp.any(kinds == SlotKind.SADDLE, axis=1)[s.row], o.saddle_limit, o.max_periods)
+    unres = lanes.live & (label < 0) & (s.age >= limit)
     decided = lanes.esc | (label >= 0) | unres
     value = jnp.where(lanes.esc, SINK, jnp.where(unres, UNRESOLVED, label)).astype(jnp.int32)
     target = jnp.where(decided, s.cell, s.labels.shape[0])  # dropped
