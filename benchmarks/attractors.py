@@ -60,7 +60,7 @@ def backlash_sweep(counts, folder: Path, say=print):
     grid = jg.CellGrid.paper(tuple(counts))
     t = time.perf_counter()
     sweep = jg.basin_sweep(REDUCED, jg.paper_params(), "b", SWEEP_VALUES, grid, options=jg.BasinOptions(uncertainty=0),
-                           progress=False, out=folder, save=False)
+                           runner=jg.Runner(out=folder, progress=False, save=False))
     wall = time.perf_counter() - t
     parts = [jg.load(p) for p in sorted((folder / "parts").glob("value_*.nc"))]
     for v, r in zip(SWEEP_VALUES, parts):

@@ -53,7 +53,7 @@ def measure(points=(3, 3), counts=(50, 30, 60), one_pool: bool = False, say=prin
     def run(batched):
         t = time.perf_counter()
         m = jg.basin_map(jg.REDUCED, params, "kappa_amp", kappa, "b", b, grid, method=method,
-                         options=jg.BasinOptions(batched=batched), progress=False)
+                         options=jg.BasinOptions(batched=batched), runner=jg.Runner(progress=False))
         return time.perf_counter() - t, m
 
     wall, m = run(False)

@@ -132,7 +132,7 @@ def sweep(n_values: int, counts, say) -> dict:
     p, grid = jg.paper_params(), jg.CellGrid.paper(tuple(counts))
     t = time.perf_counter()
     s = jg.basin_sweep(jg.REDUCED, p, "b", np.linspace(4.0, 6.0, n_values), grid,
-                       options=jg.BasinOptions(batched=True), progress=False)
+                       options=jg.BasinOptions(batched=True), runner=jg.Runner(progress=False))
     wall = time.perf_counter() - t
     say(f"5. basin sweep of {n_values} values of b on {grid.n_cells} cells, one pool, compilation included: "
         f"{wall:.1f} s ({wall / n_values:.2f} s per value); {s.n_attractors} attractors over the sweep")

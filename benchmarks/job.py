@@ -136,7 +136,7 @@ def main(argv=None) -> None:
     if not args.no_sweep:
         values = np.linspace(1.0, 3.0, 10)
         t = _timed(lambda: jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, jg.CellGrid.paper(),
-                                          progress=False))
+                                          runner=jg.Runner(progress=False)))
         row("basin sweep of 10 backlash values, per value", t / len(values), "-")
 
     if args.cold:

@@ -835,7 +835,8 @@ def bench_bifurcation(R, quick: bool):
     for name, values in (("b", np.linspace(0.25, 6.0, n_par)), ("Omega", np.linspace(0.6, 1.2, n_par)))[: 1 if quick else 2]:
         opts = jaxgear.SequenceOptions(transient=periods - record, record=record)
         fn = lambda name=name, values=values, opts=opts: jaxgear.bifurcation_diagram(  # noqa: E731
-            jaxgear.REDUCED, p, name, values, X8, direction="independent", options=opts, progress=False)
+            jaxgear.REDUCED, p, name, values, X8, direction="independent", options=opts,
+            runner=jaxgear.Runner(progress=False))
         m, d = measure_result(fn, 1)
         total = n_par * n_states
         m.update(n_params=n_par, n_states=n_states, periods=periods, param=name,

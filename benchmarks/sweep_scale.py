@@ -70,7 +70,7 @@ def measure(n_values: int = 8, counts=(20, 12, 24), repeat: int = 2) -> dict:
 
     def batched():
         return jg.basin_sweep(jg.REDUCED, params, "b", values, grid, options=jg.BasinOptions(batched=True),
-                              progress=False)
+                              runner=jg.Runner(progress=False))
 
     def separate():
         return [jg.analyze_global(jg.REDUCED, jg.with_param(params, "b", v), grid, progress=False) for v in values]

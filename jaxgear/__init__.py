@@ -140,6 +140,7 @@ from .sweep import (
     basin_sweep as basin_sweep,
     basin_map as basin_map,
     parameter_map as parameter_map,
+    Runner as Runner,
     SequenceOptions as SequenceOptions,
     BasinOptions as BasinOptions,
     BifurcationDiagram as BifurcationDiagram,

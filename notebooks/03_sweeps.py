@@ -23,7 +23,9 @@
 # - `jg.parameter_map` — both parameters at once.
 #
 # Every sweep is also one command of the `jaxgear sweep` CLI (shown before each cell; the
-# CLI writes the result file, `summary.json` and the figures). `FULL = False` runs reduced
+# CLI writes the result file, `summary.json` and the figures). The sweep functions compute
+# and return; a `jg.Runner` holds what they write and show (an output folder to resume
+# from, progress bars): `quiet` below writes nothing and shows no bar. `FULL = False` runs reduced
 # sizes in about a minute; `FULL = True` the sizes of the README figures (several minutes).
 #
 # Written files go to `SCRATCH`: `$JAXGEAR_SCRATCH` if set, else a new temporary folder.
@@ -58,6 +60,7 @@ starts[:, :3] = jg.seeds_in_box(n_starts, D[:, 0], D[:, 1], seed=0)
 SCRATCH = Path(os.environ.get("JAXGEAR_SCRATCH") or tempfile.mkdtemp(prefix="jaxgear-"))
 SCRATCH.mkdir(parents=True, exist_ok=True)
 print("files go to", SCRATCH)
+quiet = jg.Runner(progress=False)  # the sweeps' runner: nothing written, no progress bars
 
 # %% [markdown]
 # ## 1. Backlash: bifurcation diagram
@@ -75,7 +78,7 @@ print("files go to", SCRATCH)
 # %%
 b_values = np.linspace(0.1, 6, 60) if FULL else np.linspace(0.25, 6, 24)
 t = time.perf_counter()
-bif_b = jg.bifurcation_diagram(jg.REDUCED, p, "b", b_values, starts, direction="all", progress=False)
+bif_b = jg.bifurcation_diagram(jg.REDUCED, p, "b", b_values, starts, direction="all", runner=quiet)
 print(f"{len(b_values)} values x {n_starts} starts x 3 sweeps in {time.perf_counter() - t:.1f} s\n")
 print(bif_b.table())
 print("\nup and down sweeps differ at b =", np.round(bif_b.values[bif_b.differs("up", "down")], 3).tolist())
@@ -142,7 +145,7 @@ counts = (20, 12, 24) if FULL else (6, 4, 8)
 grid = jg.CellGrid.box(jg.PAPER_REGION, counts, axes=(0, 1, 2), base=(0.0,) * 4, names=jg.REDUCED.state_names)
 t = time.perf_counter()
 bs_b = jg.basin_sweep(jg.REDUCED, p, "b", np.linspace(2.5, 6, 15) if FULL else np.linspace(2.75, 5, 6), grid,
-                      progress=False)
+                      runner=quiet)
 print(f"{len(bs_b.values)} values x {grid.n_cells} cells in {time.perf_counter() - t:.1f} s\n")
 print(bs_b.shares_table())
 print()
@@ -169,7 +172,7 @@ assert shares_b0[4] > shares_b0[8] > 0.03  # a dominant P-4 and a minority P-8, 
 # %%
 k_values = np.linspace(0.1, 0.6, 101) if FULL else np.linspace(0.1, 0.6, 26)
 t = time.perf_counter()
-bif_k = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", k_values, starts, direction="all", progress=False)
+bif_k = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", k_values, starts, direction="all", runner=quiet)
 print(f"{len(k_values)} values in {time.perf_counter() - t:.1f} s\n")
 print(bif_k.table())
 plotting.plot_bifurcation(bif_k, "x1")
@@ -180,7 +183,7 @@ plotting.plot_bifurcation(bif_k, "x1")
 # (docs/model.md §7 found the same by exploration). At the preset's own value:
 
 # %%
-at_k0 = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", [k0], starts, direction="independent", progress=False)
+at_k0 = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", [k0], starts, direction="independent", runner=quiet)
 print(at_k0.table())
 assert {"P-4", "P-8"} <= {a["label"] for a in at_k0.attractors_at(0)}
 assert {a["label"] for a in bif_k.attractors_at(0, "independent")} == {"chaotic"}  # kappa_amp = 0.1
@@ -197,7 +200,7 @@ assert {a["label"] for a in bif_k.attractors_at(len(k_values) - 1, "independent"
 # %%
 t = time.perf_counter()
 bs_k = jg.basin_sweep(jg.REDUCED, p, "kappa_amp", np.linspace(0.33, 0.38, 11 if FULL else 6), grid,
-                      progress=False)
+                      runner=quiet)
 print(f"{len(bs_k.values)} values x {grid.n_cells} cells in {time.perf_counter() - t:.1f} s\n")
 print(bs_k.shares_table())
 print()
@@ -235,7 +238,7 @@ assert bs_k.present[-1].sum() == 1 and bs_k.period[-1][bs_k.present[-1]][0] == 4
 nb, nk = (41, 41) if FULL else (9, 9)
 t = time.perf_counter()
 pmap = jg.parameter_map(jg.REDUCED, p, "b", np.linspace(1, 6, nb), "kappa_amp", np.linspace(0.2, 0.5, nk),
-                        starts[: 16 if FULL else 6], progress=False)
+                        starts[: 16 if FULL else 6], runner=quiet)
 print(f"{nb * nk} parameter pairs in {time.perf_counter() - t:.1f} s\n")
 print(pmap.table())
 plotting.plot_parameter_map(pmap, "period")
@@ -259,7 +262,7 @@ plotting.plot_parameter_map(pmap, "n_attractors")
 # %%
 t = time.perf_counter()
 bmap = jg.basin_map(jg.REDUCED, p, "kappa_amp", np.linspace(0.34, 0.37, 7 if FULL else 4), "b",
-                    np.linspace(4, 6, 5 if FULL else 3), grid, progress=False)
+                    np.linspace(4, 6, 5 if FULL else 3), grid, runner=quiet)
 print(f"{bmap.sink_share.size} points x {grid.n_cells} cells in {time.perf_counter() - t:.1f} s\n")
 print(bmap.table())
 np.testing.assert_allclose(bmap.shares.sum(-1) + bmap.sink_share + bmap.unresolved_share, 1.0)
@@ -268,20 +271,19 @@ plotting.plot_basin_map(bmap)
 # %% [markdown]
 # ## 6. Interrupted sweeps resume
 #
-# With `out=DIR` (the CLI's `--out`) a sweep writes every finished block of values to
-# `DIR/parts` under a manifest of its settings. Started again with the same settings it
+# Run by `jg.Runner(out=DIR)` (the CLI's `--out`) a sweep writes every finished block of
+# values to `DIR/parts` under a manifest of its settings. Started again with the same settings it
 # loads what is there and computes only the rest; the final `DIR/bifurcation.nc` is the
 # same file as that of an uninterrupted run. Here the second call finds everything done:
 
 # %%
 folder = Path(tempfile.mkdtemp(prefix="sweep-kappa-", dir=SCRATCH))  # new and empty: the first run starts afresh
 t = time.perf_counter()
-first = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", k_values, starts[:4], direction="both", out=folder,
-                               progress=False)
+runner = jg.Runner(out=folder, progress=False)
+first = runner.run(jg.bifurcation_diagram, jg.REDUCED, p, "kappa_amp", k_values, starts[:4], direction="both")
 t1 = time.perf_counter() - t
 t = time.perf_counter()
-again = jg.bifurcation_diagram(jg.REDUCED, p, "kappa_amp", k_values, starts[:4], direction="both", out=folder,
-                               progress=False)
+again = runner.run(jg.bifurcation_diagram, jg.REDUCED, p, "kappa_amp", k_values, starts[:4], direction="both")
 t2 = time.perf_counter() - t
 print(f"first run {t1:.2f} s, second run {t2:.2f} s; files:", sorted(x.name for x in folder.iterdir()))
 assert np.array_equal(first.points, again.points)

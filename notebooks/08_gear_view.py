@@ -97,7 +97,8 @@ for view in views:
 # contact regime is the sum of the shares of the attractors in that regime.
 
 # %%
-sweep = jg.basin_sweep(REDUCED, params, "b", backlash_um, grid, gear_set=gear_set, progress=False, uncertainty=0)
+sweep = jg.basin_sweep(REDUCED, params, "b", backlash_um, grid, gear_set=gear_set, uncertainty=0,
+                       runner=jg.Runner(progress=False))
 regimes = jg.regime_shares(sweep, REDUCED, params, gear_set)
 ring = regimes.meshes.index("ring-planet")
 for um, b, row, rest in zip(sweep.values, sweep.field_values[:, 0], regimes.shares[:, ring], regimes.no_attractor):

@@ -24,6 +24,8 @@ from jaxgear import Attractor, basin_map, basin_sweep
 from jaxgear.sweep import _basins as basins_module
 from jaxgear.sweep import match_on_grid
 
+QUIET = jg.Runner(progress=False)  # nothing written, no progress bars
+
 DUFF = dict(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3)
 GRID = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
 METHOD = jg.Direct(integrator=jg.RK4(64), max_period=4)
@@ -33,7 +35,7 @@ GAMMA = [0.25, 0.3]
 
 def _duffing_map(uncertainty: int):
     return basin_map(jg.DUFFING, jg.DuffingParams(**DUFF, omega=1.3), "omega", OMEGA, "gamma", GAMMA, GRID,
-                     method=METHOD, progress=False, uncertainty=uncertainty)
+                     method=METHOD, runner=QUIET, uncertainty=uncertainty)
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +131,7 @@ def test_a_row_is_a_basin_sweep(duffing_map):
     of the Duffing move little between the two amplitudes)."""
     m = duffing_map
     s = basin_sweep(jg.DUFFING, jg.DuffingParams(**dict(DUFF, gamma=GAMMA[0]), omega=1.3), "omega", OMEGA, GRID,
-                    method=METHOD, progress=False, uncertainty=0)
+                    method=METHOD, runner=QUIET, uncertainty=0)
     G = s.n_attractors
     np.testing.assert_array_equal(m.labels[0], s.labels)
     np.testing.assert_array_equal(m.shares[0, :, :G], s.shares)
@@ -168,9 +170,10 @@ def test_kill_and_resume(tmp_path, monkeypatch):
 
     p = jg.DuffingParams(**DUFF, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
-    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False, uncertainty=0)
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), uncertainty=0)
     args = ("omega", [1.3, 1.4], "gamma", [0.25, 0.3], grid)
-    basin_map(jg.DUFFING, p, *args, out=tmp_path / "full", **kw)
+    run = jg.Runner(out=tmp_path / "run", progress=False)
+    basin_map(jg.DUFFING, p, *args, runner=jg.Runner(out=tmp_path / "full", progress=False), **kw)
     real, calls, kill = basins_module._analyze_values, [], [True]
 
     def analyze(system, params_list, *a, **k):
@@ -182,11 +185,11 @@ def test_kill_and_resume(tmp_path, monkeypatch):
     monkeypatch.setattr(basins_module, "_analyze_values", analyze)
     monkeypatch.setattr(basins_module, "BLOCK_CELLS", 2 * grid.n_cells)  # blocks of two points: a row
     with pytest.raises(Kill):
-        basin_map(jg.DUFFING, p, *args, out=tmp_path / "run", **kw)
+        basin_map(jg.DUFFING, p, *args, runner=run, **kw)
     assert calls == [[(1.3, 0.25), (1.4, 0.25)], [(1.3, 0.3), (1.4, 0.3)]]
     calls.clear()
     kill[0] = False
-    basin_map(jg.DUFFING, p, *args, out=tmp_path / "run", **kw)
+    run.run(basin_map, jg.DUFFING, p, *args, **kw)
     assert calls == [[(1.3, 0.3), (1.4, 0.3)]]  # the killed block only
     import xarray as xr
 
@@ -196,7 +199,7 @@ def test_kill_and_resume(tmp_path, monkeypatch):
     loaded = jg.load(tmp_path / "run" / "basin_map.nc", expected="BasinMap")
     assert loaded.coords_xy == ("omega", "gamma") and loaded.labels.shape == (2, 2, 5, 5)
     with pytest.raises(ValueError, match="values_x|omega"):  # the same folder, other values
-        basin_map(jg.DUFFING, p, "omega", [1.3, 1.5], "gamma", [0.25, 0.3], grid, out=tmp_path / "run", **kw)
+        basin_map(jg.DUFFING, p, "omega", [1.3, 1.5], "gamma", [0.25, 0.3], grid, runner=run, **kw)
 
 
 def test_bad_input():

@@ -91,8 +91,8 @@ def test_ctrl_c_in_a_sweep_says_how_many_values_a_rerun_resumes_from(tmp_path, c
     import jaxgear.sweep
     from jaxgear.sweep._checkpoint import Checkpoint
 
-    def two_then_stop(system, params, param, values, grid, *, out, restart, **kw):
-        ck = Checkpoint(out, "basins", {"kind": "basins", "values": list(values)}, restart)
+    def two_then_stop(system, params, param, values, grid, *, runner, **kw):
+        ck = Checkpoint(runner.out, "basins", {"kind": "basins", "values": list(values)}, runner.restart)
         for i in range(2):
             ck.path(f"value_{i:05d}.nc").write_text("a value")
         raise KeyboardInterrupt

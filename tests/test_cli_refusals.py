@@ -334,7 +334,7 @@ def test_resume_check_of_the_command_line_agrees_with_the_sweep(kind, tmp_path, 
     import jaxgear.cli.sweep as sweep_cli
     import jaxgear.sweep._basin_map
     import jaxgear.sweep._basins
-    import jaxgear.sweep._bifurcation
+    import jaxgear.sweep._runner
 
     seen = {}
     monkeypatch.setattr(sweep_cli, "check_resume", lambda out, now: seen.setdefault("cli", now))
@@ -343,7 +343,7 @@ def test_resume_check_of_the_command_line_agrees_with_the_sweep(kind, tmp_path, 
         seen["lib"] = next(a for a in args if isinstance(a, dict) and "kind" in a)
         raise _Captured
 
-    monkeypatch.setattr(jaxgear.sweep._bifurcation, "checkpoint_on_zero", stop)
+    monkeypatch.setattr(jaxgear.sweep._runner.Runner, "blocks", stop)
     monkeypatch.setattr(jaxgear.sweep._basins, "analyses_at", stop)
     monkeypatch.setattr(jaxgear.sweep._basin_map, "analyses_at", stop)
     argv = ["sweep", "--param", "b", "--values", "4:6:3", "--set", "c_sp=0.07", "--quiet", "--no-figures",

@@ -188,10 +188,10 @@ def _api_cases():
         (lambda: jg.RK4(2.5), "steps_per_period"),
         (lambda: jg.Direct(max_period=0), "max_period"),
         (lambda: jg.Direct(chunk_size=0), "chunk_size"),
-        (lambda: jg.bifurcation_diagram(jg.REDUCED, p, "b", [4, 5], [[1.0, 0, 5, 0]], save="yes"), "save"),
+        (lambda: jg.Runner(save="yes"), "save"),
         (lambda: jg.bifurcation_diagram(jg.REDUCED, p, "b", ["a"], [[1.0, 0, 5, 0]]), "values"),
         (lambda: jg.bifurcation_diagram(jg.REDUCED, p, "b", [4, 5], [[1.0, 0, 5, 0]], transient=-1), "transient"),
-        (lambda: jg.basin_sweep(jg.REDUCED, p, "b", [4, 5], jg.CellGrid.paper((2, 2, 2)), restart=1), "restart"),
+        (lambda: jg.Runner(restart=1), "restart"),
         (lambda: jg.find_periodic_orbits(jg.REDUCED, p, [[1.0, 0, 5, 0]], tol=-1), "tol"),
         (lambda: jg.find_periodic_orbits(jg.REDUCED, p, [[1.0, 0, 5, 0]], period=0), "period"),
     ]
@@ -199,8 +199,8 @@ def _api_cases():
 
 API_IDS = ["strobo-periods-neg", "strobo-periods-frac", "box-count-frac", "box-count-zero", "box-bound-str",
            "box-bound-triple", "rpm-str", "face-width-bool", "amp-list-str", "grid-list", "method-name",
-           "uncertainty", "integrator-0", "rk4-frac", "direct-max-period", "direct-chunk", "bif-save",
-           "bif-values", "bif-transient", "basins-restart", "shoot-tol", "shoot-period"]
+           "uncertainty", "integrator-0", "rk4-frac", "direct-max-period", "direct-chunk", "runner-save",
+           "bif-values", "bif-transient", "runner-restart", "shoot-tol", "shoot-period"]
 
 
 @pytest.mark.parametrize("i", range(len(API_IDS)), ids=API_IDS)

@@ -17,6 +17,8 @@ import jaxgear._contact as contact
 from jaxgear._contact import ContactRegime, GearView, GearViewOptions, MeshSpec, gear_view
 from jaxgear.analysis import Attractor
 
+QUIET = jg.Runner(progress=False)  # nothing written, no progress bars
+
 # the single spur pair of jaxgear.SPUR_PAIR, declared as a user system with one mesh:
 # switching functions x - b (drive flank) and x + b (back flank)
 SPUR = jg.ForcedSystem(vector_field=jg.SPUR_PAIR.vector_field, period=jg.SPUR_PAIR.period, state_names=("x", "v"),
@@ -326,7 +328,7 @@ def test_regime_shares_across_a_sweep_partition_the_state_space():
     hits the back flank (the P-2 is the event-counted double-sided motion); each value's
     regimes and the cells on no attractor add to 1; a map is refused."""
     grid = jg.CellGrid.box([(-1.0, 1.5), (-2.0, 2.0)], (6, 6), names=("x", "v"))
-    sweep = jg.basin_sweep(SPUR, P2_PARAMS, "e_amp", [0.01, 0.3], grid, progress=False, uncertainty=0)
+    sweep = jg.basin_sweep(SPUR, P2_PARAMS, "e_amp", [0.01, 0.3], grid, runner=QUIET, uncertainty=0)
     rs = jg.regime_shares(sweep, SPUR, P2_PARAMS, meshes=MeshSpec(force=spur_force, static_force=0.1))
     assert rs.meshes == ("mesh 1",) and rs.param == "e_amp"
     np.testing.assert_allclose(rs.shares.sum(axis=2)[:, 0] + rs.no_attractor, 1.0, atol=1e-12)
@@ -437,10 +439,10 @@ def test_regime_map_row_is_the_regime_shares_of_a_basin_sweep():
     the basin sweep over the same values at the row's parameter."""
     grid = jg.CellGrid.box([(-1.0, 1.5), (-2.0, 2.0)], (6, 6), names=("x", "v"))
     spec = MeshSpec(force=spur_force, static_force=0.1)
-    bmap = jg.basin_map(SPUR, P2_PARAMS, "e_amp", [0.01, 0.3], "zeta", [0.05, 0.06], grid, progress=False,
+    bmap = jg.basin_map(SPUR, P2_PARAMS, "e_amp", [0.01, 0.3], "zeta", [0.05, 0.06], grid, runner=QUIET,
                         uncertainty=0)
     rm = jg.regime_shares(bmap, SPUR, P2_PARAMS, meshes=spec)
-    sweep = jg.basin_sweep(SPUR, jg.with_param(P2_PARAMS, "zeta", 0.06), "e_amp", [0.01, 0.3], grid, progress=False,
+    sweep = jg.basin_sweep(SPUR, jg.with_param(P2_PARAMS, "zeta", 0.06), "e_amp", [0.01, 0.3], grid, runner=QUIET,
                            uncertainty=0)
     rs = jg.regime_shares(sweep, SPUR, jg.with_param(P2_PARAMS, "zeta", 0.06), meshes=spec)
     np.testing.assert_allclose(rm.shares[1], rs.shares, atol=1e-12)

@@ -94,7 +94,7 @@ if "direct" in what:
     out["direct_jobs"] = pooled()
 if "sweep" in what:
     pools.clear()
-    s = jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.4], grid, method=method, progress=False)
+    s = jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.4], grid, method=method, runner=jg.Runner(progress=False))
     out["sweep_labels"], out["sweep_shares"], out["sweep_points"] = s.labels, s.shares, s.points
     out["sweep_jobs"] = pooled()
 if "sharded" in what:  # no pilot; blocks of 46 and 45 cells: the shorter one padded
@@ -138,14 +138,14 @@ if "bifurcation" in what:
     b = jg.bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 6),
                                np.array([[0.0, 0.0], [2.0, 0.0]]),
                                transient=30, record=17, direction="independent", integrator=jg.RK4(32), max_period=8,
-                               progress=False)
+                               runner=jg.Runner(progress=False))
     out["bifurcation_points"] = np.asarray(b.points)
     out["bifurcation_labels"] = np.asarray(b.period)
     out["bifurcation_shards"] = spanned()
 if "gearmaps" in what:  # the compiled kernel (an FFI custom call) inside shard_map
     shards.clear()
     g = jg.bifurcation_diagram(None, None, "b", [4.0, 4.5, 5.0], np.array([[0.1, 0, 0, 0], [0.5, 0, 0, 0]]),
-                               transient=5, record=9, max_period=4, progress=False)
+                               transient=5, record=9, max_period=4, runner=jg.Runner(progress=False))
     out["gearmaps_points"] = np.asarray(g.points)
     out["gearmaps_images"] = jg.cell_images(jg.REDUCED, jg.paper_params(), jg.CellGrid.paper((5, 3, 4)),
                                             jg.PoincareCellMap(mapping_steps=3), progress=False)
@@ -259,7 +259,7 @@ grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 8), names=("x", "v"))
 _basins.BLOCK_CELLS = grid.n_cells  # one value per block: a kill loses one value
 p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
 jg.basin_sweep(jg.DUFFING, p, "omega", [1.0, 1.2, 1.3, 1.4], grid, method=jg.Direct(integrator=jg.RK4(64), max_period=4),
-               progress=False, out=out)
+               runner=jg.Runner(out=out, progress=False))
 '''
 
 
@@ -447,10 +447,11 @@ _kernels.shard_rows = spy
 p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
 X0 = np.array([[0.0, 0.0], [2.0, 0.0]])
 b = jg.bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 7), X0, transient=30, record=17,
-                           direction="all", integrator=jg.RK4(32), max_period=8, chunk_size=8, progress=False,
-                           out=f"{out}/bif_{pid}")
+                           direction="all", integrator=jg.RK4(32), max_period=8, chunk_size=8,
+                           runner=jg.Runner(out=f"{out}/bif_{pid}", progress=False))
 m = jg.parameter_map(jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 3), "gamma", [0.2, 0.3], X0, transient=30,
-                     integrator=jg.RK4(32), max_period=4, chunk_size=6, progress=False, out=f"{out}/map_{pid}")
+                     integrator=jg.RK4(32), max_period=4, chunk_size=6,
+                     runner=jg.Runner(out=f"{out}/map_{pid}", progress=False))
 np.savez(f"{out}/arrays_{pid}.npz", points=b.points, period=b.period, attractor=b.attractor, map_period=m.period,
          map_attractor=m.attractor, map_last=m.last_point, computed=np.array(computed))
 '''

@@ -713,10 +713,21 @@ def test_only_the_fields_variables_are_read(duffing_results, tmp_path):
 
 
 def test_a_basin_sweep_resumes_only_global_results(tmp_path):
-    """A sweep part that holds another result type (a crafted design file) is not taken as
-    the value's result: it is computed again."""
-    from jaxgear.sweep._basins import _load_part
+    """A sweep part that holds another result type (a crafted design file, tagged with the
+    sweep's settings) is not taken as the value's result: the runner computes it again."""
+    from jaxgear.sweep._checkpoint import Checkpoint
 
-    _attrs_file(tmp_path / "value_00000.nc")
-    with pytest.raises(ValueError, match="GlobalResult"):
-        _load_part(tmp_path / "value_00000.nc")
+    settings = {"kind": "basins", "param": "b", "values": [1.0, 2.0]}
+    _attrs_file(Checkpoint(tmp_path, "basins", settings).path("value_00000.nc"))
+    computed = []
+
+    class Result:
+        def save(self, path):
+            pass
+
+    def compute(block):
+        computed.extend(block)
+        return [Result() for _ in block]
+
+    results = jg.Runner(out=tmp_path, progress=False).values(settings, 1, compute, 1, "basins b", "GlobalResult")
+    assert computed == [0] and isinstance(results[0], Result)

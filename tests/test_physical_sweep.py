@@ -10,6 +10,8 @@ import pytest
 
 import jaxgear as jg
 
+QUIET = jg.Runner(progress=False)  # nothing written, no progress bars
+
 GS = jg.paper_gear_set()
 BASE = GS.to_params().uniform()
 
@@ -63,7 +65,7 @@ def test_a_change_off_one_line_is_refused(name, values, match):
     with pytest.raises(ValueError, match=match):
         jg.sweep_axis(BASE, name, values, GS)
     with pytest.raises(ValueError, match=match):  # the sweeps refuse it the same way, before integrating
-        jg.basin_sweep(None, None, name, values, jg.CellGrid.paper(counts=(2, 2, 2)), gear_set=GS, progress=False)
+        jg.basin_sweep(None, None, name, values, jg.CellGrid.paper(counts=(2, 2, 2)), gear_set=GS, runner=QUIET)
 
 
 def test_a_map_of_two_physical_parameters_sets_both_conversions():
@@ -79,7 +81,7 @@ def test_a_map_of_two_physical_parameters_sets_both_conversions():
         assert row.tolist() == [d["f_D"], d["f_L"], d["b_sp"], d["b_rp"]]
     with pytest.raises(ValueError, match="set the same field"):
         jg.basin_map(None, None, "b", [40.0, 50.0], "b_sp", [40.0, 50.0], jg.CellGrid.paper(counts=(2, 2, 2)),
-                     gear_set=GS, progress=False)
+                     gear_set=GS, runner=QUIET)
 
 
 class _Stop(Exception):
@@ -108,12 +110,12 @@ def test_the_analyses_run_at_the_converted_parameters(analysed):
     set converted at both values."""
     grid = jg.CellGrid.paper(counts=(2, 2, 2))
     with pytest.raises(_Stop):
-        jg.basin_sweep(None, None, "b_sp", [30.0, 60.0], grid, gear_set=GS, progress=False)
+        jg.basin_sweep(None, None, "b_sp", [30.0, 60.0], grid, gear_set=GS, runner=QUIET)
     assert analysed == [converted(b_sp=30.0), converted(b_sp=60.0)]
     analysed.clear()
     with pytest.raises(_Stop):
         jg.basin_map(None, None, "input_rpm", [2000.0, 2500.0], "T_D", [300.0, 400.0], grid, gear_set=GS,
-                     progress=False)
+                     runner=QUIET)
     assert analysed == [converted(input_rpm=r, T_D=t) for t in (300.0, 400.0) for r in (2000.0, 2500.0)]
 
 
@@ -169,7 +171,7 @@ def test_a_physical_diagram_is_the_dimensionless_one_at_the_converted_values():
     """A bifurcation diagram over the input speed in rpm records the points of the diagram
     over Omega at the converted values, and labels its axis in rpm."""
     x0 = np.array([[1.0, 0.0, 5.0, 0.0], [-3.0, 1.0, 10.0, 0.0]])
-    kw = dict(progress=False, transient=20, record=10, max_period=4)
+    kw = dict(runner=QUIET, transient=20, record=10, max_period=4)
     rpm = [1000.0, 2000.0]
     a = jg.bifurcation_diagram(None, None, "input_rpm", rpm, x0, gear_set=GS, **kw)
     b = jg.bifurcation_diagram(None, None, "Omega", [converted(input_rpm=v)["Omega"] for v in rpm], x0, **kw)

@@ -45,6 +45,7 @@ def load_parameter_map(path):
     return jg.load(path, expected="ParameterMap")
 
 ROOT = Path(__file__).resolve().parent.parent
+QUIET = jg.Runner(progress=False)  # nothing written, no progress bars
 
 
 # ----------------------------------------------------------------- a user-defined system
@@ -102,7 +103,7 @@ def test_period_doubling_of_the_trivial_orbit_at_the_mathieu_tongue():
     values = np.round(np.arange(1.85, 1.95 + 1e-9, res), 6)
     p = ParamDuffing(zeta=zeta, eps=eps, beta=1.0, Omega=2.0)
     d = bifurcation_diagram(PARAM_DUFFING, p, "Omega", values, [[0.1, 0.0]], transient=3000, record=40,
-                            integrator=jg.RK4(64), max_period=8, progress=False)
+                            integrator=jg.RK4(64), max_period=8, runner=QUIET)
     per = d.period[0, :, 0]
     assert set(per.tolist()) == {1, 2}, per
     first = int(np.argmax(per == 2))
@@ -124,7 +125,7 @@ def test_hysteresis_of_the_hardening_duffing_oscillator():
     values = np.round(np.linspace(1.0, 1.8, 41), 6)
     p = jg.DuffingParams(**DUFF, omega=1.0)
     d = bifurcation_diagram(jg.DUFFING, p, "omega", values, [[0.0, 0.0]], transient=400, record=40,
-                            direction="both", integrator=jg.RK4(64), max_period=8, progress=False)
+                            direction="both", integrator=jg.RK4(64), max_period=8, runner=QUIET)
     assert d.directions == ("up", "down")
     assert np.all(d.period == 1)
     up, down = d.points[0, :, 0, -1], d.points[1, :, 0, -1]
@@ -153,7 +154,7 @@ def test_sweep_equals_one_value_at_a_time():
     integ = jg.RK4(32)
     for name, vals in (("gamma", [0.2, 0.3, 0.4]), ("omega", [1.1, 1.3, 1.5])):
         d = bifurcation_diagram(jg.DUFFING, p, name, vals, X0, transient=5, record=17, integrator=integ,
-                                max_period=8, progress=False)
+                                max_period=8, runner=QUIET)
         for i, v in enumerate(vals):
             pv = jg.with_param(p, name, v)
             x = jg.stroboscopic_map(jg.DUFFING, pv, X0, periods=5, integrator=integ)
@@ -166,12 +167,12 @@ def test_escaped_and_aperiodic_codes():
     # negative linear stiffness, no cubic term: x grows without bound
     p = jg.DuffingParams(delta=0.1, alpha=-1.0, beta=0.0, gamma=0.0, omega=1.0)
     d = bifurcation_diagram(jg.DUFFING, p, "gamma", [0.0, 0.1], [[0.1, 0.0]], transient=60, record=17,
-                            max_period=8, integrator=jg.RK4(32), progress=False)
+                            max_period=8, integrator=jg.RK4(32), runner=QUIET)
     assert np.all(d.period == ESCAPED) and np.all(d.attractor == -1)
     # a classic chaotic Duffing (Ueda-type): x'' + 0.05 x' + x^3 = 7.5 cos t
     p = jg.DuffingParams(delta=0.05, alpha=0.0, beta=1.0, gamma=7.5, omega=1.0)
     d = bifurcation_diagram(jg.DUFFING, p, "gamma", [7.5], [[0.5, 0.0]], transient=100, record=40,
-                            max_period=16, integrator=jg.RK4(100), progress=False)
+                            max_period=16, integrator=jg.RK4(100), runner=QUIET)
     assert d.period[0, 0, 0] == APERIODIC
     assert "chaotic" in d.table()
 
@@ -184,7 +185,7 @@ def test_basin_sweep_keeps_attractor_identities():
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (12, 12), names=("x", "v"))
     values = np.linspace(1.30, 1.46, 5)
     s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=jg.Direct(integrator=jg.RK4(64), max_period=4),
-                    progress=False, uncertainty=0)
+                    runner=QUIET, uncertainty=0)
     assert s.n_attractors == 2 and np.all(s.present) and np.all(s.period == 1)
     np.testing.assert_allclose(s.shares.sum(axis=1) + s.sink_share + s.unresolved_share, 1.0)
     # the shares cross (so the per-value results, sorted by share, swap their local ids)
@@ -275,35 +276,36 @@ def _counting(monkeypatch, name, seen):
 @pytest.mark.parametrize("direction", ["both", "independent"])
 def test_kill_and_resume_bifurcation(tmp_path, monkeypatch, direction):
     p = jg.DuffingParams(**DUFF, omega=1.0)
-    kw = dict(transient=30, record=17, direction=direction, integrator=jg.RK4(32), max_period=8, chunk_size=8,
-              progress=False)
+    kw = dict(transient=30, record=17, direction=direction, integrator=jg.RK4(32), max_period=8, chunk_size=8)
     values = np.linspace(1.0, 1.6, 12)
     X0 = [[0.0, 0.0], [2.0, 0.0]]
-    full = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "full", **kw)
+    run = jg.Runner(out=tmp_path / "run", progress=False)
+    full = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0,
+                               runner=jg.Runner(out=tmp_path / "full", progress=False), **kw)
     with monkeypatch.context() as m:
         _interrupt_after(m, 2)  # killed after two blocks were written
         with pytest.raises(_Kill):
-            bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+            bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, runner=run, **kw)
     assert len(list((tmp_path / "run" / "parts").glob("*.npz"))) == 2
     B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_values"][direction]
     assert 1 < B < 6  # several blocks of several values
     computed = []
     _counting(monkeypatch, "independent_points" if direction == "independent" else "sequential_points", computed)
-    resumed = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+    resumed = run.run(bifurcation_diagram, jg.DUFFING, p, "omega", values, X0, **kw)
     assert sorted(computed) == values[2 * B:].tolist()  # every unfinished value once, no finished one again
     _assert_same_file(tmp_path / "full" / "bifurcation.nc", tmp_path / "run" / "bifurcation.nc")
     np.testing.assert_array_equal(resumed.points, full.points)
     computed.clear()  # a finished sweep: nothing is computed again, its exponents neither
     with monkeypatch.context() as m:
         m.setattr(bifurcation_module, "aperiodic_types", lambda *a, **k: pytest.fail("exponents computed again"))
-        again = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **kw)
+        again = bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, runner=run, **kw)
     assert computed == []
     np.testing.assert_array_equal(again.points, full.points)
     np.testing.assert_array_equal(again.largest_exponent, full.largest_exponent)
     # the same folder with another setting: a clear error, or a restart
     with pytest.raises(ValueError, match="transient"):
-        bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, out=tmp_path / "run", **dict(kw, transient=31))
-    bifurcation_diagram(jg.DUFFING, p, "omega", values[:4], X0, out=tmp_path / "run", restart=True, **kw)
+        bifurcation_diagram(jg.DUFFING, p, "omega", values, X0, runner=run, **dict(kw, transient=31))
+    bifurcation_diagram(jg.DUFFING, p, "omega", values[:4], X0, runner=dataclasses.replace(run, restart=True), **kw)
     assert sorted(computed) == values[:4].tolist()
 
 
@@ -311,8 +313,9 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
     p = jg.DuffingParams(**DUFF, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (5, 5), names=("x", "v"))
     values = [1.30, 1.35, 1.40, 1.45]
-    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False, uncertainty=0)
-    basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "full", **kw)
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), uncertainty=0)
+    run = jg.Runner(out=tmp_path / "run", progress=False)
+    basin_sweep(jg.DUFFING, p, "omega", values, grid, runner=jg.Runner(out=tmp_path / "full", progress=False), **kw)
     real = basins_module._analyze_values
     calls = []
 
@@ -326,11 +329,11 @@ def test_kill_and_resume_basin_sweep(tmp_path, monkeypatch):
     monkeypatch.setattr(basins_module, "BLOCK_CELLS", 2 * grid.n_cells)  # blocks of two values
     kill = True
     with pytest.raises(_Kill):
-        basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
+        basin_sweep(jg.DUFFING, p, "omega", values, grid, runner=run, **kw)
     assert calls == [values[:2], values[2:]]
     calls.clear()
     kill = False
-    basin_sweep(jg.DUFFING, p, "omega", values, grid, out=tmp_path / "run", **kw)
+    run.run(basin_sweep, jg.DUFFING, p, "omega", values, grid, **kw)
     assert calls == [values[2:]]  # the killed block only
     _assert_same_file(tmp_path / "full" / "basins.nc", tmp_path / "run" / "basins.nc")
 
@@ -365,7 +368,7 @@ def test_basin_sweep_in_one_pool_is_each_value_alone():
     p = jg.paper_params()
     grid = jg.CellGrid.paper((10, 6, 12))
     values = [4.5, 5.5]
-    s = basin_sweep(jg.REDUCED, p, "b", values, grid, progress=False, batched=True, uncertainty=64)
+    s = basin_sweep(jg.REDUCED, p, "b", values, grid, runner=QUIET, batched=True, uncertainty=64)
     assert not np.allclose(s.shares[0], s.shares[-1])  # the values differ
     _assert_sweep_is_separate_analyses(s, jg.REDUCED, p, "b", values, grid, jg.Direct(), uncertainty=64)
 
@@ -378,7 +381,7 @@ def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
 
     p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=0.5, gamma=0.3, omega=1.3)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (6, 6), names=("x", "v"))
-    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), progress=False)
+    kw = dict(method=jg.Direct(integrator=jg.RK4(32), max_period=4), runner=QUIET)
     with_u = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=16, **kw)
     without = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=0, **kw)
     assert np.isfinite(with_u.uncertainty_step).all() and np.isfinite(with_u.uncertainty_start).all()
@@ -406,10 +409,11 @@ def test_basin_sweep_uncertainty_is_optional_and_older_files_load(tmp_path):
     # a resume folder records the option only when it is not the default, so that a folder begun
     # before the option existed (its analyses measured the default) resumes; another value is
     # another sweep
-    basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, out=tmp_path / "run", **kw)
+    kw["runner"] = jg.Runner(out=tmp_path / "run", progress=False)
+    basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, **kw)
     assert "uncertainty" not in json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]
     with pytest.raises(ValueError, match="other settings"):
-        basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, out=tmp_path / "run", uncertainty=0, **kw)
+        basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, uncertainty=0, **kw)
 
 
 @pytest.mark.slow
@@ -420,7 +424,7 @@ def test_basin_sweep_in_one_pool_pure_jax():
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
     values = [1.0, 1.3, 1.4]
     method = jg.Direct(integrator=jg.RK4(64), max_period=4)
-    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=method, progress=False, batched=True)
+    s = basin_sweep(jg.DUFFING, p, "omega", values, grid, method=method, runner=QUIET, batched=True)
     assert s.present.sum(axis=1).tolist() != [s.present.shape[1]] * 3
     _assert_sweep_is_separate_analyses(s, jg.DUFFING, p, "omega", values, grid, method)
 
@@ -462,7 +466,7 @@ def test_parameter_map_period_follows_the_mathieu_tongue():
     eps = np.array([0.1, 0.3, 0.5])
     p = ParamDuffing(zeta=zeta, eps=0.2, beta=1.0, Omega=2.0)
     m = parameter_map(PARAM_DUFFING, p, "Omega", Om, "eps", eps, [[0.1, 0.0], [-1.5, 0.0]], transient=1500,
-                      integrator=jg.RK4(48), max_period=4, progress=False)
+                      integrator=jg.RK4(48), max_period=4, runner=QUIET)
     assert m.period.shape == (3, 9, 2) and m.n_attractors.shape == (3, 9)
     judged = 0
     for j, e in enumerate(eps):
@@ -489,7 +493,7 @@ def test_bad_input_raises_value_error():
     with pytest.raises(ValueError, match="empty"):
         bifurcation_diagram(jg.REDUCED, p, "b", [], x0)
     with pytest.raises(ValueError, match="b_sp"):
-        bifurcation_diagram(jg.REDUCED, p, "b", [-1.0, 2.0], x0, progress=False)
+        bifurcation_diagram(jg.REDUCED, p, "b", [-1.0, 2.0], x0, runner=QUIET)
     with pytest.raises(ValueError, match="direction"):
         bifurcation_diagram(jg.REDUCED, p, "b", [1.0, 2.0], x0, direction="sideways")
     with pytest.raises(ValueError, match="record"):
@@ -509,12 +513,12 @@ def small_results(tmp_path_factory):
     p = jg.DuffingParams(**DUFF, omega=1.3)
     bif = bifurcation_diagram(jg.DUFFING, p, "omega", np.linspace(1.2, 1.6, 5), [[0.0, 0.0], [2.0, 0.0]],
                               direction="both", integrator=jg.RK4(32),
-                              options=jg.SequenceOptions(transient=100, record=17, max_period=8), progress=False)
+                              options=jg.SequenceOptions(transient=100, record=17, max_period=8), runner=QUIET)
     grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (6, 6), names=("x", "v"))
     bas = basin_sweep(jg.DUFFING, p, "omega", [1.3, 1.4], grid, method=jg.Direct(integrator=jg.RK4(32), max_period=4),
-                      progress=False)
+                      runner=QUIET)
     pm = parameter_map(jg.DUFFING, p, "omega", [1.2, 1.4, 1.6], "gamma", [0.2, 0.3], [[0.0, 0.0], [2.0, 0.0]],
-                       quantity="n_attractors", transient=100, integrator=jg.RK4(32), max_period=4, progress=False)
+                       quantity="n_attractors", transient=100, integrator=jg.RK4(32), max_period=4, runner=QUIET)
     paths = {k: r.save(d / f"{k}.nc") for k, r in (("bif", bif), ("bas", bas), ("pm", pm))}
     return dict(bif=bif, bas=bas, pm=pm, paths=paths)
 
@@ -688,13 +692,14 @@ def test_kill_and_resume_parameter_map(tmp_path, monkeypatch):
     from jaxgear.sweep import _parameter_map as map_module
 
     p = jg.DuffingParams(**DUFF, omega=1.0)
-    kw = dict(transient=30, record=17, integrator=jg.RK4(32), max_period=8, chunk_size=4, progress=False)
+    kw = dict(transient=30, record=17, integrator=jg.RK4(32), max_period=8, chunk_size=4)
     args = (jg.DUFFING, p, "omega", np.linspace(1.0, 1.6, 4), "gamma", [0.2, 0.3, 0.4], [[0.0, 0.0], [2.0, 0.0]])
-    full = parameter_map(*args, out=tmp_path / "full", **kw)
+    run = jg.Runner(out=tmp_path / "run", progress=False)
+    full = parameter_map(*args, runner=jg.Runner(out=tmp_path / "full", progress=False), **kw)
     with monkeypatch.context() as m:
         _interrupt_after(m, 2)
         with pytest.raises(_Kill):
-            parameter_map(*args, out=tmp_path / "run", **kw)
+            parameter_map(*args, runner=run, **kw)
     assert len(list((tmp_path / "run" / "parts").glob("*.npz"))) == 2
     B = json.loads((tmp_path / "run" / "manifest.json").read_text())["settings"]["block_points"]
     assert B == 2  # (4 lanes, 2 starts) six blocks of two points
@@ -706,12 +711,12 @@ def test_kill_and_resume_parameter_map(tmp_path, monkeypatch):
         return real(system, params, names, V, *a, **k)
 
     monkeypatch.setattr(map_module, "independent_points", counting)
-    resumed = parameter_map(*args, out=tmp_path / "run", **kw)
+    resumed = run.run(parameter_map, *args, **kw)
     assert len(seen) == 12 - 2 * B  # every unfinished point once, no finished one again
     _assert_same_file(tmp_path / "full" / "parameter_map.nc", tmp_path / "run" / "parameter_map.nc")
     np.testing.assert_array_equal(resumed.period, full.period)
     with pytest.raises(ValueError, match="transient"):
-        parameter_map(*args, out=tmp_path / "run", **dict(kw, transient=31))
+        parameter_map(*args, runner=run, **dict(kw, transient=31))
 
 
 def test_a_matched_attractor_keeps_its_decided_type_where_the_test_cannot_decide():

@@ -25,6 +25,8 @@ from jaxgear._matching import cloud_overlap, match_attractors
 from jaxgear.analysis import RecurrenceOptions
 from jaxgear.sweep import match_across_values, match_on_grid
 
+QUIET = jg.Runner(progress=False)  # nothing written, no progress bars
+
 
 def _ring(centre, radius, n=400, phase=0.0):
     t = phase + np.linspace(0.0, 2 * np.pi, n, endpoint=False)
@@ -183,7 +185,7 @@ def test_bifurcation_diagram_labels_chaos_tori_and_cycles():
     C, Q, P = int(AttractorType.CHAOTIC), int(AttractorType.QUASI_PERIODIC), int(AttractorType.PERIODIC)
     ueda = DuffingParams(delta=0.05, alpha=0.0, beta=1.0, gamma=7.5, omega=1.0)
     d = jg.bifurcation_diagram(DUFFING, ueda, "gamma", [0.3, 7.5], np.array([[2.5, 0.0]]), transient=100, record=17,
-                               max_period=8, integrator=jg.RK4(200), progress=False)
+                               max_period=8, integrator=jg.RK4(200), runner=QUIET)
     assert d.period[0, :, 0].tolist() == [1, 0] and d.attractor_type[0, :, 0].tolist() == [P, C]
     lam, err = d.largest_exponent[0, 1, 0], d.exponent_error[0, 1, 0]
     # about 0.11 per unit time: within (0.08, 0.15) up to three of the estimate's standard errors
@@ -197,7 +199,7 @@ def test_bifurcation_diagram_labels_chaos_tori_and_cycles():
     golden = (1 + 5**0.5) / 2
     d = jg.bifurcation_diagram(VAN_DER_POL, VanDerPolParams(mu=0.1, F=0.05, omega=1.0), "omega", [1.0, golden],
                                np.array([[2.0, 0.0]]), transient=200, record=17, max_period=8,
-                               integrator=jg.RK4(100), progress=False)
+                               integrator=jg.RK4(100), runner=QUIET)
     assert d.period[0, :, 0].tolist() == [1, 0] and d.attractor_type[0, :, 0].tolist() == [P, Q]
     lam, err = d.largest_exponent[0, 1, 0], d.exponent_error[0, 1, 0]
     assert abs(lam) <= max(3 * err, 1e-6) and err < 1e-3
@@ -222,7 +224,7 @@ def test_backlash_band_every_cell_decided():
     values = [16 / 11, 2.0]
     grid = jg.CellGrid.paper((5, 3, 6))
     method = jg.Direct(recurrence=RecurrenceOptions(resolution=85))
-    s = jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, grid, method=method, progress=False, uncertainty=0)
+    s = jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, grid, method=method, runner=QUIET, uncertainty=0)
     assert s.unresolved_share.max() <= 0.01, s.shares_table()
     chaotic = (s.attractor_type == int(AttractorType.CHAOTIC)) & s.present
     assert chaotic.any(axis=1).all(), s.shares_table()
@@ -249,7 +251,7 @@ def test_backlash_sweep_through_the_chaotic_band():
     :func:`test_backlash_band_every_cell_decided`): b = 1.8, 2.0, 2.2 on an 8 x 5 x 10 grid,
     one chaotic attractor followed through them."""
     values = [1.8, 2.0, 2.2]
-    s = jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, jg.CellGrid.paper((8, 5, 10)), progress=False,
+    s = jg.basin_sweep(jg.REDUCED, jg.paper_params(), "b", values, jg.CellGrid.paper((8, 5, 10)), runner=QUIET,
                        uncertainty=0)
     g = _check_chaotic_sweep(s, values)
     assert [e["event"] for e in s.events() if e["id"] == g and e["event"] != "share change"] == ["present"]
@@ -264,7 +266,7 @@ def test_bifurcation_diagram_labels_chaos_and_cycles():
     from jaxgear import plotting
 
     d = jg.bifurcation_diagram(jg.REDUCED, jg.paper_params(), "b", [2.0, 5.0], np.zeros((1, 4)), transient=150,
-                               record=17, max_period=8, progress=False)
+                               record=17, max_period=8, runner=QUIET)
     assert d.period[0, :, 0].tolist() == [0, 4]
     assert d.attractor_type[0, :, 0].tolist() == [int(AttractorType.CHAOTIC), int(AttractorType.PERIODIC)]
     lam, err = d.largest_exponent[0, 0, 0], d.exponent_error[0, 0, 0]
@@ -289,7 +291,7 @@ def test_bifurcation_diagram_never_calls_the_weakly_chaotic_gear_attractor_a_tor
     values = 16 / 11 + 1e-9 * np.linspace(-1, 1, 24)
     start = np.array([[16 / 11 + 0.3, 0.0, 0.0, 0.0]])
     d = jg.bifurcation_diagram(jg.REDUCED, jg.paper_params(), "b", values, start, transient=300, record=17,
-                               max_period=8, progress=False)
+                               max_period=8, runner=QUIET)
     assert np.all(d.period[0, :, 0] == 0), d.period[0, :, 0]
     last = d.points[0, :, 0, -1]
     assert np.ptp(last, axis=0).max() > 0.1  # the values' points lie apart on the attractor

@@ -12,6 +12,8 @@ import pytest
 import jaxgear as jg
 from jaxgear._checks import check_enum
 
+QUIET = jg.Runner(progress=False)  # nothing written, no progress bars
+
 DUFF = jg.DuffingParams(delta=0.1, alpha=1.0, beta=1.0, gamma=0.3, omega=1.4)
 X0 = np.zeros((1, 2))
 
@@ -44,10 +46,10 @@ def test_a_bad_direction_or_quantity_is_refused_before_integrating(monkeypatch):
         monkeypatch.setattr(module, name, no_integration)
     for bad in ("sideways", 1, -1):  # the sweep's direction is no signed crossing direction
         with pytest.raises(ValueError, match=r"direction=.* must be one of 'independent', 'up', 'down', 'both', 'all'"):
-            jg.bifurcation_diagram(jg.DUFFING, DUFF, "omega", [1.3, 1.4], X0, direction=bad, progress=False)
+            jg.bifurcation_diagram(jg.DUFFING, DUFF, "omega", [1.3, 1.4], X0, direction=bad, runner=QUIET)
     with pytest.raises(ValueError, match="quantity='periods' must be one of 'period', 'n_attractors'"):
         jg.parameter_map(jg.DUFFING, DUFF, "omega", [1.3, 1.4], "gamma", [0.2, 0.3], X0, quantity="periods",
-                         progress=False)
+                         runner=QUIET)
 
 
 def test_a_poincare_direction_is_a_signed_number_not_a_sweep_direction():

@@ -12,13 +12,14 @@ command resumes where it stopped.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
 from .._io import save_figure, write_json
 from .._outdir import OutputFolder, check_output_folder
-from ..sweep import SweepDirection
+from ..sweep import Runner, SweepDirection
 from .common import (
     ESCAPE_BOUND,
     add_param_options,
@@ -194,11 +195,13 @@ def run(args) -> int:
     if args.kind != "continuation" and not args.restart:  # a sweep of other settings in --out: refused now
         check_resume(args.out, _resume_settings(args, plan))
     head = _head(args, plan)
+    # the sweep resumes from and saves its parts in --out; this command writes the result with its summary and figures
+    runner = Runner(out=Path(args.out), restart=args.restart, progress=not args.quiet, save=False)
     if args.distributed:
         from .._devices import process_index
 
         if process_index() != 0:  # its share of the values (exchanged, or parts in --out); process 0 writes
-            _share(args, plan)
+            _share(args, plan, dataclasses.replace(runner, progress=False))
             return 0
     if args.kind != "continuation":  # Ctrl-C: the boundary of the command line says what a rerun resumes from
         args.interrupt_note = lambda: _resume_note(args, plan)
@@ -207,7 +210,7 @@ def run(args) -> int:
         if args.kind == "continuation":
             files = _continuation(args, plan, work, head)
         else:
-            files = _sweep(args, plan, work, head, t0)
+            files = _sweep(args, plan, work, head, t0, runner)
     print(f"\nwrote {', '.join(files)} to {args.out}/")
     return 0
 
@@ -483,22 +486,19 @@ def _sequence_options(args):
     return SequenceOptions(transient=args.transient, record=args.record, max_period=args.max_period)
 
 
-def _diagram(args, plan: _Plan, progress: bool):
-    """The bifurcation diagram, resumable in ``--out`` (the result file is written by the caller)."""
+def _diagram(args, plan: _Plan, runner: Runner):
+    """The bifurcation diagram, resumable in ``--out`` by ``runner`` (the result file is
+    written by the caller)."""
     from ..sweep import bifurcation_diagram
 
     return bifurcation_diagram(plan.system, plan.params, plan.param, plan.values, _starts(args, plan.user),
                                direction=args.direction, integrator=plan.integ, options=_sequence_options(args),
-                               progress=progress, out=Path(args.out), restart=args.restart, save=False,
-                               gear_set=plan.gear_set)
+                               runner=runner, gear_set=plan.gear_set)
 
 
-def _share(args, plan: _Plan) -> None:
+def _share(args, plan: _Plan, runner: Runner) -> None:
     """A process other than 0 of a ``--distributed`` sweep: its share of the values."""
-    if args.kind == "basins":
-        _basins(args, plan, progress=False)
-    else:
-        _diagram(args, plan, progress=False)
+    (_basins if args.kind == "basins" else _diagram)(args, plan, runner)
 
 
 def _user_grid(args, user):
@@ -611,31 +611,31 @@ def _starts(args, user=None):
     return X0
 
 
-def _basins(args, plan: _Plan, progress: bool):
+def _basins(args, plan: _Plan, runner: Runner):
     """The basin sweep over ``--param`` (no ``--values2``) or the basin map over ``--param``
-    x ``--param2``, resumable in ``--out`` (the result file is written by the caller)."""
+    x ``--param2``, resumable in ``--out`` by ``runner`` (the result file is written by the
+    caller)."""
     from ..sweep import BasinOptions, basin_map, basin_sweep
 
     samples = {} if args.uncertainty_samples is None else {"uncertainty": args.uncertainty_samples}
     opts = BasinOptions(batched=args.one_pool, **samples)
-    kw = dict(method=plan.method, options=opts, progress=progress, out=Path(args.out), restart=args.restart,
-              save=False, gear_set=plan.gear_set)
+    kw = dict(method=plan.method, options=opts, runner=runner, gear_set=plan.gear_set)
     if plan.values2 is None:
         return basin_sweep(plan.system, plan.params, plan.param, plan.values, plan.grid, **kw)
     return basin_map(plan.system, plan.params, plan.param, plan.values, plan.param2, plan.values2, plan.grid, **kw)
 
 
-def _sweep(args, plan: _Plan, work: Path, head: str, t0: float) -> list[str]:
+def _sweep(args, plan: _Plan, work: Path, head: str, t0: float, runner: Runner) -> list[str]:
     """A bifurcation or basin sweep (or map) of the gear model or of the ``--system``:
-    resume parts in ``--out``, its files into ``work``."""
+    resume parts in ``--out`` (``runner``), its files into ``work``."""
     if args.kind == "bifurcation":
         print(head + f", {len(_starts(args, plan.user))} starts, direction {args.direction}")
-        result = _diagram(args, plan, progress=not args.quiet)
+        result = _diagram(args, plan, runner)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         name, figs, extra = "bifurcation.nc", _report_diagram(args, plan, result), {}
     else:
         print(head + f", {args.method} on {plan.grid.n_cells} cells per value")
-        result = _basins(args, plan, progress=not args.quiet)
+        result = _basins(args, plan, runner)
         print(f"done in {time.perf_counter() - t0:.1f} s\n")
         name, figs, extra = _report_basins(args, plan, result)
     result.save(work / name)

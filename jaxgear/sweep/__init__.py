@@ -10,7 +10,8 @@
 - :mod:`._values` — checking and applying parameter values;
 - :mod:`._physical` — :func:`sweep_axis`: a :class:`~jaxgear.GearSet` field in physical units
   mapped to the dimensionless fields it changes;
-- :mod:`._checkpoint` — kill-and-resume of long sweeps.
+- :mod:`._runner` — :class:`Runner`: the sweeps' output folder, kill-and-resume and
+  progress (its helper :mod:`._checkpoint`: the checkpoints of long sweeps).
 """
 
 from ._basin_map import BasinMap, basin_map, match_on_grid
@@ -20,9 +21,10 @@ from ._classify import APERIODIC, ESCAPED, period_label, type_label
 from ._options import BasinOptions, SequenceOptions
 from ._parameter_map import MapQuantity, ParameterMap, parameter_map
 from ._physical import PHYSICAL_ALIASES, SweepAxis, physical_names, sweep_axis
+from ._runner import Runner
 from ._values import check_values
 
-__all__ = ["SequenceOptions", "BasinOptions", "BifurcationDiagram", "SequenceSettings", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram",
+__all__ = ["Runner", "SequenceOptions", "BasinOptions", "BifurcationDiagram", "SequenceSettings", "BasinSweep", "BasinMap", "ParameterMap", "bifurcation_diagram",
            "basin_sweep", "basin_map", "parameter_map", "match_on_grid", "ESCAPED", "APERIODIC", "DIRECTIONS",
            "SweepDirection", "MapQuantity",
            "period_label", "type_label", "match_across_values",

@@ -13,15 +13,13 @@ continuation of attractors as along one parameter, carried over a grid in rows.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .._cells import CellGrid
-from .._checks import check_bool, with_changes
+from .._checks import with_changes
 from .._codec import array_field, later_field, result_type
-from .._devices import process_index
 from .._format import format_table
 from .._matching import match_attractors
 from .._model import REDUCED
@@ -34,6 +32,7 @@ from ._bifurcation import read_only
 from ._classify import label_order
 from ._options import BasinOptions
 from ._physical import axis_label, joint_rows, physical_summary, resolve_gear_set, sweep_axis
+from ._runner import Runner, sweep_runner
 from ._values import apply_values, check_values, coord_name
 
 __all__ = ["BasinMap", "basin_map", "match_on_grid"]
@@ -211,8 +210,8 @@ def match_on_grid(results, ny: int, nx: int, match_tol: float) -> list[np.ndarra
 
 def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y,
               grid: CellGrid | None = None, *, method: AbstractGlobalMethod | str | None = None,
-              options: BasinOptions | None = None, progress: bool = True, out=None, restart: bool = False,
-              save: bool = True, gear_set=None, **changes) -> BasinMap:
+              options: BasinOptions | None = None, runner: Runner | None = None, gear_set=None,
+              **changes) -> BasinMap:
     """Basin shares over a grid of two parameters, attractors identified across the grid.
 
     At every point of ``values_y x values_x`` :func:`~jaxgear.analyze_global` runs
@@ -233,28 +232,29 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
             and their values (sorted, distinct).
         method: a global-analysis method object (default :class:`~jaxgear.Direct`) or
             its name.
-        out: kill-and-resume folder: each point's :class:`~jaxgear.GlobalResult` is saved
-            to ``DIR/parts/value_NNNNN.nc`` (``NNNNN = iy * nx + ix``) when done; the final
-            ``DIR/basin_map.nc`` (``save=False``: only the parts); restart: discard a
-            folder of other settings.
         options: :class:`~jaxgear.BasinOptions` (as in :func:`~jaxgear.basin_sweep`:
             ``match_tol``; ``batched``, the points of a block in one lane pool;
             ``uncertainty``, cells sampled at each point for its label uncertainty, kept as
             ``uncertainty_step`` and ``uncertainty_start``, 0 skips it); ``None``: the defaults.
-        progress: show a progress bar.
+        runner: a :class:`~jaxgear.Runner`: its output folder, resume and progress bar
+            (``None``: ``Runner()``, nothing written). With a folder ``DIR``, each point's
+            :class:`~jaxgear.GlobalResult` is saved to ``DIR/parts/value_NNNNN.nc``
+            (``NNNNN = iy * nx + ix``) when done, and the map to ``DIR/basin_map.nc``.
         gear_set: a :class:`~jaxgear.GearSet`: both parameters are then its fields (as
             in :func:`~jaxgear.basin_sweep`), in its physical units; each point sets the
             dimensionless fields both conversions change.
         **changes: fields of ``options`` to change.
 
     Run as several JAX processes (:func:`jaxgear._devices.initialize`), process ``p`` of
-    ``P`` computes the points ``i % P == p`` into ``out`` (required then), every process
-    assembles the map from the parts, and only process 0 writes ``basin_map.nc``. A
-    killed process loses the point it was computing; the same call rerun resumes.
+    ``P`` computes the points ``i % P == p`` into the runner's folder (required then),
+    every process assembles the map from the parts, and only process 0 writes
+    ``basin_map.nc``. A killed process loses the point it was computing; the same call
+    rerun resumes.
 
     Returns:
         :class:`BasinMap`.
     """
+    runner = sweep_runner(runner, changes, "basin_map")
     opts = with_changes(options, BasinOptions, changes)
     if gear_set is not None:
         params = resolve_gear_set(gear_set, params, system is None or system is REDUCED)
@@ -269,16 +269,12 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
     else:
         names, rows = (param_x, param_y), VV
     check_values(system, params, names, rows)
-    check_bool(progress, "progress")
-    check_bool(restart, "restart")
-    check_bool(save, "save")
     settings = dict(kind="basin_map", system=system.name, param_x=param_x, values_x=vx.tolist(), param_y=param_y,
                     values_y=vy.tolist(), **({"physical": [ax_x.unit, ax_y.unit]} if ax_x.physical else {}),
                     params=params_to_dict(params), grid=grid.to_dict(),
                     method=method.to_dict(), match_tol=opts.match_tol, **uncertainty_setting(opts.uncertainty),
                     version=__version__)
-    results = analyses_at(system, [apply_values(params, names, v) for v in rows], grid, method, opts, settings, out,
-                          restart, progress)
+    results = analyses_at(system, [apply_values(params, names, v) for v in rows], grid, method, opts, settings, runner)
     ny, nx = len(vy), len(vx)
     arrays = global_arrays(results, match_on_grid(results, ny, nx, opts.match_tol), grid, system.dim)
     bmap = BasinMap(
@@ -288,6 +284,5 @@ def basin_map(system: ForcedSystem | None, params, param_x: str, values_x, param
         **{k: a.reshape(ny, nx, *a.shape[1:]) for k, a in arrays.items()}, grid=grid, method=method,
         match_tol=opts.match_tol, uncertainty_samples=opts.uncertainty, system=system.name,
         state_names=tuple(system.state_names), params=params_to_dict(params), version=__version__)
-    if out is not None and save and process_index() == 0:  # one process writes
-        bmap.save(Path(out) / "basin_map.nc")
+    runner.write(bmap, "basin_map.nc")
     return bmap

@@ -14,18 +14,16 @@ sink.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._batching import progress_bar
 from .._cells import CellGrid
-from .._checks import check_bool, check_int, with_changes
+from .._checks import check_int, with_changes
 from .._codec import array_field, custom_field, later_field, result_type
-from .._devices import process_count, process_index, values_over_processes, wait_for_parts
+from .._devices import values_over_processes
 from .._format import format_table
-from .._io import load, save_result
+from .._io import save_result
 from .._lyapunov import AttractorType
 from .._matching import match_attractors
 from .._model import REDUCED
@@ -43,10 +41,10 @@ from ..analysis import (
 )
 from ..analysis._uncertainty import DEFAULT_SAMPLES
 from ._bifurcation import read_only
-from ._checkpoint import open_shared_checkpoint
 from ._classify import carry_decided_types, type_label
 from ._options import BasinOptions
 from ._physical import axis_label, physical_summary, resolve_gear_set, sweep_axis
+from ._runner import Runner, sweep_runner
 from ._values import apply_values, check_values, coord_name
 
 __all__ = ["BasinSweep", "GlobalShares", "basin_sweep", "match_across_values"]
@@ -407,8 +405,7 @@ def _analyze_values(system, params_list, grid, method, batched: bool = False, un
 
 def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: CellGrid | None = None, *,
                 method: AbstractGlobalMethod | str | None = None, options: BasinOptions | None = None,
-                progress: bool = True, out=None, restart: bool = False, save: bool = True, gear_set=None,
-                **changes) -> BasinSweep:
+                runner: Runner | None = None, gear_set=None, **changes) -> BasinSweep:
     """Basin shares across a parameter, attractors continued from value to value.
 
     At each value :func:`~jaxgear.analyze_global` runs ``method`` on ``grid`` (default:
@@ -451,11 +448,10 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             kept as ``uncertainty_step`` and ``uncertainty_start``); 0 skips it. On a small
             grid it is a large part of the sweep (40 % on 20 x 12 x 24 cells, about 5 % on
             the paper's 90,000).
-        progress: show a progress bar.
-        out: kill-and-resume folder: each value's :class:`~jaxgear.GlobalResult` is saved
-            to ``DIR/parts/value_00000.nc`` when done; the final ``DIR/basins.nc``
-            (``save=False``: only the parts; the command line writes the result with its
-            summary and figures as one set); restart: discard a folder of other settings.
+        runner: a :class:`~jaxgear.Runner`: its output folder, resume and progress bar
+            (``None``: ``Runner()``, nothing written). With a folder ``DIR``, each value's
+            :class:`~jaxgear.GlobalResult` is saved to ``DIR/parts/value_00000.nc`` when
+            done, and the sweep to ``DIR/basins.nc``.
         gear_set: a :class:`~jaxgear.GearSet`: ``param`` is then one of its fields (or
             ``b``, ``e_amp``, ``k_amp``: both meshes) and ``values`` are in its physical
             units (µm, N/m, rpm, N m, ...); each value sets the dimensionless fields its
@@ -466,13 +462,14 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     Every analysis splits its cells over the local devices (:mod:`jaxgear._devices`). Run
     as several JAX processes (:func:`jaxgear._devices.initialize`, e.g. one per host
     under Slurm), process ``p`` of ``P`` computes the values ``i`` with ``i % P == p``
-    into ``out`` (required then, a folder every process sees), every process assembles
-    the sweep from the parts, and only process 0 writes ``basins.nc``: the file of one
-    process. A killed process loses the value it was computing; the same command rerun
-    resumes from the parts.
+    into the runner's folder (required then, a folder every process sees), every process
+    assembles the sweep from the parts, and only process 0 writes ``basins.nc``: the file
+    of one process. A killed process loses the value it was computing; the same command
+    rerun resumes from the parts.
     Returns:
         :class:`BasinSweep`.
     """
+    runner = sweep_runner(runner, changes, "basin_sweep")
     opts = with_changes(options, BasinOptions, changes)
     if gear_set is not None:
         params = resolve_gear_set(gear_set, params, system is None or system is REDUCED)
@@ -480,19 +477,13 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
     axis = sweep_axis(params, param, values, gear_set)
     names, rows = axis.applied()
     check_values(system, params, names, rows)
-    check_bool(progress, "progress")
-    check_bool(restart, "restart")
-    check_bool(save, "save")
     settings = dict(kind="basins", system=system.name, param=param, values=axis.values.tolist(),
                     **({"physical": axis.unit} if axis.physical else {}),
                     params=params_to_dict(params), grid=grid.to_dict(), method=method.to_dict(),
                     match_tol=float(opts.match_tol), **uncertainty_setting(opts.uncertainty), version=__version__)
-    me = process_index()
-    results = analyses_at(system, [apply_values(params, names, r) for r in rows], grid, method, opts, settings, out,
-                          restart, progress)
+    results = analyses_at(system, [apply_values(params, names, r) for r in rows], grid, method, opts, settings, runner)
     sweep = _assemble_basins(results, param, axis.values, grid, method, opts, system, params, axis)
-    if out is not None and save and me == 0:  # one process writes
-        sweep.save(Path(out) / "basins.nc")
+    runner.write(sweep, "basins.nc")
     return sweep
 
 
@@ -533,63 +524,23 @@ def resolve_basin_options(system, params, method, grid, options: BasinOptions):
     return system, params, method, grid, options
 
 
-def analyses_at(system, params_list, grid, method, options: BasinOptions, settings: dict, out, restart: bool,
-                progress: bool) -> list:
+def analyses_at(system, params_list, grid, method, options: BasinOptions, settings: dict, runner: Runner) -> list:
     """The global analysis at every parameter set of ``params_list`` (with the label
     uncertainty of ``options.uncertainty`` sampled cells, in one lane pool per block when
-    ``options.batched``), resumable: each result is saved to
-    ``out/parts/value_NNNNN.nc`` (``NNNNN`` its index) as its block of at most
-    :data:`BLOCK_CELLS` cells ends, and a rerun loads the saved ones (``settings``: the
-    manifest's, of ``kind`` ``"basins"`` or ``"basin_map"``; ``restart``: discard parts of
-    other settings). With several JAX processes, process ``p`` of ``P`` computes the
-    indices ``i % P == p`` (``out`` required) and reads the others' parts. A progress bar
-    counts the finished ones."""
+    ``options.batched``), in blocks of at most :data:`BLOCK_CELLS` cells, resumable and
+    split over processes by ``runner`` (:meth:`~jaxgear.Runner.values`; ``settings``: the
+    manifest's, of ``kind`` ``"basins"`` or ``"basin_map"``)."""
     kind = settings["kind"]
     label = (f"basins {settings['param']}" if kind == "basins"
              else f"basin map {settings['param_x']} x {settings['param_y']}")
-    n = len(params_list)
-    n_proc, me = process_count(), process_index()
-    if n_proc > 1 and out is None:
-        raise ValueError(f"a basin {'map' if kind == 'basin_map' else 'sweep'} over {n_proc} processes needs out= "
-                         "(a folder every process can read): each process saves its values there and process 0 "
-                         "assembles them.")
-    ck = open_shared_checkpoint(out, kind, settings, restart)
-    results: list = [None] * n
-    bar = progress_bar(n, label, progress, unit="value")
-    todo = []
-    for i in range(n):
-        part = f"value_{i:05d}.nc"
-        results[i] = ck.load_result(part, _load_part) if ck.has(part) else None
-        if results[i] is None:
-            if i % n_proc == me:  # this process's share of the values
-                todo.append(i)
-        else:
-            bar.update(1)
-    per_block = max(1, BLOCK_CELLS // grid.n_cells)
-    for b in range(0, len(todo), per_block):
-        block = todo[b:b + per_block]
+
+    def compute(block):
         with values_over_processes():  # this process's values: each analysis on this process's devices
-            done = _analyze_values(system, [params_list[i] for i in block], grid, method, options.batched,
+            return _analyze_values(system, [params_list[i] for i in block], grid, method, options.batched,
                                    options.uncertainty)
-        for i, r in zip(block, done):
-            if ck.dir is not None:
-                r.save(ck.path(f"value_{i:05d}.nc"))
-            results[i] = r
-        bar.update(len(block))
-    bar.close()
-    if n_proc > 1:  # the other processes' values, from their parts
-        missing = [i for i in range(n) if results[i] is None]
-        wait_for_parts([ck.path(f"value_{i:05d}.nc") for i in missing])
-        for i in missing:
-            results[i] = ck.load_result(f"value_{i:05d}.nc", _load_part)
-            if results[i] is None:
-                raise RuntimeError(f"the part of value {i} written by another process is unreadable; rerun.")
-    return results
 
-
-def _load_part(path):
-    """A saved value of a basin sweep or map: a :class:`~jaxgear.GlobalResult` and nothing else."""
-    return load(path, expected="GlobalResult")
+    return runner.values(settings, len(params_list), compute, max(1, BLOCK_CELLS // grid.n_cells), label,
+                         "GlobalResult")
 
 
 def _num(x) -> str:

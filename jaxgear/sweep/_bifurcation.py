@@ -10,8 +10,9 @@ values), so hysteresis shows; ``"all"`` does both kinds.
 
 Parameters are named by a field of the parameter pytree or an alias (``b``,
 ``kappa_amp``, ``e_amp``: both meshes) and set with :func:`jaxgear.with_param`; values
-enter the compiled kernels as array leaves, so nothing is recompiled per value. With
-``out=DIR`` every finished block is saved and an interrupted sweep resumes.
+enter the compiled kernels as array leaves, so nothing is recompiled per value. With a
+:class:`~jaxgear.Runner` of an output folder every finished block is saved and an
+interrupted sweep resumes.
 """
 
 from __future__ import annotations
@@ -19,16 +20,13 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
-from pathlib import Path
 from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import progress_bar
-from .._checks import check_bool, check_enum, with_changes
+from .._checks import check_enum, with_changes
 from .._codec import array_field, custom_field, later_field, plain, result_type
-from .._devices import cell_processes
 from .._format import format_table
 from .._io import save_result
 from .._lyapunov import AttractorType, LyapunovSpectrum, kaplan_yorke
@@ -40,11 +38,11 @@ from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..analysis._global import LYAPUNOV_PERIODS, LYAPUNOV_STRETCHES, with_longer_look
 from ..integrate import AbstractIntegrator, integrator_from_dict, resolve_integrator
-from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import APERIODIC, ESCAPED, classify_sequences, group_starts, label_order, type_label
 from ._kernels import independent_points, sequential_points, values_exponent_estimates
 from ._options import DIAGRAM_RECORD, SequenceOptions
 from ._physical import axis_label, physical_summary, resolve_gear_set, sweep_axis
+from ._runner import Runner, sweep_runner
 from ._values import apply_values, check_starts, check_values, coord_name
 
 __all__ = ["BifurcationDiagram", "SequenceSettings", "bifurcation_diagram", "SweepDirection", "DIRECTIONS",
@@ -345,8 +343,8 @@ def check_common(system, params):
 def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values, x0s, *,
                         direction: SweepDirection | str = SweepDirection.INDEPENDENT,
                         integrator: AbstractIntegrator | None = None,
-                        options: SequenceOptions | None = None, progress: bool = True, out=None,
-                        restart: bool = False, save: bool = True, gear_set=None, **changes) -> BifurcationDiagram:
+                        options: SequenceOptions | None = None, runner: Runner | None = None, gear_set=None,
+                        **changes) -> BifurcationDiagram:
     """Bifurcation diagram: stroboscopic points against one parameter, classified by period.
 
     For each value of ``param`` and each initial state: ``transient`` forcing periods,
@@ -381,12 +379,11 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
         options: :class:`~jaxgear.SequenceOptions` (``transient``, ``record`` (``None``:
             :data:`DIAGRAM_RECORD`), ``max_period``, ``tol``, ``merge_tol``,
             ``escape_bound``, ``chunk_size``: trajectories per compiled batch, values per
-            block ``chunk_size // S``, also the block written to ``out``); ``None``: the defaults.
-        progress: show a progress bar.
-        out: folder for kill-and-resume (``DIR/parts``, ``DIR/manifest.json``) and the
-            final ``DIR/bifurcation.nc``; restart: discard a folder of other settings;
-            save: ``False`` keeps only the resume parts in ``out`` (the command line writes
-            the result with its summary and figures as one set).
+            block ``chunk_size // S``, also the block the runner saves); ``None``: the defaults.
+        runner: a :class:`~jaxgear.Runner`: its output folder, resume and progress bar
+            (``None``: ``Runner()``, nothing written). With a folder ``DIR``: kill-and-resume
+            (``DIR/parts``, ``DIR/manifest.json``) and the final ``DIR/bifurcation.nc``,
+            read instead of computed when it holds this diagram.
         gear_set: a :class:`~jaxgear.GearSet`: ``param`` is then one of its fields (or
             ``b``, ``e_amp``, ``k_amp``: both meshes) and ``values`` are in its physical
             units; each value sets the dimensionless fields its conversion changes
@@ -400,14 +397,14 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
     and the parts are exchanged, so every process returns the whole, identical diagram;
     the sequential sweeps (``"up"``, ``"down"``, ``"both"``: the state carried from
     value to value) run on process 0 alone and are sent to the others. Only process 0
-    keeps ``out`` (it need not be shared) and writes the file.
+    keeps the runner's folder (it need not be shared) and writes the file.
     Returns:
         :class:`BifurcationDiagram`.
     """
+    runner = sweep_runner(runner, changes, "bifurcation_diagram")
     opts = with_changes(options, SequenceOptions, changes).with_record(DIAGRAM_RECORD)
     direction = check_enum(direction, "direction", SweepDirection)
-    system, params, axis, X0, integrator = _check_diagram(system, params, param, values, x0s, integrator, restart,
-                                                          save, gear_set)
+    system, params, axis, X0, integrator = _check_diagram(system, params, param, values, x0s, integrator, gear_set)
     vals = axis.values
     passes, dirs, blocks = _passes(direction, len(vals), len(X0), opts.chunk_size)
     settings = dict(kind="bifurcation", system=system.name, param=param, values=vals.tolist(),
@@ -416,13 +413,14 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
                     direction=direction.value, integrator=integrator.to_dict(), max_period=opts.max_period,
                     tol=float(opts.tol), merge_tol=float(opts.merge_tol), escape_bound=float(opts.escape_bound),
                     block_values=blocks, version=__version__)
-    ck = checkpoint_on_zero(out, "bifurcation", settings, restart)
-    done = None if restart else _finished(out, axis, X0, dirs, params_to_dict(params),
-                                          SequenceSettings(options=opts, integrator=integrator))
-    if done is not None:  # the same diagram, already whole in out: nothing is recomputed
+    ck = runner.blocks("bifurcation", settings)
+    done = runner.finished("bifurcation.nc", "BifurcationDiagram",
+                           functools.partial(_is_diagram, axis, X0, dirs, params_to_dict(params),
+                                             SequenceSettings(options=opts, integrator=integrator)))
+    if done is not None:  # the same diagram, already whole in the runner's folder: nothing is recomputed
         return done
     run = _Run(system, params, *axis.applied(), X0, opts, integrator)
-    points = _record_passes(run, passes, dirs, blocks, ck, progress, f"sweep {param}")
+    points = _record_passes(run, passes, dirs, blocks, ck, runner.bar(len(dirs) * len(vals), f"sweep {param}"))
     period = classify_sequences(points, opts.max_period, float(opts.tol), float(opts.escape_bound))
     attractor = group_starts(points[..., -opts.max_period:, :], period, float(opts.merge_tol))
     kind, lam, err = aperiodic_types(run, points, period, attractor)
@@ -433,36 +431,25 @@ def bifurcation_diagram(system: ForcedSystem | None, params, param: str, values,
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
         settings=SequenceSettings(options=opts, integrator=integrator), version=__version__,
     )
-    if out is not None and save and cell_processes()[0] == 0:  # one process writes
-        diagram.save(Path(out) / "bifurcation.nc")
+    runner.write(diagram, "bifurcation.nc")
     return diagram
 
 
-def _finished(out, axis, starts, directions, params: dict, settings: SequenceSettings):
-    """The diagram saved as ``out/bifurcation.nc`` when it is the one these arguments ask
-    for (same parameter, values, starts, directions, base parameters and settings; the
-    checkpoint already refused a folder of other settings), else ``None``."""
-    if out is None or not (Path(out) / "bifurcation.nc").is_file():
-        return None
-    from .._io import load
-
-    try:
-        d = load(Path(out) / "bifurcation.nc", expected="BifurcationDiagram")
-    except (OSError, ValueError):  # unreadable or of another kind: computed again and replaced
-        return None
-    same = (d.param == axis.name and d.physical == axis.physical and np.array_equal(d.values, axis.values) and np.array_equal(d.starts, starts)
-            and tuple(d.directions) == tuple(directions) and d.params == params and d.settings == settings)
-    return d if same else None
+def _is_diagram(axis, starts, directions, params: dict, settings: SequenceSettings, d) -> bool:
+    """Whether the saved diagram ``d`` is the one these arguments ask for (same parameter,
+    values, starts, directions, base parameters and settings; the checkpoint already
+    refused a folder of other settings)."""
+    return (d.param == axis.name and d.physical == axis.physical and np.array_equal(d.values, axis.values)
+            and np.array_equal(d.starts, starts) and tuple(d.directions) == tuple(directions) and d.params == params
+            and d.settings == settings)
 
 
-def _check_diagram(system, params, param, values, x0s, integrator, restart, save, gear_set=None):
+def _check_diagram(system, params, param, values, x0s, integrator, gear_set=None):
     """The defaults and checks of :func:`bifurcation_diagram` (but its ``direction``'s):
     ``(system, params, axis (a SweepAxis: values sorted), starts (S, dim), integrator)``."""
     if gear_set is not None:
         params = resolve_gear_set(gear_set, params, system is None or system is REDUCED)
     system, params = check_common(system, params)
-    check_bool(restart, "restart")
-    check_bool(save, "save")
     axis = sweep_axis(params, param, values, gear_set)
     names, rows = axis.applied()
     X0 = check_starts(system, x0s)
@@ -520,12 +507,11 @@ def _compute_block(run: _Run, name: str, B: int, orders, a: int, b: int, carry) 
     return dict(points=pts, carry=carry)
 
 
-def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: str) -> np.ndarray:
-    """Every pass block by block (each saved to and resumed from ``ck``): the recorded
-    points ``(D, V, S, R, dim)``."""
+def _record_passes(run: _Run, passes, dirs, blocks, ck, bar) -> np.ndarray:
+    """Every pass block by block (each saved to and resumed from ``ck``, counted on the
+    progress bar ``bar``): the recorded points ``(D, V, S, R, dim)``."""
     V, (S, dim), R = len(run.values), run.starts.shape, run.options.record
     points = np.empty((len(dirs), V, S, R, dim))
-    bar = progress_bar(len(dirs) * V, label, progress, unit="value")
     for name, ds in passes:
         B, nd = blocks[name], len(ds)
         rows = [dirs.index(d) for d in ds]
@@ -534,9 +520,8 @@ def _record_passes(run: _Run, passes, dirs, blocks, ck, progress: bool, label: s
         for bi, a in enumerate(range(0, V, B)):
             b = min(a + B, V)
             like = dict(points=((b - a, nd, S, R, dim), float), carry=((nd, S, dim), float))
-            z = shared_block(ck, f"{name}_{bi:05d}.npz", functools.partial(_compute_block, run, name, B, orders, a, b,
-                                                                           carry),
-                             like, collective=name == "independent")
+            z = ck.block(f"{name}_{bi:05d}.npz", functools.partial(_compute_block, run, name, B, orders, a, b, carry),
+                         like, collective=name == "independent")
             pts, carry = z["points"], z["carry"]
             for j in range(nd):
                 points[rows[j], orders[j][a:b]] = pts[:, j]

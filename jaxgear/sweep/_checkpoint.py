@@ -1,4 +1,7 @@
-"""Kill-and-resume of long sweeps: finished blocks saved under a manifest of the settings."""
+"""Kill-and-resume of long sweeps: finished blocks saved under a manifest of the settings.
+
+The private helper of :class:`~jaxgear.Runner` (:mod:`._runner`), which alone opens
+these checkpoints for the sweep functions."""
 
 from __future__ import annotations
 
@@ -142,6 +145,10 @@ class Checkpoint:
             self._tag(name)
             _save_part(self.parts / name, arrays)
 
+    def block(self, name: str, compute, like: Mapping[str, tuple], collective: bool = True) -> dict:
+        """The arrays of block ``name``, saved or computed: :func:`shared_block`."""
+        return shared_block(self, name, compute, like, collective)
+
 
 def _read_tag(path: Path) -> dict | None:
     """The tag ``{"kind", "hash", "settings"}`` of a part, ``None`` where missing or unreadable."""
@@ -248,7 +255,7 @@ def _save_part(path: Path, arrays: dict) -> None:
     atomic_write(path, write)
 
 
-def mismatch_message(folder, kind, diff: str, restart: str = "restart=True, --restart") -> str:
+def mismatch_message(folder, kind, diff: str, restart: str = "jaxgear.Runner(restart=True), --restart") -> str:
     """The refusal to resume the ``kind`` sweep saved in ``folder`` with other settings
     (``diff``: :func:`diff_settings`; ``restart``: how to discard it)."""
     return (f"{folder} holds {article(str(kind))} sweep with other settings (differing: {diff}); resume it with "

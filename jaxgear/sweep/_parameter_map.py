@@ -4,16 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-from pathlib import Path
 from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import progress_bar
 from .._checks import check_enum, with_changes
 from .._codec import array_field, plain, result_type
-from .._devices import cell_processes
 from .._format import format_table
 from .._io import save_result
 from .._params import param_targets, params_to_dict
@@ -21,10 +18,10 @@ from .._system import ForcedSystem, check_system
 from .._version import __version__
 from ..integrate import AbstractIntegrator, resolve_integrator
 from ._bifurcation import SequenceSettings, _Run, check_common, read_only
-from ._checkpoint import checkpoint_on_zero, shared_block
 from ._classify import classify_sequences, group_starts, label_order, period_label
 from ._kernels import independent_points
 from ._options import SequenceOptions
+from ._runner import Runner, sweep_runner
 from ._values import apply_values, check_starts, check_values, coord_name, sorted_values
 
 __all__ = ["ParameterMap", "parameter_map", "MapQuantity"]
@@ -133,8 +130,7 @@ class ParameterMap:
 
 def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, param_y: str, values_y, x0s, *,
                   quantity: MapQuantity | str = MapQuantity.PERIOD, integrator: AbstractIntegrator | None = None,
-                  options: SequenceOptions | None = None, progress: bool = True, out=None, restart: bool = False,
-                  **changes) -> ParameterMap:
+                  options: SequenceOptions | None = None, runner: Runner | None = None, **changes) -> ParameterMap:
     """Two-parameter map: the period of the attractor reached from a fixed initial state
     (``quantity="period"``, :attr:`MapQuantity.PERIOD`: from ``x0s[0]``) or the number of
     distinct attractors reached from several starts (``"n_attractors"``), on the grid
@@ -145,13 +141,16 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
     (``transient`` periods, then ``record`` points, ``None``: ``2 max_period + 2``), all
     batched with ``vmap`` in blocks of ``chunk_size`` trajectories; ``**changes``: fields
     of ``options`` to change. Both period codes and attractor counts are always computed.
-    ``out``: kill-and-resume folder and the final ``DIR/parameter_map.nc``.
+    ``runner``: a :class:`~jaxgear.Runner`, its output folder ``DIR`` (kill-and-resume,
+    and the final ``DIR/parameter_map.nc``) and progress bar (``None``: ``Runner()``,
+    nothing written).
 
     Several JAX processes (:func:`jaxgear._devices.initialize`), each calling this with
     the same arguments, split every block of grid points over the processes and
     exchange the parts: every process returns the whole, identical map, and only
-    process 0 keeps ``out`` and writes the file.
+    process 0 keeps the runner's folder and writes the file.
     """
+    runner = sweep_runner(runner, changes, "parameter_map")
     quantity = check_enum(quantity, "quantity", MapQuantity)
     opts = with_changes(options, SequenceOptions, changes)
     opts = opts.with_record(2 * opts.max_period + 2)
@@ -174,9 +173,9 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
                     transient=opts.transient, record=opts.record, integrator=integrator.to_dict(),
                     max_period=opts.max_period, tol=float(opts.tol), merge_tol=float(opts.merge_tol),
                     escape_bound=float(opts.escape_bound), block_points=int(B), version=__version__)
-    ck = checkpoint_on_zero(out, "parameter_map", settings, restart)
+    ck = runner.blocks("parameter_map", settings)
     run = _Run(system, params, names, VV, X0, opts, integrator)
-    period, attractor, last = _map_blocks(run, B, ck, progress, f"map {param_x} x {param_y}")
+    period, attractor, last = _map_blocks(run, B, ck, runner.bar(n, f"map {param_x} x {param_y}", unit="point"))
     ny, nx = len(vy), len(vx)
     n_att = attractor.max(axis=1, initial=-1) + 1
     pmap = ParameterMap(
@@ -187,23 +186,21 @@ def parameter_map(system: ForcedSystem | None, params, param_x: str, values_x, p
         system=system.name, state_names=tuple(system.state_names), params=params_to_dict(params),
         settings=SequenceSettings(options=opts, integrator=integrator), version=__version__,
     )
-    if out is not None and cell_processes()[0] == 0:  # one process writes
-        pmap.save(Path(out) / "parameter_map.nc")
+    runner.write(pmap, "parameter_map.nc")
     return pmap
 
 
 
 
-def _map_blocks(run: _Run, B: int, ck, progress: bool, label: str):
+def _map_blocks(run: _Run, B: int, ck, bar):
     """The grid points ``run.values (n, 2)`` in blocks of ``B`` (each saved to and resumed
-    from ``ck``): the period code and attractor id per (point, start), ``(n, S)``, and the
-    last recorded point ``(n, S, dim)``."""
+    from ``ck``, counted on the progress bar ``bar``): the period code and attractor id
+    per (point, start), ``(n, S)``, and the last recorded point ``(n, S, dim)``."""
     (n, _), (S, dim) = run.values.shape, run.starts.shape
     opts, X0, M = run.options, jnp.asarray(run.starts), run.options.max_period
     period = np.empty((n, S), dtype=np.int64)
     attractor = np.empty((n, S), dtype=np.int64)
     last = np.empty((n, S, dim))
-    bar = progress_bar(n, label, progress, unit="point")
     for bi, a in enumerate(range(0, n, B)):
         b = min(a + B, n)
 
@@ -215,7 +212,7 @@ def _map_blocks(run: _Run, B: int, ck, progress: bool, label: str):
                         last=pts[:, :, -1])
 
         like = dict(period=((b - a, S), np.int64), attractor=((b - a, S), np.int64), last=((b - a, S, dim), float))
-        z = shared_block(ck, f"map_{bi:05d}.npz", compute, like)
+        z = ck.block(f"map_{bi:05d}.npz", compute, like)
         period[a:b], attractor[a:b], last[a:b] = z["period"], z["attractor"], z["last"]
         bar.update(b - a)
     bar.close()
