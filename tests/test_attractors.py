@@ -219,7 +219,8 @@ def test_without_the_longer_run_the_transient_leaves_cells_unresolved():
     assert cut.n_unresolved >= 0.3 * cut.n_cells
 
 
-@pytest.mark.slow  # about 3 min on 2 cores
+@pytest.mark.slow  # about 3 min on one core: to whichever worker is free (its file's other tests run elsewhere)
+@pytest.mark.spread
 def test_backlash_scan_leaves_no_value_unresolved_and_one_type_per_attractor():
     """The backlash scan of the paper preset from 1.0 to 3.0 in steps of 0.05 on 10 x 6 x 12
     cells (a basin sweep): no value leaves more than 1 % of its cells unresolved (b = 1.15,
