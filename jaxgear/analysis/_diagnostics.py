@@ -45,9 +45,8 @@ def warn_if_unreliable(r: GlobalResult) -> None:
     if r.n_unresolved > 0.01 * n:
         warnings.warn(f"{r.n_unresolved} cells ({100 * r.n_unresolved / n:.1f} %) were not resolved within "
                       f"max_periods={getattr(m, 'max_periods', None)} periods ({_saddle_limit(m)} where a chaotic saddle "
-                      f"was found): raise max_periods (slow "
-                      f"transients), saddle_periods (a long chaotic transient), or max_period (now {m.max_period}) if "
-                      f"the motion has a longer period, or period_tol.",
+                      f"was found): raise max_periods (slow transients), saddle_periods (a long chaotic transient), "
+                      f"or max_period (now {m.max_period}) if the motion has a longer period, or period_tol.",
                       stacklevel=3)
     g = r.grid
     for a in r.attractors:

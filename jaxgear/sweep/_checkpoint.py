@@ -18,7 +18,7 @@ from .._devices import allgather, cell_processes, process_count, process_index
 from .._io import atomic_write
 
 __all__ = ["Checkpoint", "diff_settings", "mismatch_message", "open_shared_checkpoint", "checkpoint_on_zero",
-           "shared_block", "saved_parts"]
+           "saved_parts"]
 
 
 def _hash(settings: Mapping) -> str:
@@ -146,9 +146,30 @@ class Checkpoint:
             _save_part(self.parts / name, arrays)
 
     def block(self, name: str, compute, like: Mapping[str, tuple], collective: bool = True) -> dict:
-        """The arrays of block ``name``, saved or computed: :func:`shared_block`."""
-        return shared_block(self, name, compute, like, collective)
-
+        """The arrays of block ``name`` of a sweep, the same on every process (every process calls
+        it for every block, in the same order): the saved part when process 0 has a readable
+        one (sent to the others), else ``compute()`` (saved by process 0). ``collective``:
+        ``compute`` runs on every process and exchanges the parts itself (an independent
+        block split over the processes); otherwise process 0 alone computes the block (a
+        sequential one) and sends it. ``like``: ``{name: (shape, dtype)}`` of the arrays.
+        One process: the saved part, or ``compute()`` saved."""
+        me, count = cell_processes()
+        z = self.load(name) if self.has(name) else None
+        if count > 1:
+            saved = bool(allgather(np.int32(z is not None))[0])
+            if not saved and collective:
+                z = compute()
+                self.save(name, **z)
+                return z
+            if not saved and me == 0:
+                z = compute()
+                self.save(name, **z)
+            return {k: allgather(np.asarray(z[k], dtype) if me == 0 else np.zeros(shape, dtype))[0]
+                    for k, (shape, dtype) in like.items()}
+        if z is None:
+            z = compute()
+            self.save(name, **z)
+        return z
 
 def _read_tag(path: Path) -> dict | None:
     """The tag ``{"kind", "hash", "settings"}`` of a part, ``None`` where missing or unreadable."""
@@ -199,7 +220,7 @@ def open_shared_checkpoint(out, kind: str, settings: dict, restart: bool = False
 
 def checkpoint_on_zero(out, kind: str, settings: dict, restart: bool = False) -> Checkpoint:
     """:class:`Checkpoint` of a sweep whose processes compute every block together
-    (:func:`shared_block`): process 0 alone opens ``out`` (which need not be shared); the
+    (:meth:`Checkpoint.block`): process 0 alone opens ``out`` (which need not be shared); the
     others keep nothing. When process 0 cannot open it, every process raises. One process
     (:func:`jaxgear._devices.cell_processes`): ``Checkpoint(out, kind, settings, restart)``."""
     me, count = cell_processes()
@@ -217,32 +238,6 @@ def checkpoint_on_zero(out, kind: str, settings: dict, restart: bool = False) ->
         raise RuntimeError(f"process 0 could not open the sweep folder {out} (see its error).")
     return ck
 
-
-def shared_block(ck: Checkpoint, part: str, compute, like: Mapping[str, tuple], collective: bool = True) -> dict:
-    """The arrays of one block of a sweep, the same on every process (every process calls
-    it for every block, in the same order): the saved part when process 0 has a readable
-    one (sent to the others), else ``compute()`` (saved by process 0). ``collective``:
-    ``compute`` runs on every process and exchanges the parts itself (an independent
-    block split over the processes); otherwise process 0 alone computes the block (a
-    sequential one) and sends it. ``like``: ``{name: (shape, dtype)}`` of the arrays.
-    One process: the saved part, or ``compute()`` saved."""
-    me, count = cell_processes()
-    z = ck.load(part) if ck.has(part) else None
-    if count > 1:
-        saved = bool(allgather(np.int32(z is not None))[0])
-        if not saved and collective:
-            z = compute()
-            ck.save(part, **z)
-            return z
-        if not saved and me == 0:
-            z = compute()
-            ck.save(part, **z)
-        return {k: allgather(np.asarray(z[k], dtype) if me == 0 else np.zeros(shape, dtype))[0]
-                for k, (shape, dtype) in like.items()}
-    if z is None:
-        z = compute()
-        ck.save(part, **z)
-    return z
 
 
 def _save_part(path: Path, arrays: dict) -> None:
