@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -339,14 +341,13 @@ def test_unlocked_van_der_pol_is_quasi_periodic():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the torus of tests/test_lyapunov.py has a rotation number within 1e-6 of "
-                   "21/34: a cloud of 300 periods is 34 tight clusters, and the clouds of different cells (at "
-                   "different phases along the curve) share no boxes: one torus is reported as several "
-                   "quasi-periodic attractors")
 def test_near_resonant_torus_is_one_attractor():
     """The case of tests/test_lyapunov.py (forcing frequency the golden mean itself): its
     rotation number (scipy) is 21/34 to 1e-5 (the limit cycle's frequency 1 - mu^2/16
-    shifts it off the golden mean), still quasi-periodic by its exponents: one torus."""
+    shifts it off the golden mean), still quasi-periodic by its exponents: one torus. The
+    cloud of one cell is 34 tight clusters, and the clouds of cells at other phases along
+    the curve share no boxes with it: the analysis joins them by the continuity of the
+    phase along a segment between them (jaxgear.analysis._tori)."""
     omega = 1 / GOLDEN
     rho = _rotation_number(omega)
     assert abs(rho - 21 / 34) < 1e-5
@@ -354,6 +355,44 @@ def test_near_resonant_torus_is_one_attractor():
                                progress=False, uncertainty=0)
     assert r.n_unresolved == 0 and all(a.type is AttractorType.QUASI_PERIODIC for a in r.attractors)
     _check_one_torus(r, omega)
+
+
+class _Turn(NamedTuple):
+    w: float
+
+
+def _two_circles(r2):
+    """Two attracting circles of the plane, r = 1 and r = r2, the circle between them
+    repelling (their basins' boundary), both turning at ``w`` per unit time (period 2 pi)."""
+    def f(t, z, p):
+        r = jnp.hypot(z[0], z[1])
+        g = -200.0 * (r - 1.0) * (r - (1.0 + r2) / 2) * (r - r2)
+        return jnp.stack([g * z[0] - p.w * z[1], g * z[1] + p.w * z[0]])
+
+    return jaxgear.ForcedSystem(f, lambda p: 2 * jnp.pi, ("x", "y"), section_index=1, name="two-circles")
+
+
+def _clusters(r, shift, q=34, per=20):
+    """A near-resonant cloud on the circle of radius r: q tight clusters at angles
+    2 pi (k / q + shift)."""
+    a = 2 * np.pi * (np.arange(q)[:, None] / q + shift) + np.linspace(-1e-4, 1e-4, per)[None, :]
+    return r * np.stack([np.cos(a.ravel()), np.sin(a.ravel())], axis=1)
+
+
+def test_clouds_of_one_curve_are_joined_and_of_two_curves_not():
+    """The join of quasi-periodic attractors (jaxgear.analysis._tori): interleaved clusters
+    on one attracting circle are one attractor; clusters on two circles 0.1 apart (closer
+    than the clouds' nearest points, 0.14) stay two, and so do attractors of other types."""
+    from jaxgear.analysis._tori import joined_tori
+
+    system, p, rk = _two_circles(1.1), _Turn(w=0.6180339887), RK4(200)
+    qp, exps = int(AttractorType.QUASI_PERIODIC), np.array([0.0, -6.0])
+    one, other, far = _clusters(1.0, 0.0), _clusters(1.0, 0.5 / 34), _clusters(1.1, 0.5 / 34)
+    got = joined_tori(system, p, rk, [one, other, far], [qp] * 3, [exps] * 3)
+    assert got is not None and list(got) == [0, 0, 1]
+    assert joined_tori(system, p, rk, [one, far], [qp] * 2, [exps] * 2) is None
+    chaotic = int(AttractorType.CHAOTIC)
+    assert joined_tori(system, p, rk, [one, other], [chaotic, qp], [exps] * 2) is None
 
 
 # --------------------------------------------------------------------------- periodic attractors

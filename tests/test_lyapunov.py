@@ -298,6 +298,10 @@ def test_classify_from_constructed_spectra():
     assert list(classify_attractor(spec(0.2, 0.01, status=3))) == [AttractorType.UNKNOWN]
     assert list(classify_attractor(spec(0.2, 0.01), np.array([2]))) == [AttractorType.PERIODIC]
     assert list(classify_attractor(spec(5e-7, 1e-9))) == [AttractorType.QUASI_PERIODIC]  # below zero_tol
+    # beyond 3 errors but within 1e-4 of the contraction (-1): a torus's finite-time bias, zero
+    assert list(classify_attractor(spec(5e-5, 1e-7))) == [AttractorType.QUASI_PERIODIC]
+    assert "zero within" in jaxgear.type_reason(AttractorType.QUASI_PERIODIC, [5e-5, -1.0], [1e-7, 0.01])
+    assert list(classify_attractor(spec(2e-4, 1e-7))) == [AttractorType.CHAOTIC]
 
 
 def test_a_zero_exponent_is_a_torus_only_on_a_closed_curve_else_undetermined():

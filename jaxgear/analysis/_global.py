@@ -34,6 +34,7 @@ from ._fractal import basin_entropy
 from ._method import AbstractGlobalMethod, method_from_name
 from ._orbits import exact_cycle_multipliers, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
+from ._tori import joined_tori
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
 
 __all__ = ["analyze_global", "analyze_global_values", "default_method", "DEFAULT_METHOD", "with_label_uncertainty"]
@@ -169,16 +170,26 @@ def _merge_same(labels, raw, cycles, method):
             pts, k = minimal_cycle(np.asarray(pts), int(k), method.period_tol)
         reduced.append((pts, k, res))
     ids = group_attractors([(p, k) for p, k, _ in reduced], method.merge_tol)
-    if np.array_equal(ids, np.arange(len(reduced))):
-        return labels, reduced, cycles
+    return _merge_groups(labels, reduced, cycles, ids)
+
+
+def _merge_groups(labels, raw, cycles, ids, join_clouds: bool = False):
+    """Labels, attractors and periodic cells with the attractors of each group id ``ids[i]``
+    merged into one (the group's first one; with ``join_clouds``, the clouds of period-0
+    attractors put together)."""
+    if np.array_equal(ids, np.arange(len(raw))):
+        return labels, raw, cycles
     out = labels.copy()
     for old, new in enumerate(ids):
         out[labels == old] = new
     n_new = int(ids.max(initial=-1)) + 1
-    first = [int(np.argmax(ids == g)) for g in range(n_new)]
-    merged_cycles = [np.unique(np.concatenate([np.asarray(cycles[o], np.int64) for o in np.nonzero(ids == g)[0]]))
-                     for g in range(n_new)]
-    return out, [reduced[i] for i in first], merged_cycles
+    members = [np.flatnonzero(ids == g) for g in range(n_new)]
+    merged = [raw[m[0]] for m in members]
+    if join_clouds:
+        merged = [(np.concatenate([np.asarray(raw[o][0]) for o in m]), *raw[m[0]][1:]) if raw[m[0]][1] == 0 else r
+                  for m, r in zip(members, merged)]
+    merged_cycles = [np.unique(np.concatenate([np.asarray(cycles[o], np.int64) for o in m])) for m in members]
+    return out, merged, merged_cycles
 
 
 def _section_index(system, method):
@@ -283,8 +294,17 @@ def _ensemble_starts(cloud: np.ndarray) -> np.ndarray:
     return cloud[np.linspace(0, len(cloud) - 1, LYAPUNOV_LANES).astype(np.int64)]
 
 
-def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime) -> GlobalResult:
-    """Attractors sorted by decreasing share (ids renumbered 0..A-1) and the result object."""
+def _first_appearance(ids):
+    """Group ids renumbered 0.. in order of first appearance."""
+    first = {g: n for n, g in enumerate(dict.fromkeys(ids.tolist()))}
+    return np.array([first[g] for g in ids.tolist()], np.int64)
+
+
+def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime,
+              join_tori: bool = True) -> GlobalResult:
+    """Attractors sorted by decreasing share (ids renumbered 0..A-1) and the result object;
+    quasi-periodic attractors that are one invariant curve are joined first
+    (:func:`~jaxgear.analysis._tori.joined_tori`)."""
     n = grid.n_cells
     counts = np.array([(labels == i).sum() for i in range(len(raw))], dtype=np.int64)
     order = np.argsort(-counts, kind="stable")
@@ -301,6 +321,13 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     mus = {old: float(np.abs(m).max()) if np.all(np.isfinite(m)) else np.inf for old, m in mults.items()}
     kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator,
                                          [mults.get(old) for old in order])
+    joined = joined_tori(system, params, method.integrator, [raw[old][0] for old in order], kinds,
+                         [e for e, _, _ in spectra]) if join_tori else None
+    if joined is not None:  # (ids in the order of `order`: back to the raw attractors')
+        ids = np.empty(len(raw), np.int64)
+        ids[order] = joined
+        labels, raw, cycles = _merge_groups(labels, raw, cycles, _first_appearance(ids), join_clouds=True)
+        return _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime, join_tori=False)
     for new, old in enumerate(order):
         pts, per, res = raw[old]
         sec = secs[new]
