@@ -93,6 +93,7 @@ from .analysis import (
     with_label_uncertainty as with_label_uncertainty,
     detect_period as detect_period,
     Attractor as Attractor,
+    ChaoticSaddle as ChaoticSaddle,
     GlobalResult as GlobalResult,
     SINK as SINK,
     UNRESOLVED as UNRESOLVED,

@@ -78,11 +78,12 @@ def array_field(dims=None, *, later: bool = False, **kw):
     return dataclasses.field(metadata={"dims": dims, "later": later}, **kw)
 
 
-def items_field(dim: str, *, legacy: Callable[[Any], tuple] | None = None, **kw):
+def items_field(dim: str, *, legacy: Callable[[Any], tuple] | None = None, later: bool = False, **kw):
     """A dataclass field holding a tuple of dataclasses, stored along dimension ``dim``.
     ``legacy``: how a file that holds the field in an earlier form, one JSON attribute
-    (a dictionary), is read: ``legacy(json value) -> tuple of the dataclasses``."""
-    return dataclasses.field(metadata={"item_dim": dim, "legacy": legacy}, **kw)
+    (a dictionary), is read: ``legacy(json value) -> tuple of the dataclasses``. ``later``:
+    added after files of its type were first written (they load with its default)."""
+    return dataclasses.field(metadata={"item_dim": dim, "legacy": legacy, "later": later}, **kw)
 
 
 def later_field(default, **kw):

@@ -476,6 +476,25 @@ def _registered_in_source() -> set[str]:
     return names
 
 
+def test_chaotic_saddles_round_trip_and_older_files_load_without_them(duffing_results, tmp_path):
+    """A result's chaotic saddles (cloud, lifetime and how it was measured) round-trip
+    exactly and are printed; a file written before they were recorded loads with none."""
+    r = duffing_results["direct"]
+    saddle = jg.ChaoticSaddle(points=np.arange(12.0).reshape(6, 2), lifetime=416.2, lifetime_error=40.1,
+                              starts=1024, periods=2016, left=1.0)
+    one = dataclasses.replace(r, saddles=(saddle, dataclasses.replace(saddle, lifetime=np.inf,
+                                                                      lifetime_error=np.nan, left=0.0)))
+    q = jg.load(one.save(tmp_path / "r.nc"))
+    assert_same(q, one)
+    assert "a mean lifetime of 416 +- 40 periods" in q.table() and "beyond about 2016 periods" in q.table()
+    assert q.summary()["saddles"][0]["lifetime"] == 416.2
+    with xr.open_dataset(tmp_path / "r.nc", engine="h5netcdf") as ds:
+        schema = json.loads(ds.attrs["jaxgear_schema"])
+    old = _rewrite(tmp_path / "r.nc", tmp_path / "old.nc", drop=("saddles",),
+                   jaxgear_schema=json.dumps({k: v for k, v in schema.items() if not k.startswith("saddles")}))
+    assert jg.load(old).saddles == () and "chaotic saddle" not in jg.load(old).table()
+
+
 def test_every_result_type_is_registered_and_exported():
     """Each class the source decorates with ``@result_type`` is known to the codec once
     ``jaxgear`` is imported (so :func:`jaxgear.load` finds it by the name in the file, the

@@ -443,13 +443,13 @@ def test_one_pool_rows_decide_against_their_own_tables():
     m = jg.Direct(integrator=jg.RK4(64), max_period=4, chunk_size=64)
     kw = dict(options=m.pool_options(pilot=0), progress=False)
     p13, p10 = jg.DuffingParams(**DUFF, omega=1.3), jg.DuffingParams(**DUFF, omega=1.0)
-    _, atts, _ = run_pool(jg.DUFFING, p13, X, m.integrator, **kw)
+    _, atts, *_ = run_pool(jg.DUFFING, p13, X, m.integrator, **kw)
     assert len(atts) == 2
     rows = [(p13, atts), (p13, atts[::-1]), (p10, ())]
     alone = [run_pool(jg.DUFFING, p, X, m.integrator, attractors=a, **kw) for p, a in rows]
     pooled = run_pools(jg.DUFFING, [p for p, _ in rows], [X] * 3, m.integrator, attractors=[a for _, a in rows], **kw)
     assert len(alone[2][1]) != 2  # the third value's table differs in length
-    for (lab, att, _), (lab1, att1, _) in zip(pooled, alone):
+    for (lab, att, *_), (lab1, att1, *_) in zip(pooled, alone):
         np.testing.assert_array_equal(lab, lab1)
         assert [k for _, k in att] == [k for _, k in att1]  # the points: of the lane that found it first
     swap = np.array([1, 0])

@@ -43,13 +43,13 @@ from ._orbits import detect_period
 from ._pool import PoolOptions
 from ._recurrence import RecurrenceResult, classify_by_recurrence
 from ._recurrence_options import RecurrenceOptions
-from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, GlobalResult, LabelUncertainty
+from ._result import LABEL_MEANINGS, SINK, UNRESOLVED, Attractor, ChaoticSaddle, GlobalResult, LabelUncertainty
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainty
 
 __all__ = ["AbstractGlobalMethod", "Direct", "PoincareCellMap", "StroboscopicCellMap", "analyze_global",
            "analyze_global_values",
            "default_method", "DEFAULT_METHOD", "analyze_cell_map", "cell_images", "compare_with_direct",
-           "detect_period", "GlobalResult", "Attractor", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
+           "detect_period", "GlobalResult", "Attractor", "ChaoticSaddle", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS", "METHODS",
            "method_from_dict", "method_from_name", "Classification", "label_uncertainty", "DEFAULT_SAMPLES",
            "with_label_uncertainty", "PoolOptions", "RecurrenceOptions", "RecurrenceResult",
            "classify_by_recurrence", "basin_entropy", "BasinEntropy", "uncertainty_exponent", "UncertaintyExponent",

@@ -8,6 +8,7 @@ import numpy as np
 
 from .._lyapunov import AttractorType
 from ._cellmap import PoincareCellMap, StroboscopicCellMap
+from ._orbits import LONG_CYCLE_FACTOR
 from ._result import GlobalResult
 
 __all__ = ["warn_if_unreliable", "MIN_CELLS"]
@@ -56,7 +57,8 @@ def warn_if_unreliable(r: GlobalResult) -> None:
             warnings.warn(f"attractor {a.id}: its type is not decided: {a.type_reason}.", stacklevel=3)
         elif a.period == 0 and not typed:  # a cell group with no period, or a cycle found by its boxes
             warnings.warn(f"attractor {a.id} showed no period <= max_period={m.max_period}"
-                          + (" and its largest Lyapunov exponent is negative: a cycle of a longer period"
+                          + (" and its largest Lyapunov exponent is negative: a cycle whose period is above "
+                             f"{LONG_CYCLE_FACTOR * m.max_period} (or that converges slowly)"
                              if a.type == AttractorType.PERIODIC else
                              ": it may have a longer period, be quasi-periodic or chaotic, or be a slow transient")
                           + "; raise max_period (or settle_periods).", stacklevel=3)

@@ -33,12 +33,14 @@ from .._cells import CellGrid
 from .._checks import check_int
 from ..integrate import AbstractIntegrator, default_integrator
 from ._boxes import partition_of_states
+from ._cloud import verify_length
 from ._lanes import Boxes
 from ._method import AbstractGlobalMethod, Classification, register_method
 from ._orbits import largest_multipliers, refine_orbits
 from ._pool import PoolOptions, run_pool, run_pools
 from ._recurrence_options import RecurrenceOptions
 from ._result import UNRESOLVED
+from ._saddles import saddle_lifetimes
 
 __all__ = ["Direct", "STABLE_BELOW"]
 
@@ -175,16 +177,16 @@ class Direct(AbstractGlobalMethod):
         return Boxes(self.recurrence, partition_of_states(X, float(self.recurrence.resolution)))
 
     def classify(self, system, params, grid: CellGrid, progress: bool) -> Classification:
-        labels, atts, mean = self.label_states(system, params, grid.centres(), progress)
-        return Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean)
+        return self.classify_values(system, [params], grid, progress)[0]
 
     def classify_values(self, system, params_list, grid: CellGrid, progress: bool) -> list[Classification]:
         """:meth:`classify` at several parameter sets in one lane pool (each lane carries
         its value's parameters; attractor tables per value): one classification per
         value, each that of :meth:`classify` at that value."""
         out = []
-        for labels, atts, mean in self.label_states_values(system, params_list, grid.centres(), progress):
-            out.append(Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean))
+        for labels, atts, mean, saddles in self.label_states_values(system, params_list, grid.centres(), progress,
+                                                                     saddles=True):
+            out.append(Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean, saddles))
         return out
 
     def label_states(self, system, params, X: np.ndarray, progress: bool = False):
@@ -192,18 +194,28 @@ class Direct(AbstractGlobalMethod):
         period, residual)], mean periods per state)``."""
         return self.label_states_values(system, [params], X, progress)[0]
 
-    def label_states_values(self, system, params_list, X: np.ndarray, progress: bool = False, label="direct"):
+    def label_states_values(self, system, params_list, X: np.ndarray, progress: bool = False, label="direct",
+                            saddles: bool = False):
         """:meth:`label_states` of the same states ``X (n, dim)`` under each parameter set of
-        ``params_list``, in one lane pool: a list of its results, one per value."""
+        ``params_list``, in one lane pool: a list of its results, one per value; with
+        ``saddles``, each with a fourth item, the value's chaotic saddles with their
+        lifetimes (:func:`~jaxgear.analysis._saddles.saddle_lifetimes`)."""
         X = np.asarray(X, np.float64)
         boxes = self.boxes(X)
         pooled = run_pools(system, params_list, [X] * len(params_list), self.integrator, self.pool_options(),
                            boxes=boxes, progress=progress, label=label)
         out = []
-        for params, (labels, atts, used) in zip(params_list, pooled):
+        for params, (labels, atts, used, met) in zip(params_list, pooled):
             res = self._refined(system, params, atts)
             labels, res, used = self._stable_only(system, params, X, boxes, labels, res, used, progress)
-            out.append((labels, res, float(used.mean()) if len(used) else 0.0))
+            one = (labels, res, float(used.mean()) if len(used) else 0.0)
+            if saddles:
+                one += (saddle_lifetimes(system, params, self.integrator, boxes.partition, met,
+                                         [(p, k) for p, k, _ in res], periods=verify_length(self.recurrence,
+                                                                                           self.max_period),
+                                         max_period=self.max_period, bound=self.pool.escape_bound)
+                        if met else (),)
+            out.append(one)
         return out
 
     def _refined(self, system, params, atts) -> list:
@@ -246,7 +258,7 @@ class Direct(AbstractGlobalMethod):
                 continue
             seeds = [(p, k) for p, k, _ in res] + repellers
             # (the pool pads its queue to a few compiled lengths itself: queue_length)
-            lab, atts, use = run_pool(system, params, X[cells], self.integrator, self.pool_options(pilot=0),
+            lab, atts, use, _ = run_pool(system, params, X[cells], self.integrator, self.pool_options(pilot=0),
                                       boxes=boxes, attractors=seeds, progress=progress,
                                       label="direct (off repellers)")
             found = atts[len(seeds):]  # slots after the seeds: cycles met on the way

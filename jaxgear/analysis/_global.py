@@ -32,7 +32,7 @@ from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._fractal import basin_entropy
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import exact_cycle_multipliers, section_points_of
+from ._orbits import exact_cycle_multipliers, long_cycles, section_points_of
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._tori import joined_tori
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
@@ -104,10 +104,10 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     method.check(system, grid)
     check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
 
-    labels, raw, cycles, mean_periods = method.classify(system, params, grid, progress)
+    labels, raw, cycles, mean_periods, saddles = method.classify(system, params, grid, progress)
     labels, raw, cycles = _merge_same(labels, raw, cycles, method)
     result = _assemble(system, params, grid, method, labels, raw, cycles, mean_periods,
-                       time.perf_counter() - t_start)
+                       time.perf_counter() - t_start, saddles=saddles)
     if uncertainty:
         result = with_label_uncertainty(result, system, params, method, uncertainty, progress)
         result = dataclasses.replace(result, runtime_s=time.perf_counter() - t_start)
@@ -135,7 +135,10 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
 
     A method with ``classify_values`` (:class:`~jaxgear.Direct`) runs every value in one
     lane pool, and the label uncertainties in one pool each; other methods run value
-    after value. ``runtime_s`` of each result is its share of the whole.
+    after value. A value where the pool met an attractor of boxes or a chaotic saddle, or
+    left cells unresolved, is analysed again alone: which lane becomes a candidate, and when its boxes enter the
+    table, depends on the other values' lanes in the pool, and so can the odd label
+    decided by box hits. ``runtime_s`` of each result is its share of the whole.
     """
     params_list = list(params_list)
     if not hasattr(method, "classify_values") or len(params_list) == 1:
@@ -144,22 +147,31 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
     t_start = time.perf_counter()
     for params in params_list:
         check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
-    results = []
-    for params, (labels, raw, cycles, mean_periods) in zip(params_list,
-                                                           method.classify_values(system, params_list, grid,
-                                                                                  progress)):
+    results: list = []
+    for params, (labels, raw, cycles, mean_periods, saddles) in zip(params_list,
+                                                                    method.classify_values(system, params_list, grid,
+                                                                                           progress)):
+        if saddles or any(int(k) == 0 for _, k, _ in raw) or np.any(labels == UNRESOLVED):
+            results.append(None)  # (analysed alone below)
+            continue
         labels, raw, cycles = _merge_same(labels, raw, cycles, method)
-        results.append(_assemble(system, params, grid, method, labels, raw, cycles, mean_periods, 0.0))
-    if uncertainty:
-        us = label_uncertainties(system, params_list, grid, [r.labels for r in results],
-                                 [r.attractors for r in results], Direct.like(method), samples=uncertainty,
+        results.append(_assemble(system, params, grid, method, labels, raw, cycles, mean_periods, 0.0,
+                                 saddles=saddles))
+    pooled = [i for i, r in enumerate(results) if r is not None]
+    if uncertainty and pooled:
+        us = label_uncertainties(system, [params_list[i] for i in pooled], grid, [results[i].labels for i in pooled],
+                                 [results[i].attractors for i in pooled], Direct.like(method), samples=uncertainty,
                                  progress=progress)
-        results = [dataclasses.replace(r, uncertainty=u) for r, u in zip(results, us)]
+        for i, u in zip(pooled, us):
+            results[i] = dataclasses.replace(results[i], uncertainty=u)
+    for i in pooled:
+        warn_if_unreliable(results[i])
+    for i, r in enumerate(results):
+        if r is None:
+            results[i] = analyze_global(system, params_list[i], grid, method, progress=progress,
+                                        uncertainty=uncertainty)
     runtime = (time.perf_counter() - t_start) / len(results)
-    results = [dataclasses.replace(r, runtime_s=runtime) for r in results]
-    for r in results:
-        warn_if_unreliable(r)
-    return results
+    return [dataclasses.replace(r, runtime_s=runtime) for r in results]
 
 
 def _merge_same(labels, raw, cycles, method):
@@ -300,11 +312,37 @@ def _first_appearance(ids):
     return np.array([first[g] for g in ids.tolist()], np.int64)
 
 
+def _retyped(system, params, method, labels, raw, cycles, order, kinds, spectra):
+    """What the attractors' types change, as new ``(labels, raw, cycles)``, or ``None``:
+    an attractor of boxes that contracts (typed periodic by its exponents) is the cycle of
+    its period when that is found (:func:`~jaxgear.analysis._orbits.long_cycles`), and
+    quasi-periodic attractors on one invariant curve are one
+    (:func:`~jaxgear.analysis._tori.joined_tori`). ``order``, ``kinds``, ``spectra``: the
+    attractors in the order their types were measured."""
+    raw = list(raw)
+    contracting = [old for old, kind in zip(order, kinds) if raw[old][1] == 0 and kind == int(AttractorType.PERIODIC)]
+    starts = [np.asarray(raw[old][0])[np.all(np.isfinite(raw[old][0]), axis=1)][-1] for old in contracting]
+    found = long_cycles(system, params, starts, method.integrator, method.max_period, method.period_tol)
+    for old, cycle in zip(contracting, found):
+        if cycle is not None:
+            raw[old] = cycle
+    joined = joined_tori(system, params, method.integrator, [raw[old][0] for old in order], kinds,
+                         [e for e, _, _ in spectra])
+    if joined is None and all(c is None for c in found):
+        return None
+    if joined is None:
+        return _merge_same(labels, raw, cycles, method)
+    ids = np.empty(len(raw), np.int64)  # (ids in the order of `order`: back to the raw attractors')
+    ids[order] = joined
+    labels, raw, cycles = _merge_groups(labels, raw, cycles, _first_appearance(ids), join_clouds=True)
+    return _merge_same(labels, raw, cycles, method) if any(c is not None for c in found) else (labels, raw, cycles)
+
+
 def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime,
-              join_tori: bool = True) -> GlobalResult:
+              typed_again: bool = True, saddles: tuple = ()) -> GlobalResult:
     """Attractors sorted by decreasing share (ids renumbered 0..A-1) and the result object;
-    quasi-periodic attractors that are one invariant curve are joined first
-    (:func:`~jaxgear.analysis._tori.joined_tori`)."""
+    what their types change is done first (:func:`_retyped`: a cycle longer than
+    ``max_period`` gets its period, one torus seen as several is one)."""
     n = grid.n_cells
     counts = np.array([(labels == i).sum() for i in range(len(raw))], dtype=np.int64)
     order = np.argsort(-counts, kind="stable")
@@ -321,13 +359,11 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
     mus = {old: float(np.abs(m).max()) if np.all(np.isfinite(m)) else np.inf for old, m in mults.items()}
     kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator,
                                          [mults.get(old) for old in order])
-    joined = joined_tori(system, params, method.integrator, [raw[old][0] for old in order], kinds,
-                         [e for e, _, _ in spectra]) if join_tori else None
-    if joined is not None:  # (ids in the order of `order`: back to the raw attractors')
-        ids = np.empty(len(raw), np.int64)
-        ids[order] = joined
-        labels, raw, cycles = _merge_groups(labels, raw, cycles, _first_appearance(ids), join_clouds=True)
-        return _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, runtime, join_tori=False)
+    if typed_again:
+        again = _retyped(system, params, method, labels, raw, cycles, order, kinds, spectra)
+        if again is not None:
+            return _assemble(system, params, grid, method, *again, mean_periods, runtime, typed_again=False,
+                             saddles=saddles)
     for new, old in enumerate(order):
         pts, per, res = raw[old]
         sec = secs[new]
@@ -343,7 +379,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
         method=method, params=params_to_dict(params), system=system.name,
         state_names=tuple(system.state_names), n_sink=int((out_labels == SINK).sum()),
         n_unresolved=int((out_labels == UNRESOLVED).sum()), runtime_s=float(runtime), version=__version__,
-        mean_periods=float(mean_periods),
+        mean_periods=float(mean_periods), saddles=tuple(saddles),
         # (boxes need 2 cells a side: a grid with an axis of one cell has no basin entropy)
         basin_entropy=basin_entropy(out_labels.reshape(grid.counts), box=min(ENTROPY_BOX, *grid.counts))
         if min(grid.counts) >= 2 else None,

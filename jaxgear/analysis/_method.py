@@ -43,13 +43,15 @@ class Classification(NamedTuple):
     labels: ``(n_cells,)`` attractor index, ``SINK`` or ``UNRESOLVED``; attractors:
     ``[(points (k, dim), period k, residual), ...]``; cycles: the periodic cells of each
     attractor (cell methods; empty arrays otherwise); mean_periods: forcing periods
-    integrated per cell.
+    integrated per cell; saddles: the chaotic saddles met (:class:`~jaxgear.ChaoticSaddle`,
+    direct method).
     """
 
     labels: np.ndarray
     attractors: list
     cycles: list
     mean_periods: float
+    saddles: tuple = ()
 
 
 class AbstractGlobalMethod(eqx.Module):

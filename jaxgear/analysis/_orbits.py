@@ -69,6 +69,30 @@ def follow(system, params, X: np.ndarray, integrator, settle: int, max_period: i
     return detect_period(orbit, max_period, tol), orbit
 
 
+LONG_CYCLE_FACTOR = 16
+"""An attractor of boxes whose largest exponent is negative (a cycle longer than
+``max_period``) is given its period when that is at most this many times ``max_period``."""
+LONG_CYCLE_SETTLE = 200
+"""Periods such a cycle's point is continued before its period is read."""
+
+
+def long_cycles(system, params, starts, integrator, max_period: int, tol: float):
+    """The cycles through the states ``starts`` (one per attractor of boxes that contracts:
+    a cycle longer than ``max_period``): for each, ``(points (k, dim), k, residual)`` of the
+    cycle after :data:`LONG_CYCLE_SETTLE` periods, its period ``k`` up to
+    :data:`LONG_CYCLE_FACTOR` ``* max_period`` read as for any cycle
+    (:func:`detect_period`, tolerance ``tol``), or ``None`` where none repeats."""
+    if not len(starts):
+        return []
+    K = LONG_CYCLE_FACTOR * int(max_period)
+    periods, orbits = follow(system, params, _pad_rows(np.asarray(starts, np.float64)), integrator, LONG_CYCLE_SETTLE,
+                             K, tol)
+    found = [i for i in range(len(starts)) if periods[i] > 0]
+    refined = dict(zip(found, refine_orbits(system, params, [(orbits[i, -1], int(periods[i])) for i in found],
+                                            integrator, max_period=K)))
+    return [(refined[i][0], int(periods[i]), refined[i][1]) if i in refined else None for i in range(len(starts))]
+
+
 def _pad_rows(X: np.ndarray, minimum: int = 8) -> np.ndarray:
     """``X (n, dim)`` padded with copies of a row to a power of two (at least ``minimum``)
     rows, so that batches of a few states share one compiled shape."""

@@ -110,7 +110,7 @@ def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *,
              attractors=(), progress: bool = False, label: str = "direct"):
     """Label the states ``X (n, dim)`` at phase 0 (see the module): ``(labels (n,) with
     attractor slot, SINK or UNRESOLVED; [(points (k, dim) in cycle order, k)]; periods per
-    state (n,))``.
+    state (n,); [cloud (m, dim) of each chaotic saddle met]``).
 
     ``attractors``: known ``(points, k)`` cycles (``k <= max_period``) that take the first
     slots, in that order; a period ``-k`` makes the cycle a repeller (an unstable P-k
@@ -129,7 +129,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     """:func:`run_pool` for ``V`` parameter sets at once, in one pool: the states
     ``X_list[v] (n_v, dim)`` under the parameters ``params_list[v]`` (one pytree
     structure). ``attractors``: per value, its known cycles. Returns ``[(labels,
-    attractors, periods)]`` per value, each what :func:`run_pool` returns for that value
+    attractors, periods, saddles)]`` per value, each what :func:`run_pool` returns for that value
     alone.
 
     The pilots of all values run first in one pool on the first device, then all the
@@ -183,8 +183,18 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     out = []
     for v in range(V):
         found, lut = _attractors(tables, v, o.max_period)
-        out.append((np.where(labels[v] >= 0, lut[np.maximum(labels[v], 0)], labels[v]), found, used[v]))
+        out.append((np.where(labels[v] >= 0, lut[np.maximum(labels[v], 0)], labels[v]), found, used[v],
+                    _saddles(tables, v, o.max_period)))
     return out
+
+
+def _saddles(tables: AttractorTable, v: int, M: int) -> list[np.ndarray]:
+    """The clouds ``(m, dim)`` (finite points) of value ``v``'s chaotic saddles
+    (``SlotKind.SADDLE``: long chaotic transients the pool met, which label no cell)."""
+    codes, clouds = np.asarray(tables.codes)[v], np.asarray(tables.clouds)[v]
+    kinds = slot_kind(codes, M)
+    return [clouds[a][np.all(np.isfinite(clouds[a]), axis=1)] for a in range(int(np.asarray(tables.counts)[v]))
+            if kinds[a] == SlotKind.SADDLE]
 
 
 def _attractors(tables: AttractorTable, v: int, M: int):

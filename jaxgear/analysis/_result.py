@@ -16,7 +16,7 @@ from ..integrate import AbstractFixedStep, AbstractIntegrator, integrator_from_d
 from ._fractal import BasinEntropy
 from ._method import AbstractGlobalMethod, method_from_dict
 
-__all__ = ["Attractor", "GlobalResult", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
+__all__ = ["Attractor", "ChaoticSaddle", "GlobalResult", "LabelUncertainty", "SINK", "UNRESOLVED", "LABEL_MEANINGS"]
 
 SINK = -1
 """Label of cells whose orbits leave the region or blow up (Hsu's sink cell; outcome
@@ -116,6 +116,40 @@ def _exponent_text(a: Attractor) -> str:
     if a.period > 0 and err == 0.0:  # a cycle's, from its Floquet multipliers
         return f"{lam:+.4f} (Floquet)"
     return f"{lam:+.4f}" + (f" +- {err:.1e}" if np.isfinite(err) else "")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ChaoticSaddle:
+    """A long chaotic transient the analysis met: a set on which states wander like on a
+    chaotic attractor before they leave it for an attractor (Lai & Tél, *Transient Chaos*,
+    2011). It labels no cell; its cells are labelled with where they went (they may run up
+    to ``saddle_periods``).
+
+    Attributes:
+        points: ``(m, dim)`` a cloud of stroboscopic points on it.
+        lifetime: the transient's mean lifetime ``1 / kappa`` in forcing periods, from the
+            escape rate ``kappa`` of ``starts`` of its points continued ``periods`` periods
+            (inf when none of them left after the first eighth).
+        lifetime_error: its standard error (NaN where not measurable).
+        starts, periods: the points continued and for how long.
+        left: the share of them that left within ``periods``.
+    """
+
+    points: np.ndarray = array_field(("saddle_point", "state"))
+    lifetime: float = float("nan")
+    lifetime_error: float = float("nan")
+    starts: int = 0
+    periods: int = 0
+    left: float = float("nan")
+
+    def describe(self) -> str:
+        """One line: the mean lifetime and how it was measured."""
+        if not np.isfinite(self.lifetime):
+            life = f"a mean lifetime beyond about {self.periods} periods"
+        else:
+            life = f"a mean lifetime of {self.lifetime:,.0f} +- {self.lifetime_error:,.0f} periods"
+        return (f"chaotic saddle (a long chaotic transient, no attractor): {life} "
+                f"({100 * self.left:.0f} % of {self.starts} of its points left it within {self.periods} periods)")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -227,6 +261,8 @@ class GlobalResult:
         basin_entropy: the basin entropy ``S_b`` and boundary basin entropy ``S_bb`` of the
             labels (:func:`~jaxgear.basin_entropy`, boxes of 5 cells a side; Daza et al.,
             Sci. Rep. 6, 31416, 2016; sink and unresolved cells count as outcomes).
+        saddles: the chaotic saddles (long chaotic transients) the cells met, each a
+            :class:`ChaoticSaddle` with its mean lifetime (direct method).
     """
 
     labels: np.ndarray = array_field(_grid_dims)
@@ -243,6 +279,7 @@ class GlobalResult:
     mean_periods: float = float("nan")
     uncertainty: LabelUncertainty | None = None
     basin_entropy: BasinEntropy | None = None
+    saddles: tuple[ChaoticSaddle, ...] = items_field("saddle", later=True, default=())
 
     @property
     def n_cells(self) -> int:
@@ -280,6 +317,8 @@ class GlobalResult:
                 f"boundary S_bb = {e.S_bb:.3f} ({'above' if e.fractal else 'not above'} log 2: "
                 f"{'a fractal boundary' if e.fractal else 'no proof of a fractal boundary'})")
             table += f"\nbasin entropy S_b = {e.S_b:.3f} ({e.box}^{len(self.grid.axes)}-cell boxes), {bb}"
+        for saddle in self.saddles:
+            table += "\n" + saddle.describe()
         return table if self.uncertainty is None else table + "\n" + self.uncertainty.describe()
 
     def summary(self) -> dict[str, Any]:
@@ -294,6 +333,8 @@ class GlobalResult:
             basin_entropy=None if self.basin_entropy is None else dict(
                 S_b=self.basin_entropy.S_b, S_bb=self.basin_entropy.S_bb, box=self.basin_entropy.box,
                 fractal=self.basin_entropy.fractal, n_boundary_boxes=self.basin_entropy.n_boundary_boxes),
+            saddles=[dict(lifetime=c.lifetime, lifetime_error=c.lifetime_error, starts=c.starts, periods=c.periods,
+                          left=c.left) for c in self.saddles],
             version=self.version,
         )
 

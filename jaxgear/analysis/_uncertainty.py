@@ -98,7 +98,7 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
         pooled = run_pools(system, params_list, [X] * len(params_list), integrator, direct.pool_options(pilot=0),
                            boxes=boxes, attractors=knowns, progress=progress, label=name, like=like)
         outs = []
-        for (lab, _, _), ids in zip(pooled, idss):
+        for (lab, *_), ids in zip(pooled, idss):
             out = lab.copy()
             seeded = (lab >= 0) & (lab < len(ids))
             out[seeded] = ids[lab[seeded]]

@@ -437,7 +437,11 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             after another: the same attractors, and the same labels whenever a value's
             pilot finds all of its attractors (otherwise the capture radius changes at
             another moment of the pool, and the odd cell near a basin boundary can be
-            captured differently: 1 of 5,760 cells at one point of a benchmark map).
+            captured differently: 1 of 5,760 cells at one point of a benchmark map). A
+            value where the pool met a quasi-periodic or chaotic attractor or a chaotic
+            saddle, or left cells unresolved, is analysed again alone (its labels are
+            its separate analysis's: in one pool, when a candidate's boxes enter the
+            table depends on the other values' lanes).
             Off by default: on the 2-core CPU of the
             benchmarks it is about as fast (0.9 to 1.05x, ``benchmarks/sweep_scale.py``:
             the cells' integration dominates, and what one pool saves, the pilot's and
