@@ -320,8 +320,11 @@ def _retyped(system, params, method, labels, raw, cycles, order, kinds, spectra)
     (:func:`~jaxgear.analysis._tori.joined_tori`). ``order``, ``kinds``, ``spectra``: the
     attractors in the order their types were measured."""
     raw = list(raw)
-    contracting = [old for old, kind in zip(order, kinds) if raw[old][1] == 0 and kind == int(AttractorType.PERIODIC)]
-    starts = [np.asarray(raw[old][0])[np.all(np.isfinite(raw[old][0]), axis=1)][-1] for old in contracting]
+    finite = [np.asarray(pts, np.float64).reshape(len(pts), -1) for pts, _, _ in raw]
+    finite = [p[np.all(np.isfinite(p), axis=1)] for p in finite]
+    contracting = [old for old, kind in zip(order, kinds)
+                   if raw[old][1] == 0 and kind == int(AttractorType.PERIODIC) and len(finite[old])]
+    starts = [finite[old][-1] for old in contracting]
     found = long_cycles(system, params, starts, method.integrator, method.max_period, method.period_tol)
     for old, cycle in zip(contracting, found):
         if cycle is not None:
