@@ -457,6 +457,39 @@ def test_one_pool_rows_decide_against_their_own_tables():
                                                          pooled[0][0]))
 
 
+def test_a_value_whose_pilot_missed_an_attractor_is_analysed_alone(monkeypatch):
+    """The pool says, per value, whether its pilot found all of its attractors: with a
+    pilot of all cells but one it did, with a pilot of one cell the bistable Duffing's second
+    attractor is found later. A sweep in one pool analyses such a value again alone (its
+    labels could depend on the other values'), and keeps the pooled result of the others."""
+    from jaxgear.analysis import _global as global_module
+    from jaxgear.analysis._pool import run_pool
+
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (10, 10), names=("x", "v"))
+    X = np.asarray(grid.centres(), np.float64)
+    p13 = jg.DuffingParams(**DUFF, omega=1.3)
+    m = jg.Direct(integrator=jg.RK4(64), max_period=4, chunk_size=64)
+    whole = run_pool(jg.DUFFING, p13, X, m.integrator, options=m.pool_options(pilot=len(X) - 1), progress=False)
+    one = run_pool(jg.DUFFING, p13, X, m.integrator, options=m.pool_options(pilot=1), progress=False)
+    assert len(whole.attractors) == len(one.attractors) == 2
+    assert whole.pilot_complete and not one.pilot_complete
+    alone = []
+    real = global_module.analyze_global
+
+    def spy(system, params, *a, **k):
+        alone.append(float(params.omega))
+        return real(system, params, *a, **k)
+
+    monkeypatch.setattr(global_module, "analyze_global", spy)
+    values = [1.3, 1.0]
+    for pilot, want in ((len(X) - 1, []), (1, [1.3])):
+        alone.clear()
+        global_module.analyze_global_values(jg.DUFFING, [jg.with_param(p13, "omega", v) for v in values], grid,
+                                            jg.Direct(integrator=jg.RK4(64), max_period=4, chunk_size=64, pilot=pilot),
+                                            uncertainty=0)
+        assert alone == want, (pilot, alone)
+
+
 # ----------------------------------------------------------------- parameter map
 def test_parameter_map_period_follows_the_mathieu_tongue():
     """Period reached from a small start on an (Omega, eps) grid: P-2 inside the tongue,

@@ -184,9 +184,9 @@ class Direct(AbstractGlobalMethod):
         its value's parameters; attractor tables per value): one classification per
         value, each that of :meth:`classify` at that value."""
         out = []
-        for labels, atts, mean, saddles in self.label_states_values(system, params_list, grid.centres(), progress,
-                                                                     saddles=True):
-            out.append(Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean, saddles))
+        for labels, atts, mean, saddles, complete in self.label_states_values(system, params_list, grid.centres(),
+                                                                               progress, details=True):
+            out.append(Classification(labels, atts, [np.zeros(0, np.int64)] * len(atts), mean, saddles, complete))
         return out
 
     def label_states(self, system, params, X: np.ndarray, progress: bool = False):
@@ -195,26 +195,27 @@ class Direct(AbstractGlobalMethod):
         return self.label_states_values(system, [params], X, progress)[0]
 
     def label_states_values(self, system, params_list, X: np.ndarray, progress: bool = False, label="direct",
-                            saddles: bool = False):
+                            details: bool = False):
         """:meth:`label_states` of the same states ``X (n, dim)`` under each parameter set of
         ``params_list``, in one lane pool: a list of its results, one per value; with
-        ``saddles``, each with a fourth item, the value's chaotic saddles with their
-        lifetimes (:func:`~jaxgear.analysis._saddles.saddle_lifetimes`)."""
+        ``details``, each with two more items: the value's chaotic saddles with their
+        lifetimes (:func:`~jaxgear.analysis._saddles.saddle_lifetimes`) and whether the
+        pool's pilot found all of its attractors."""
         X = np.asarray(X, np.float64)
         boxes = self.boxes(X)
         pooled = run_pools(system, params_list, [X] * len(params_list), self.integrator, self.pool_options(),
                            boxes=boxes, progress=progress, label=label)
         out = []
-        for params, (labels, atts, used, met) in zip(params_list, pooled):
+        for params, (labels, atts, used, met, complete) in zip(params_list, pooled):
             res = self._refined(system, params, atts)
             labels, res, used = self._stable_only(system, params, X, boxes, labels, res, used, progress)
             one = (labels, res, float(used.mean()) if len(used) else 0.0)
-            if saddles:
+            if details:
                 one += (saddle_lifetimes(system, params, self.integrator, boxes.partition, met,
                                          [(p, k) for p, k, _ in res], periods=verify_length(self.recurrence,
                                                                                            self.max_period),
                                          max_period=self.max_period, bound=self.pool.escape_bound)
-                        if met else (),)
+                        if met else (), complete)
             out.append(one)
         return out
 
@@ -258,7 +259,7 @@ class Direct(AbstractGlobalMethod):
                 continue
             seeds = [(p, k) for p, k, _ in res] + repellers
             # (the pool pads its queue to a few compiled lengths itself: queue_length)
-            lab, atts, use, _ = run_pool(system, params, X[cells], self.integrator, self.pool_options(pilot=0),
+            lab, atts, use, *_ = run_pool(system, params, X[cells], self.integrator, self.pool_options(pilot=0),
                                       boxes=boxes, attractors=seeds, progress=progress,
                                       label="direct (off repellers)")
             found = atts[len(seeds):]  # slots after the seeds: cycles met on the way

@@ -104,7 +104,7 @@ def analyze_global(system: ForcedSystem | None = None, params=None, grid: CellGr
     method.check(system, grid)
     check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
 
-    labels, raw, cycles, mean_periods, saddles = method.classify(system, params, grid, progress)
+    labels, raw, cycles, mean_periods, saddles, _ = method.classify(system, params, grid, progress)
     labels, raw, cycles = _merge_same(labels, raw, cycles, method)
     result = _assemble(system, params, grid, method, labels, raw, cycles, mean_periods,
                        time.perf_counter() - t_start, saddles=saddles)
@@ -130,15 +130,16 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
                           progress: bool = False, uncertainty: int = DEFAULT_SAMPLES) -> list[GlobalResult]:
     """:func:`analyze_global` at several parameter sets of one system on one grid (the
     arguments already checked): one :class:`~jaxgear.GlobalResult` per set, each the
-    result :func:`analyze_global` gives at that set alone (the labels: whenever the
-    set's pilot sample finds all of its attractors; see :func:`~jaxgear.basin_sweep`).
+    result :func:`analyze_global` gives at that set alone, label for label.
 
     A method with ``classify_values`` (:class:`~jaxgear.Direct`) runs every value in one
     lane pool, and the label uncertainties in one pool each; other methods run value
-    after value. A value where the pool met an attractor of boxes or a chaotic saddle, or
-    left cells unresolved, is analysed again alone: which lane becomes a candidate, and when its boxes enter the
-    table, depends on the other values' lanes in the pool, and so can the odd label
-    decided by box hits. ``runtime_s`` of each result is its share of the whole.
+    after value. In one pool a value's labels are its own when its pilot found all of
+    its attractors and the pool met no attractor of boxes, chaotic saddle or unresolved
+    cell there: an attractor found later changes the capture radius, and a candidate's
+    boxes enter the table, at a moment that depends on the other values' lanes. Any
+    other value is analysed again alone. ``runtime_s`` of each result is its share of
+    the whole.
     """
     params_list = list(params_list)
     if not hasattr(method, "classify_values") or len(params_list) == 1:
@@ -148,10 +149,9 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
     for params in params_list:
         check_system(system, params, grid.centres(np.array([0]))[0], batched=False)
     results: list = []
-    for params, (labels, raw, cycles, mean_periods, saddles) in zip(params_list,
-                                                                    method.classify_values(system, params_list, grid,
-                                                                                           progress)):
-        if saddles or any(int(k) == 0 for _, k, _ in raw) or np.any(labels == UNRESOLVED):
+    for params, (labels, raw, cycles, mean_periods, saddles, complete) in zip(
+            params_list, method.classify_values(system, params_list, grid, progress)):
+        if not complete or saddles or any(int(k) == 0 for _, k, _ in raw) or np.any(labels == UNRESOLVED):
             results.append(None)  # (analysed alone below)
             continue
         labels, raw, cycles = _merge_same(labels, raw, cycles, method)

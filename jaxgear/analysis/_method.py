@@ -44,7 +44,9 @@ class Classification(NamedTuple):
     ``[(points (k, dim), period k, residual), ...]``; cycles: the periodic cells of each
     attractor (cell methods; empty arrays otherwise); mean_periods: forcing periods
     integrated per cell; saddles: the chaotic saddles met (:class:`~jaxgear.ChaoticSaddle`,
-    direct method).
+    direct method); pilot_complete: whether the lane pool's pilot found every attractor
+    (direct method; in a pool shared with other values, the labels of a value whose
+    attractors were not all found by then may depend on the other values).
     """
 
     labels: np.ndarray
@@ -52,6 +54,7 @@ class Classification(NamedTuple):
     cycles: list
     mean_periods: float
     saddles: tuple = ()
+    pilot_complete: bool = True
 
 
 class AbstractGlobalMethod(eqx.Module):

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -106,11 +107,21 @@ def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: Poo
             s = placement.resize(s, L=L_min)
 
 
+class PoolLabels(NamedTuple):
+    """What the pool returns for one value (:func:`run_pool`, :func:`run_pools`)."""
+
+    labels: np.ndarray  # (n,) attractor slot, SINK or UNRESOLVED per state
+    attractors: list  # [(points (k, dim) in cycle order, k)]; a cloud with period APERIODIC; -k a repeller
+    used: np.ndarray  # (n,) periods integrated per state
+    saddles: list  # [cloud (m, dim)] of each chaotic saddle met
+    pilot_complete: bool  # the pilot found every attractor (none was added after it; False: no pilot ran)
+
+
 def run_pool(system, params, X: np.ndarray, integrator, options: PoolOptions, *, boxes: Boxes | None = None,
              attractors=(), progress: bool = False, label: str = "direct"):
-    """Label the states ``X (n, dim)`` at phase 0 (see the module): ``(labels (n,) with
-    attractor slot, SINK or UNRESOLVED; [(points (k, dim) in cycle order, k)]; periods per
-    state (n,); [cloud (m, dim) of each chaotic saddle met]``).
+    """Label the states ``X (n, dim)`` at phase 0 (see the module): a :class:`PoolLabels`
+    (labels, attractors, periods per state, chaotic saddles met, whether the pilot found
+    every attractor).
 
     ``attractors``: known ``(points, k)`` cycles (``k <= max_period``) that take the first
     slots, in that order; a period ``-k`` makes the cycle a repeller (an unstable P-k
@@ -128,8 +139,8 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
               attractors=None, progress: bool = False, label: str = "direct", like: int = 0):
     """:func:`run_pool` for ``V`` parameter sets at once, in one pool: the states
     ``X_list[v] (n_v, dim)`` under the parameters ``params_list[v]`` (one pytree
-    structure). ``attractors``: per value, its known cycles. Returns ``[(labels,
-    attractors, periods, saddles)]`` per value, each what :func:`run_pool` returns for that value
+    structure). ``attractors``: per value, its known cycles. Returns a
+    :class:`PoolLabels` per value, each what :func:`run_pool` returns for that value
     alone.
 
     The pilots of all values run first in one pool on the first device, then all the
@@ -158,6 +169,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     bar = progress_bar(sum(len(X) for X in Xs), label, progress)
     labels = [np.empty(len(X), dtype=np.int64) for X in Xs]
     used = [np.empty(len(X), dtype=np.int64) for X in Xs]
+    after_pilot = np.asarray(tables.counts).copy()
     for phase in (0, 1):
         parts = [order[:n_p] if phase == 0 else order[n_p:] for order, n_p in zip(orders, n_ps)]
         if not sum(len(p) for p in parts):
@@ -171,6 +183,7 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
         if phase == 0:  # the pilot, on the first device, in the queue shape of the main pool (its tail's program)
             rest = sum(len(order) - n_p for order, n_p in zip(orders, n_ps))
             lab, use, tables = run(OneDevice(), [Xp], [rows], queue=queue_length(rest) if rest else 0)[0]
+            after_pilot = np.asarray(tables.counts).copy()
         else:  # one pool per device over a block of the queue, the attractors merged
             lab, use, tables = run_blocks(run, Xp, rows, tables, o.merge_tol,
                                           None if boxes is None else boxes.partition, like=like)
@@ -183,8 +196,9 @@ def run_pools(system, params_list, X_list, integrator, options: PoolOptions, *, 
     out = []
     for v in range(V):
         found, lut = _attractors(tables, v, o.max_period)
-        out.append((np.where(labels[v] >= 0, lut[np.maximum(labels[v], 0)], labels[v]), found, used[v],
-                    _saddles(tables, v, o.max_period)))
+        out.append(PoolLabels(np.where(labels[v] >= 0, lut[np.maximum(labels[v], 0)], labels[v]), found, used[v],
+                              _saddles(tables, v, o.max_period),
+                              bool(np.asarray(tables.counts)[v] == after_pilot[v])))
     return out
 
 

@@ -122,7 +122,7 @@ def classify_by_recurrence(system, params, X, *, options: RecurrenceOptions | No
         partition = partition_of_states(X, float(options.resolution))
     elif not isinstance(partition, FinePartition) or partition.lo.shape != (system.dim,):
         raise ValueError(f"partition must be a FinePartition of dimension {system.dim} or None.")
-    labels, found, used, _ = run_pool(system, params, X, resolve_integrator(integrator), pool,
+    labels, found, used, *_ = run_pool(system, params, X, resolve_integrator(integrator), pool,
                                    boxes=Boxes(options, partition))
     rows = max(options.max_points, pool.max_period)
     points = np.full((len(found), rows, X.shape[1]), np.nan)

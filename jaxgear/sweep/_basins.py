@@ -434,14 +434,12 @@ def basin_sweep(system: ForcedSystem | None, params, param: str, values, grid: C
             ``match_tol`` (``None``: 5 % of the grid's diagonal); ``batched``: run the
             values of a block in one lane pool over (value, cell) pairs
             (:func:`~jaxgear.analysis.analyze_global_values`) instead of one analysis
-            after another: the same attractors, and the same labels whenever a value's
-            pilot finds all of its attractors (otherwise the capture radius changes at
-            another moment of the pool, and the odd cell near a basin boundary can be
-            captured differently: 1 of 5,760 cells at one point of a benchmark map). A
-            value where the pool met a quasi-periodic or chaotic attractor or a chaotic
-            saddle, or left cells unresolved, is analysed again alone (its labels are
-            its separate analysis's: in one pool, when a candidate's boxes enter the
-            table depends on the other values' lanes).
+            after another, with the same attractors and labels: a value whose pilot did
+            not find all of its attractors (an attractor found later changes the capture
+            radius at a moment of the pool that depends on the other values: 1 of 5,760
+            cells differed at one point of a benchmark map), or where the pool met an
+            attractor of boxes or a chaotic saddle (when a candidate's boxes enter the
+            table depends on them too) or left cells unresolved, is analysed again alone.
             Off by default: on the 2-core CPU of the
             benchmarks it is about as fast (0.9 to 1.05x, ``benchmarks/sweep_scale.py``:
             the cells' integration dominates, and what one pool saves, the pilot's and
