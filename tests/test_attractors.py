@@ -128,11 +128,17 @@ def _numpy_period(x, steps: int = DUFF_STEPS):
     """One forcing period of the Duffing oscillator (``SADDLE_GAMMA``) from the states ``x
     (n, 2)`` by numpy RK4 (``steps`` per period)."""
     d, a, b, w = (DUFF[k] for k in ("delta", "alpha", "beta", "omega"))
-    h = DUFF_T / steps
 
     def f(t, y):
         return np.stack([y[:, 1], SADDLE_GAMMA * np.cos(w * t) - d * y[:, 1] - a * y[:, 0] - b * y[:, 0] ** 3], axis=1)
 
+    return _numpy_rk4(f, x, DUFF_T, steps)
+
+
+def _numpy_rk4(f, x, T, steps):
+    """The states ``x (n, 2)`` after time ``T`` of ``y' = f(t, y)`` from t = 0, by a plain
+    numpy RK4 of ``steps`` steps (independent of jaxgear's integrators)."""
+    h = T / steps
     y = np.array(x, dtype=float)
     for i in range(steps):
         t = i * h
@@ -481,23 +487,11 @@ def test_a_cycle_longer_than_max_period_gets_its_period():
     assert a.period == 2 and a.type is AttractorType.PERIODIC and a.cell_count == grid.n_cells and a.multiplier < 1
     T = 2 * np.pi / 2.0
 
-    def period(y, steps=400):
-        h = T / steps
-        for i in range(steps):
-            t = i * h
+    def f(t, y):
+        k = 1.0 + 0.4 * np.cos(2.0 * t)
+        return np.stack([y[:, 1], -0.1 * y[:, 1] - k * y[:, 0] - y[:, 0] ** 3], axis=1)
 
-            def f(t, y):
-                k = 1.0 + 0.4 * np.cos(2.0 * t)
-                return np.stack([y[:, 1], -0.1 * y[:, 1] - k * y[:, 0] - y[:, 0] ** 3], axis=1)
-
-            k1 = f(t, y)
-            k2 = f(t + h / 2, y + h / 2 * k1)
-            k3 = f(t + h / 2, y + h / 2 * k2)
-            k4 = f(t + h, y + h * k3)
-            y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return y
-
-    np.testing.assert_allclose(period(a.points), a.points[::-1], atol=1e-6)
+    np.testing.assert_allclose(_numpy_rk4(f, a.points, T, 400), a.points[::-1], atol=1e-6)
     assert np.abs(a.points[0] - a.points[1]).max() > 0.1  # two distinct points: no fixed point
     assert abs(np.sum(a.exponents) + 2 * 0.05 * T) < 1e-6
 

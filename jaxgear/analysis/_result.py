@@ -129,7 +129,8 @@ class ChaoticSaddle:
         points: ``(m, dim)`` a cloud of stroboscopic points on it.
         lifetime: the transient's mean lifetime ``1 / kappa`` in forcing periods, from the
             escape rate ``kappa`` of ``starts`` of its points continued ``periods`` periods
-            (inf when none of them left after the first eighth).
+            (inf when none of them left after the first eighth, NaN when all had left
+            within it: too short to measure).
         lifetime_error: its standard error (NaN where not measurable).
         starts, periods: the points continued and for how long.
         left: the share of them that left within ``periods``.
@@ -144,7 +145,9 @@ class ChaoticSaddle:
 
     def describe(self) -> str:
         """One line: the mean lifetime and how it was measured."""
-        if not np.isfinite(self.lifetime):
+        if np.isnan(self.lifetime):
+            life = f"a mean lifetime below about {self.periods // 8} periods"
+        elif not np.isfinite(self.lifetime):
             life = f"a mean lifetime beyond about {self.periods} periods"
         else:
             life = f"a mean lifetime of {self.lifetime:,.0f} +- {self.lifetime_error:,.0f} periods"

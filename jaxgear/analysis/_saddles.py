@@ -115,7 +115,8 @@ def saddle_lifetimes(system, params, integrator, partition: FinePartition, saddl
             now = np.asarray(left)
             stage_left[now & (stage_left == 0)] = stage
         kappa, err = escape_rate(stage_left, SADDLE_STAGES, stage_periods)
-        lifetime = 1.0 / kappa if kappa > 0 else math.inf
+        # (kappa inf: every point left within the burn-in, a lifetime too short to measure)
+        lifetime = math.nan if math.isinf(kappa) else 1.0 / kappa if kappa > 0 else math.inf
         out.append(ChaoticSaddle(points=cloud, lifetime=lifetime,
                                  lifetime_error=err / kappa**2 if kappa > 0 and math.isfinite(kappa) else math.nan,
                                  starts=SADDLE_STARTS, periods=SADDLE_STAGES * stage_periods,
