@@ -21,6 +21,19 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
+
+def _env(devices: int | None = None) -> dict:
+    """The environment of a JAX process the tests start: on CPUs, this interpreter's
+    ``sys.path``, and the suite's compilation flags (``tests/conftest.py``: they halve the
+    compile time, which is most of these tests') without any forced host device count but
+    ``devices`` where given."""
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
+    if devices is not None:
+        flags.append(f"--xla_force_host_platform_device_count={devices}")
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu",
+                XLA_FLAGS=" ".join(flags))
+
+
 SCRIPT = r'''
 import sys
 import threading
@@ -158,8 +171,7 @@ np.savez(sys.argv[1], **out)
 def run_on_devices(tmp_path, devices: int, what: str) -> dict:
     """The script's arrays, run in a fresh process with ``devices`` forced host devices."""
     out = tmp_path / f"{what}_{devices}.npz"
-    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}",
-               PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
+    env = _env(devices)
     r = subprocess.run([sys.executable, "-c", SCRIPT, str(out), what, str(devices)], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -274,8 +286,7 @@ def _free_port() -> int:
 def _start(out, n: int) -> list[subprocess.Popen]:
     """``n`` processes of one JAX program (``jax.distributed.initialize`` on CPU) running
     the basin sweep into ``out``."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)
+    env = _env()
     port = str(_free_port())
     return [subprocess.Popen([sys.executable, "-c", PROCESS_SCRIPT, str(out), str(n), str(i), port], cwd=ROOT, env=env,
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) for i in range(n)]
@@ -371,8 +382,7 @@ def test_two_processes_analyze_the_cells_of_one(tmp_path):
     too short for a block per process."""
     import jaxgear as jg
 
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)
+    env = _env()
     for n in (1, 2):
         port = str(_free_port())
         procs = [subprocess.Popen([sys.executable, "-c", ANALYSIS_SCRIPT, str(tmp_path / f"r{n}"), str(n), str(i), port],
@@ -403,8 +413,7 @@ def test_cli_distributed_writes_the_one_process_files(tmp_path, command):
     one process."""
     import jaxgear as jg
 
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)
+    env = _env()
     base = [sys.executable, "-m", "jaxgear", *command, "--quiet", "--no-figures"]
     r = subprocess.run(base + ["--out", str(tmp_path / "one")], cwd=ROOT, env=env, capture_output=True, timeout=600)
     assert r.returncode == 0, r.stderr.decode()[-3000:]
@@ -466,8 +475,7 @@ def test_two_processes_sweep_the_values_of_one(tmp_path):
     0 writes its folder (the file of one process)."""
     from test_sweep import _assert_same_array, _assert_same_file
 
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p), JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)
+    env = _env()
     for n in (1, 2):
         port = str(_free_port())
         (tmp_path / f"r{n}").mkdir()
