@@ -78,7 +78,8 @@ from ._recurrence_options import RecurrenceOptions
 from ._result import SINK, UNRESOLVED
 
 __all__ = ["PoolState", "AttractorTable", "Boxes", "init_pool", "run_rounds", "resize", "compact", "seed_tables",
-           "table_slots", "NOT_DONE", "APERIODIC", "SlotKind", "slot_code", "slot_kind", "slot_period"]
+           "table_slots", "NOT_DONE", "APERIODIC", "SlotKind", "slot_code", "slot_kind", "slot_period", "Phase",
+           "Candidate", "candidate_of", "characterise", "with_candidate"]
 
 NOT_DONE = -3
 """Label of a cell not decided yet (never returned)."""
@@ -231,6 +232,27 @@ class PoolState(NamedTuple):
     misses: jax.Array  # (L,) int32 unregistered boxes in a row within the run
     tried: jax.Array  # (L,) int32 age at the lane's last candidacy
     dropped: jax.Array  # () int32 boxes that found no slot in the table
+    # a round stopped at its candidate (Phase) and what the rest of the round needs
+    phase: jax.Array  # () int32 Phase
+    pending: jax.Array  # (L,) int32 the round's labels up to its candidate
+    saddle_rows: jax.Array  # (V,) bool values with a chaotic saddle before the candidate
+    candidate: jax.Array  # () int32 the candidate's lane
+    cand_y: jax.Array  # (dim,) its state
+    cand_row: jax.Array  # () int32 its value
+    cand_label: jax.Array  # () int32 the slot it takes (-1: none), once characterised
+    cand_charge: jax.Array  # () int32 the periods charged to it, once characterised
+
+
+class Phase(enum.IntEnum):
+    """Where a round stands (``PoolState.phase``). A round whose decisions chose a candidate
+    for a new attractor of boxes stops there: the pool's program returns, the candidate is
+    characterised by a program of its own (:func:`characterise`, with no lane axis: one
+    program for every pool size), and the next call of the pool's program finishes the
+    round as if it had never stopped."""
+
+    READY = 0  # between rounds
+    CANDIDATE = 1  # stopped at a candidate, to be characterised
+    CHARACTERISED = 2  # the candidate characterised, the round's decisions to finish
 
 
 # ----------------------------------------------------------------------------- attractor tables
@@ -290,7 +312,10 @@ def init_pool(L: int, M: int, X, Xrow, attractors: AttractorTable, boxes: Boxes 
         radius=jnp.zeros(attractors.n_values, jnp.float64), n_active=take, overflow=jnp.asarray(False),
         rounds=jnp.asarray(0, jnp.int32), table=_seeded_table(boxes, attractors, M), hit_att=jnp.full(L, -1, jnp.int32),
         hits=jnp.zeros(L, jnp.int32), misses=jnp.zeros(L, jnp.int32), tried=jnp.zeros(L, jnp.int32),
-        dropped=jnp.asarray(0, jnp.int32))
+        dropped=jnp.asarray(0, jnp.int32), phase=jnp.asarray(Phase.READY, jnp.int32),
+        pending=jnp.full(L, -1, jnp.int32), saddle_rows=jnp.zeros(attractors.n_values, bool),
+        candidate=jnp.asarray(0, jnp.int32), cand_y=jnp.zeros(dim, jnp.float64), cand_row=jnp.asarray(0, jnp.int32),
+        cand_label=jnp.asarray(-1, jnp.int32), cand_charge=jnp.asarray(0, jnp.int32))
 
 
 def _seeded_table(boxes: Boxes | None, attractors: AttractorTable, M: int) -> CellTable:
@@ -314,7 +339,7 @@ def resize(s: PoolState, L: int | None = None, A: int | None = None) -> PoolStat
     if L is not None:
         s = s._replace(Y=s.Y[:, :L], hist=s.hist[:, :, :L], streak=s.streak[:, :L], cell=s.cell[:L], row=s.row[:L],
                        age=s.age[:L], hit_att=s.hit_att[:L], hits=s.hits[:L], misses=s.misses[:L],
-                       tried=s.tried[:L], n_active=jnp.minimum(s.n_active, L))
+                       tried=s.tried[:L], pending=s.pending[:L], n_active=jnp.minimum(s.n_active, L))
     if A is not None:
         s = s._replace(attractors=s.attractors.with_slots(A), overflow=jnp.asarray(False))
     return s
@@ -534,11 +559,54 @@ def _refill(s: PoolState, decided, X, Xrow, n) -> PoolState:
                       tried=jnp.where(free, 0, s.tried).astype(jnp.int32))
 
 
-def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes, label):
+def _choose_candidate(o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes, label) -> PoolState:
     """The round's candidate for a new attractor of boxes (at most one in the pool): the
     oldest live undecided lane past the transient (and as long since its last try), in no
     run of box hits, not recurring and not approaching a cycle (among the oldest such lanes,
-    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`). Its cloud
+    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`). With one, the round stops there
+    (``Phase.CANDIDATE``) to have it characterised (:func:`characterise`)."""
+    opt, part = boxes.options, boxes.partition
+    M = o.max_period
+    eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
+                & (s.age - s.tried >= opt.transient) & (s.hits == 0)
+                & (s.age < o.max_periods))  # past it, a lane on a chaotic saddle has been tried often enough
+    l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
+    return s._replace(phase=jnp.where(found, Phase.CANDIDATE, s.phase).astype(jnp.int32),
+                      candidate=jnp.asarray(l0, jnp.int32), cand_y=s.Y[:, l0], cand_row=s.row[l0], cand_label=jnp.asarray(-1, jnp.int32),
+                      cand_charge=jnp.asarray(0, jnp.int32))
+
+
+class Candidate(NamedTuple):
+    """What characterising a round's candidate reads and writes (:func:`characterise`):
+    no lane axis, so one compiled program serves every pool size (on a mesh every leaf has
+    a leading device axis)."""
+
+    phase: jax.Array  # () int32 Phase: characterised only at Phase.CANDIDATE
+    y: jax.Array  # (dim,) the candidate's state
+    row: jax.Array  # () int32 its value
+    rounds: jax.Array  # () int32 rounds run (its cloud's random key)
+    attractors: AttractorTable
+    table: CellTable
+    overflow: jax.Array  # () bool
+    dropped: jax.Array  # () int32
+    label: jax.Array  # () int32 the slot the lane takes (-1: none)
+    charge: jax.Array  # () int32 the periods charged to the lane
+
+
+def candidate_of(s: PoolState) -> Candidate:
+    """The pool's candidate (fields of its state: no computation)."""
+    return Candidate(phase=s.phase, y=s.cand_y, row=s.cand_row, rounds=s.rounds, attractors=s.attractors, table=s.table, overflow=s.overflow,
+                     dropped=s.dropped, label=s.cand_label, charge=s.cand_charge)
+
+
+def with_candidate(s: PoolState, c: Candidate) -> PoolState:
+    """The pool with its candidate characterised (``c`` from :func:`characterise`)."""
+    return s._replace(phase=c.phase, attractors=c.attractors, table=c.table, overflow=c.overflow, dropped=c.dropped,
+                      cand_label=c.label, cand_charge=c.charge)
+
+
+def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Candidate) -> Candidate:
+    """A round's candidate (at ``Phase.CANDIDATE``, else ``c`` unchanged). Its cloud
     (:func:`~jaxgear.analysis._cloud.attractor_cloud`, staged, stopped on a cycle or
     an escape) is accepted when it recurs in its own boxes; it then joins the attractor of
     boxes (or the saddle) of its value that it overlaps, or takes a new slot; its boxes
@@ -553,30 +621,25 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
     boxes enter the table (lanes visiting them are no candidates again) and the lane
     integrates on."""
     opt, part = boxes.options, boxes.partition
-    M, V = o.max_period, s.attractors.n_values
+    M, V = o.max_period, c.attractors.n_values
     mark, saddle = slot_code(SlotKind.BOXES, M), slot_code(SlotKind.SADDLE, M)
-    eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
-                & (s.age - s.tried >= opt.transient) & (s.hits == 0)
-                & (s.age < o.max_periods))  # past it, a lane on a chaotic saddle has been tried often enough
-    l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
 
-    def characterise(c):
-        s, label = c
-        v0 = s.row[l0]
+    def run(c):
+        v0 = c.row
         p0 = params if V == 1 else jax.tree.map(lambda a: a[v0], params)
-        tables = s.attractors
+        tables = c.attractors
         P, A, Q = opt.cloud_periods, tables.n_slots, tables.clouds.shape[2]
 
         def stop(pts):  # a cycle (left to the point-level recognition) or an escape ends the cloud
             return near_periodic(part, pts, M) | jnp.any(escaped(flat_cloud(pts), o.escape_bound))
 
-        cloud, ran = attractor_cloud(system, p0, integrator, s.Y[:, l0], periods=P, lanes=opt.cloud_lanes,
-                                     key=jax.random.fold_in(jax.random.PRNGKey(0), s.rounds), stages=CLOUD_STAGES,
+        cloud, ran = attractor_cloud(system, p0, integrator, c.y, periods=P, lanes=opt.cloud_lanes,
+                                     key=jax.random.fold_in(jax.random.PRNGKey(0), c.rounds), stages=CLOUD_STAGES,
                                      stop=stop)
         ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (recurrence_share(part, cloud) >= opt.accept_share)
         second = flat_cloud(cloud[P // 2:])  # (dim, m)
         second_keys = row_keys(part, second, jnp.full(second.shape[1], v0, jnp.int32), V)
-        over = overlap_shares(s.table, second_keys, A)
+        over = overlap_shares(c.table, second_keys, A)
         over = jnp.where(_of_boxes(tables.codes[v0], M), over, 0.0)  # only sets of boxes absorb clouds
         best = jnp.argmax(over).astype(jnp.int32)
         joins = over[best] >= opt.overlap_share
@@ -585,7 +648,7 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
             def leaves(_):
                 def elsewhere(pts):  # (2M, dim, K): every last point in a known set's boxes
                     flat = flat_cloud(pts)
-                    lab = lookup(s.table, row_keys(part, flat, jnp.full(flat.shape[1], v0, jnp.int32), V))
+                    lab = lookup(c.table, row_keys(part, flat, jnp.full(flat.shape[1], v0, jnp.int32), V))
                     return jnp.all(lab.reshape(pts.shape[0], -1) >= 0, axis=0)
 
                 return leaving_share(system, p0, integrator, part, verification_starts(second, opt.verify_lanes),
@@ -601,25 +664,24 @@ def _candidate(system, params, integrator, o: PoolOptions, boxes: Boxes, s: Pool
         taken = ok & (joins | room)
         attractor = taken & ~transient & ~(joins & (tables.codes[v0, best] == saddle))  # the lane is labelled
         keys = jnp.where(taken, second_keys, -1)
-        table, dropped = insert(s.table, keys, slot)
+        table, dropped = insert(c.table, keys, slot)
         charged = ran + jnp.where(new, verify_length(opt, M) if opt.verify_periods else 0, 0)
         tables = tables._replace(
             codes=jnp.where(new, tables.codes.at[v0, slot].set(jnp.where(transient, saddle, mark)), tables.codes),
             clouds=jnp.where(new, tables.clouds.at[v0, slot].set(pts), tables.clouds),
             counts=tables.counts.at[v0].add(new.astype(jnp.int32)))
-        s = s._replace(
-            attractors=tables, overflow=s.overflow | (ok & ~joins & ~room),
-            table=table, dropped=s.dropped + dropped, tried=s.tried.at[l0].set(s.age[l0]),
-            age=s.age.at[l0].add(jnp.where(attractor, charged, 0)))
-        return s, label.at[l0].set(jnp.where(attractor, slot, label[l0])).astype(jnp.int32)
+        return c._replace(phase=jnp.asarray(Phase.CHARACTERISED, jnp.int32), attractors=tables,
+                          overflow=c.overflow | (ok & ~joins & ~room), table=table, dropped=c.dropped + dropped,
+                          label=jnp.where(attractor, slot, -1).astype(jnp.int32),
+                          charge=jnp.where(attractor, charged, 0).astype(jnp.int32))
 
-    return jax.lax.cond(found, characterise, lambda c: c, (s, label))
+    return jax.lax.cond(c.phase == Phase.CANDIDATE, run, lambda c: c, c)
 
 
-def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: PoolState, X, Xrow, n) -> PoolState:
-    """A round's decisions (see the module): escaped, captured, recurring, box-hitting and
-    timed-out lanes write their cells' labels, new attractors are registered, freed lanes
-    refill."""
+def _round_head(o: PoolOptions, boxes: Boxes | None, s: PoolState):
+    """A round's decisions up to its candidate (see the module): each lane's label among
+    the known attractors (capture, recurrence, a run of box hits), new cycles registered,
+    the candidate chosen. Returns the state and the labels."""
     lanes = _lane_status(o, s)
     label = _match_known(o, s, lanes)
     # the capture radius follows its value's table: computed for every value in the
@@ -628,15 +690,31 @@ def decide(system, params, integrator, o: PoolOptions, boxes: Boxes | None, s: P
         s.attractors.points, s.attractors.codes), lambda: s.radius)
     tables, radius, label, overflow = _register_new(o, s, lanes, label, radius)
     s = s._replace(attractors=tables, radius=radius, overflow=overflow)
+    if boxes is None:
+        return s, label
+    kinds = slot_kind(s.attractors.codes, o.max_period)  # (V, A)
+    on_saddle = kinds[s.row, jnp.maximum(s.hit_att, 0)] == SlotKind.SADDLE
+    hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
+    label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
+    # the values with a chaotic saddle before the candidate: their cells' lanes may still
+    # be on that long transient
+    s = s._replace(saddle_rows=jnp.any(kinds == SlotKind.SADDLE, axis=1))
+    return _choose_candidate(o, boxes, s, lanes, label), label
+
+
+def _round_tail(o: PoolOptions, boxes: Boxes | None, s: PoolState, label, X, Xrow, n) -> PoolState:
+    """The rest of a round's decisions: the characterised candidate's lane takes its label
+    and its periods, escaped, labelled and timed-out lanes write their cells' labels, freed
+    lanes refill."""
+    lanes = _lane_status(o, s)  # unchanged by the candidate
     limit = o.max_periods
     if boxes is not None:
-        kinds = slot_kind(s.attractors.codes, o.max_period)  # (V, A)
-        on_saddle = kinds[s.row, jnp.maximum(s.hit_att, 0)] == SlotKind.SADDLE
-        hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
-        label = jnp.where(hit, s.hit_att, label).astype(jnp.int32)
-        s, label = _candidate(system, params, integrator, o, boxes, s, lanes, label)
-        # a value with a chaotic saddle: its cells' lanes may still be on that long transient
-        limit = jnp.where(jnp.any(kinds == SlotKind.SADDLE, axis=1)[s.row], o.saddle_limit, o.max_periods)
+        l0, done = s.candidate, s.phase == Phase.CHARACTERISED
+        label = label.at[l0].set(jnp.where(done & (s.cand_label >= 0), s.cand_label, label[l0])).astype(jnp.int32)
+        s = s._replace(tried=jnp.where(done, s.tried.at[l0].set(s.age[l0]), s.tried),
+                       age=s.age.at[l0].add(jnp.where(done, s.cand_charge, 0)),
+                       phase=jnp.asarray(Phase.READY, jnp.int32))
+        limit = jnp.where(s.saddle_rows[s.row], o.saddle_limit, o.max_periods)
     unres = lanes.live & (label < 0) & (s.age >= limit)
     decided = lanes.esc | (label >= 0) | unres
     value = jnp.where(lanes.esc, SINK, jnp.where(unres, UNRESOLVED, label)).astype(jnp.int32)
@@ -684,25 +762,52 @@ def compact(s: PoolState) -> PoolState:
 def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: Boxes | None, X, Xrow, n,
                L_min: int, rounds):
     """At most ``rounds`` rounds (traced: the host sizes its calls by their duration), fewer
-    when every cell of the queue ``X[:n]`` is decided, an attractor table overflows or the
-    pool can move to ``L_min`` lanes. ``n`` may be traced (a padded block of a sharded
-    queue). Returns the state and its progress row ``(done, overflow, n_active,
-    next_cell, attractors)``."""
-    def cond(c):
-        s, r = c
-        shrink = (s.next_cell >= n) & (s.n_active <= L_min) & (s.Y.shape[1] > L_min)
-        return (r < rounds) & (s.n_done < n) & ~s.overflow & ~shrink
+    when every cell of the queue ``X[:n]`` is decided, an attractor table overflows, the
+    pool can move to ``L_min`` lanes, or a round stops at a candidate for a new attractor
+    of boxes (``Phase.CANDIDATE``: characterised by :func:`characterise`, the call after
+    finishes that round). ``n`` may be traced (a padded block of a sharded queue). Returns
+    the state and its progress row ``(done, overflow, n_active, next_cell, attractors,
+    candidate)``."""
+    def periods(s):
+        return jax.lax.fori_loop(0, o.round_periods, lambda _, s: one_period(system, params, integrator, o, boxes, s),
+                                 s)
 
-    def body(c):
-        s, r = c
-        s = jax.lax.fori_loop(0, o.round_periods, lambda _, s: one_period(system, params, integrator, o, boxes, s), s)
-        s = decide(system, params, integrator, o, boxes, s, X, Xrow, n)
+    def finish(s, label):
+        s = _round_tail(o, boxes, s, label, X, Xrow, n)
         # once the queue is empty, the busy lanes are gathered at the front as lanes free up
         busy = jnp.sum(s.cell >= 0, dtype=jnp.int32)
         worth = (s.next_cell >= n) & (busy.astype(jnp.float64) <= COMPACT_BELOW * s.n_active.astype(jnp.float64))
-        return jax.lax.cond(worth, compact, lambda s: s, s), r + 1
+        return jax.lax.cond(worth, compact, lambda s: s, s)
+
+    def between_rounds(s, r):
+        shrink = (s.next_cell >= n) & (s.n_active <= L_min) & (s.Y.shape[1] > L_min)
+        return (r < rounds) & (s.n_done < n) & ~s.overflow & ~shrink
+
+    if boxes is None:  # no candidates: whole rounds
+        def body(c):
+            s, r = c
+            s, label = _round_head(o, boxes, periods(s))
+            return finish(s, label), r + 1
+
+        cond = lambda c: between_rounds(*c)  # noqa: E731
+    else:
+        def body(c):
+            s, r = c
+
+            def fresh(s):  # a new round, up to its candidate
+                s, label = _round_head(o, boxes, periods(s))
+                return s._replace(pending=label)
+
+            s = jax.lax.cond(s.phase == Phase.READY, fresh, lambda s: s, s)
+            stopped = s.phase == Phase.CANDIDATE
+            s = jax.lax.cond(stopped, lambda s: s, lambda s: finish(s, s.pending), s)
+            return s, r + (~stopped).astype(jnp.int32)
+
+        def cond(c):  # a round characterised is finished first
+            s, r = c
+            return (s.phase == Phase.CHARACTERISED) | ((s.phase == Phase.READY) & between_rounds(s, r))
 
     s, _ = jax.lax.while_loop(cond, body, (s, jnp.asarray(0, jnp.int32)))
     info = jnp.stack([s.n_done, s.overflow.astype(jnp.int32), s.n_active, s.next_cell,
-                      jnp.sum(s.attractors.counts, dtype=jnp.int32)])
+                      jnp.sum(s.attractors.counts, dtype=jnp.int32), (s.phase == Phase.CANDIDATE).astype(jnp.int32)])
     return s, info

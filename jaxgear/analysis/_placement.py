@@ -33,7 +33,19 @@ from jax.sharding import PartitionSpec as P
 from .._batching import pad_rows, power_of_two_at_least
 from .._devices import BATCH, allgather, batch_mesh, cell_processes, local_devices, put, split_rows
 from .._matching import same_attractor
-from ._lanes import AttractorTable, SlotKind, init_pool, resize, run_rounds, slot_code, slot_kind, table_slots
+from ._lanes import (
+    AttractorTable,
+    SlotKind,
+    candidate_of,
+    characterise,
+    init_pool,
+    resize,
+    run_rounds,
+    slot_code,
+    slot_kind,
+    table_slots,
+    with_candidate,
+)
 from ._pool_options import PoolOptions
 
 __all__ = ["OneDevice", "DeviceMesh", "run_blocks", "MIN_BLOCK_CELLS", "queue_length"]
@@ -72,6 +84,11 @@ def _run_one(s, system, params, integrator, o: PoolOptions, boxes, X, Xrow, n_re
 _resize_one = jax.jit(resize, static_argnames=("L", "A"))
 
 
+@functools.partial(jax.jit, static_argnames=("system", "integrator", "o"))
+def _characterise_one(c, system, params, integrator, o: PoolOptions, boxes):
+    return characterise(system, params, integrator, o, boxes, c)
+
+
 class OneDevice:
     """The pool of one queue on one device (``None``: the default device, uncommitted)."""
 
@@ -94,6 +111,11 @@ class OneDevice:
         params, boxes, X, Xrow, n_real = data
         s, info = _run_one(s, system, params, integrator, o, boxes, X, Xrow, n_real, L_min, rounds)
         return s, np.asarray(info).reshape(1, -1)
+
+    def characterise(self, s, data, system, integrator, o: PoolOptions):
+        """The pool with the candidate its round stopped at characterised."""
+        params, boxes = data[:2]
+        return with_candidate(s, _characterise_one(candidate_of(s), system, params, integrator, o, boxes))
 
     def resize(self, s, L=None, A=None):
         return _resize_one(s, L=L, A=A)
@@ -144,6 +166,14 @@ def _run_mesh(s, system, params, integrator, o: PoolOptions, boxes, X, Xrow, n_r
     return _per_device(mesh, body, replicated=(1, 2, 6))(s, params, boxes, X, Xrow, n_real, rounds)
 
 
+@functools.partial(jax.jit, static_argnames=("mesh", "system", "integrator", "o"))
+def _characterise_mesh(c, system, params, integrator, o: PoolOptions, boxes, mesh):
+    def body(c, params, boxes):  # a block without a candidate passes unchanged
+        return _stacked(characterise(system, params, integrator, o, boxes, _local(c)))
+
+    return _per_device(mesh, body, replicated=(1, 2))(c, params, boxes)
+
+
 @functools.partial(jax.jit, static_argnames=("mesh", "L", "A"))
 def _resize_mesh(s, mesh, L: int | None = None, A: int | None = None):
     return _per_device(mesh, lambda s: _stacked(resize(_local(s), L=L, A=A)))(s)
@@ -179,7 +209,12 @@ class DeviceMesh:
     def run(self, s, data, system, integrator, o: PoolOptions, L_min: int, rounds):
         params, boxes, X, Xrow, n_real = data
         s, info = _run_mesh(s, system, params, integrator, o, boxes, X, Xrow, n_real, L_min, rounds, self.mesh)
-        return s, np.asarray(info).reshape(-1, 5)
+        return s, np.asarray(info).reshape(-1, 6)
+
+    def characterise(self, s, data, system, integrator, o: PoolOptions):
+        """The pools with the candidates their rounds stopped at characterised."""
+        params, boxes = data[:2]
+        return with_candidate(s, _characterise_mesh(candidate_of(s), system, params, integrator, o, boxes, self.mesh))
 
     def resize(self, s, L=None, A=None):
         return _resize_mesh(s, self.mesh, L=L, A=A)

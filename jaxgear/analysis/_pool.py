@@ -92,7 +92,10 @@ def drive(placement, X_blocks, row_blocks, *, system, params, integrator, o: Poo
         L_min = _next_pool(L)
         t = time.perf_counter()
         s, info = placement.run(s, data, system, integrator, compiled, L_min, np.int32(rounds))
-        n_done, overflow, n_active, next_cell, n_att = info.T
+        n_done, overflow, n_active, next_cell, n_att, candidate = info.T
+        if candidate.any():  # a round stopped at a candidate: characterised, then the round goes on
+            s = placement.characterise(s, data, system, integrator, compiled)
+            continue
         # calls of about CALL_SECONDS: few host round trips, a progress bar still moving
         rounds = int(np.clip(rounds * CALL_SECONDS / max(time.perf_counter() - t, 1e-3), 1, 4 * rounds))
         bar.update(int(n_done.sum()) - done)
