@@ -71,3 +71,21 @@ def test_the_pilot_and_the_tail_of_the_main_pool_are_one_program(monkeypatch):
     monkeypatch.setattr(_pool, "_next_pool", lambda L: L)
     q = jg.analyze_global(jg.DUFFING, PARAMS, grid, method=method, progress=False, uncertainty=0)
     np.testing.assert_array_equal(q.labels, r.labels)
+
+
+def test_a_candidate_is_characterised_by_one_program_for_every_pool_size():
+    """The chaotic attractor of the double-well Duffing is found by a candidate's cloud.
+    That characterisation is a program of its own with no lane axis: the first analysis
+    compiles it once, and a second analysis whose pool has four times the lanes finds the
+    attractor again (a new candidate) and compiles only its pool."""
+    chaotic = jg.DuffingParams(delta=0.15, alpha=-1.0, beta=1.0, gamma=0.3, omega=1.0)
+    method = jg.Direct(integrator=jg.RK4(58))  # a step count no other test compiles
+    small = jg.CellGrid.box([(-2, 2), (-2, 2)], (16, 16))  # 256 cells: a pool of 1,024 lanes
+    large = jg.CellGrid.box([(-2, 2), (-2, 2)], (64, 64))  # 4,096 cells: 4,096 lanes
+    with count_compilations("_characterise") as first:
+        r = jg.analyze_global(jg.DUFFING, chaotic, small, method=method, progress=False, uncertainty=0)
+    assert any(a.period == 0 for a in r.attractors) and len(first) == 1, first
+    with count_compilations("_run_one") as pools, count_compilations("_characterise") as again:
+        q = jg.analyze_global(jg.DUFFING, chaotic, large, method=jg.Direct(integrator=jg.RK4(58), pilot=0),
+                              progress=False, uncertainty=0)
+    assert any(a.period == 0 for a in q.attractors) and len(pools) >= 1 and again == [], (pools, again)

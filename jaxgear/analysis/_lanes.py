@@ -28,8 +28,12 @@ Wagemakers 2022) when the pool is given :class:`Boxes`: every period a lane's po
 looks up its box in a device hash table of the known attractors' boxes and counts its
 consecutive hits on one attractor (enough hits decide it); once per round the oldest
 lane still undecided after ``transient`` periods, and not approaching a cycle (its
-repetition errors within a box and shrinking), is the candidate: a cloud of its
-trajectory is integrated, and when the cloud recurs in its own boxes it is an attractor
+repetition errors within a box and shrinking), is the candidate. The round stops there
+(:class:`Phase`): the pool's program returns, and a program of its own with no lane axis
+(:func:`characterise`: one for every pool size, and most of the recurrence machinery's
+code, so the pool's programs stay small) integrates a cloud of its trajectory; the next
+call of the pool's program finishes the round. When the cloud recurs in its own boxes it
+is an attractor
 (a new slot of its value's table, a ``SlotKind.BOXES``, its cloud kept), or
 joins the attractor of boxes it overlaps; its boxes enter the table. A new set is
 verified first: a sample of its cloud's points is continued for thousands of periods, and
@@ -759,6 +763,14 @@ def compact(s: PoolState) -> PoolState:
     return s._replace(cell=cell, n_active=jnp.minimum(s.n_active, c).astype(jnp.int32))
 
 
+def _unless_ring(pred, f, s: PoolState) -> PoolState:
+    """``f(s)`` where ``pred``, else ``s``, for an ``f`` that reads the ring but does not
+    write it: the ring (most of the pool's memory) is no output of the conditional, which
+    would copy it."""
+    out = jax.lax.cond(pred, lambda s: f(s)._replace(hist=None), lambda s: s._replace(hist=None), s)
+    return out._replace(hist=s.hist)
+
+
 def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: Boxes | None, X, Xrow, n,
                L_min: int, rounds):
     """At most ``rounds`` rounds (traced: the host sizes its calls by their duration), fewer
@@ -768,13 +780,10 @@ def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: 
     finishes that round). ``n`` may be traced (a padded block of a sharded queue). Returns
     the state and its progress row ``(done, overflow, n_active, next_cell, attractors,
     candidate)``."""
-    def periods(s):
-        return jax.lax.fori_loop(0, o.round_periods, lambda _, s: one_period(system, params, integrator, o, boxes, s),
-                                 s)
+    def periods(s, count=o.round_periods):
+        return jax.lax.fori_loop(0, count, lambda _, s: one_period(system, params, integrator, o, boxes, s), s)
 
-    def finish(s, label):
-        s = _round_tail(o, boxes, s, label, X, Xrow, n)
-        # once the queue is empty, the busy lanes are gathered at the front as lanes free up
+    def compacted(s):  # once the queue is empty, the busy lanes are gathered at the front as lanes free up
         busy = jnp.sum(s.cell >= 0, dtype=jnp.int32)
         worth = (s.next_cell >= n) & (busy.astype(jnp.float64) <= COMPACT_BELOW * s.n_active.astype(jnp.float64))
         return jax.lax.cond(worth, compact, lambda s: s, s)
@@ -787,21 +796,24 @@ def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: 
         def body(c):
             s, r = c
             s, label = _round_head(o, boxes, periods(s))
-            return finish(s, label), r + 1
+            return compacted(_round_tail(o, boxes, s, label, X, Xrow, n)), r + 1
 
         cond = lambda c: between_rounds(*c)  # noqa: E731
     else:
         def body(c):
             s, r = c
 
-            def fresh(s):  # a new round, up to its candidate
-                s, label = _round_head(o, boxes, periods(s))
+            fresh = s.phase == Phase.READY  # else a round characterised: its periods were run
+            s = periods(s, jnp.where(fresh, o.round_periods, 0))
+
+            def head(s):  # a new round's decisions, up to its candidate
+                s, label = _round_head(o, boxes, s)
                 return s._replace(pending=label)
 
-            s = jax.lax.cond(s.phase == Phase.READY, fresh, lambda s: s, s)
+            s = _unless_ring(fresh, head, s)
             stopped = s.phase == Phase.CANDIDATE
-            s = jax.lax.cond(stopped, lambda s: s, lambda s: finish(s, s.pending), s)
-            return s, r + (~stopped).astype(jnp.int32)
+            s = _unless_ring(~stopped, lambda s: _round_tail(o, boxes, s, s.pending, X, Xrow, n), s)
+            return jax.lax.cond(~stopped, compacted, lambda s: s, s), r + (~stopped).astype(jnp.int32)
 
         def cond(c):  # a round characterised is finished first
             s, r = c
