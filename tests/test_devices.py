@@ -120,6 +120,22 @@ if "sharded" in what:  # no pilot; blocks of 46 and 45 cells: the shorter one pa
     out["sharded_jobs"] = pooled()
     out["sharded_threads"] = np.array(callers == {threading.main_thread().ident})
     out["sharded_plain"] = np.array(len(plain))
+if "chaotic" in what:  # no pilot: each device's pool meets the chaotic attractor by a candidate of its own
+    real_characterise, candidates = _placement.DeviceMesh.characterise, []
+
+    def characterise_spy(self, *a, **k):
+        candidates.append(1)
+        return real_characterise(self, *a, **k)
+
+    _placement.DeviceMesh.characterise = characterise_spy
+    r = jg.analyze_global(jg.DUFFING, jg.DuffingParams(delta=0.15, alpha=-1.0, beta=1.0, gamma=0.3, omega=1.0),
+                          jg.CellGrid.box([(-2, 2), (-2, 2)], (16, 16)), jg.Direct(integrator=jg.RK4(64), pilot=0),
+                          progress=False, uncertainty=0)
+    _placement.DeviceMesh.characterise = real_characterise
+    out["chaotic_labels"] = np.asarray(r.labels)
+    out["chaotic_shares"] = np.array([a.share for a in r.attractors])
+    out["chaotic_periods"] = np.array([a.period for a in r.attractors])
+    out["chaotic_meshcandidates"] = np.array(len(candidates))
 if "shoot" in what:
     shards.clear()
     seeds = jg.seeds_in_box(12, [-3, -3], [3, 3], seed=1)
@@ -188,18 +204,20 @@ def assert_same(one: dict, two: dict, what: str):
             assert int(one[key]) == 1 and int(two[key]) == 2, key  # two devices really took a block each
         elif key.endswith("_threads"):
             assert one[key] and two[key], key  # the pools ran from the main thread alone
+        elif key.endswith("_meshcandidates"):
+            assert int(one[key]) == 0 and int(two[key]) >= 1, key  # candidates characterised on the mesh
         elif key.endswith("_plain"):
             assert int(one[key]) > 0 and int(two[key]) == 0, key  # two devices: the sharded pool alone
         elif key.split("_")[0] in EXACT:
             np.testing.assert_array_equal(two[key], one[key], err_msg=key)
-        elif key.endswith("_labels") or key.endswith("_shares") or key.endswith(("_iterations", "_status")):
+        elif key.endswith(("_labels", "_shares", "_periods", "_iterations", "_status")):
             np.testing.assert_array_equal(two[key], one[key], err_msg=key)
         else:  # orbits: to round-off
             np.testing.assert_allclose(two[key], one[key], rtol=0, atol=1e-10, err_msg=key)
     assert {k.split("_")[0] for k in one} == set(what.split(","))
 
 
-SECTIONS = "direct,sweep,sharded,shoot,gear,cellmap,bifurcation,gearmaps"
+SECTIONS = "direct,sweep,sharded,chaotic,shoot,gear,cellmap,bifurcation,gearmaps"
 """Every section of the script (it runs them in this order; each resets the spies it reads)."""
 
 
@@ -235,6 +253,17 @@ def test_two_devices_run_one_sharded_pool(device_runs):
     device."""
     what = "sharded"
     assert_same(device_runs(1, what), device_runs(2, what), what)
+
+
+@pytest.mark.slow
+def test_two_devices_characterise_their_candidates(device_runs):
+    """A chaotic attractor met by both devices' pools (no pilot): each pool's candidate is
+    characterised by the sharded program of candidates, and the labels, shares and types
+    are those of one device."""
+    what = "chaotic"
+    res = device_runs(2, what)
+    assert 0 in set(res["chaotic_periods"].tolist())  # the chaotic attractor (period 0) was found
+    assert_same(device_runs(1, what), res, what)
 
 
 @pytest.mark.slow
