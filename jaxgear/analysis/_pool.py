@@ -3,10 +3,12 @@
 The pool itself (its state and one round, all on the device) is
 :mod:`jaxgear.analysis._lanes`; where it runs (one device, a mesh, processes) is
 :mod:`jaxgear.analysis._placement`. The host only reads a few scalars per call
-(progress, a full attractor table, a pool to shrink) and makes those decisions
-(:func:`drive`): it grows every attractor table when one overflows, and moves a draining
-pool to one :data:`SHRINK` times smaller once its busy lanes fit (down to
-:data:`TAIL_LANES`), so the bookkeeping of the last rounds covers few idle lanes.
+(progress, a full attractor table, a pool to shrink, a round stopped at its candidate)
+and makes those decisions (:func:`drive`): it has a candidate for a new attractor of
+boxes characterised (by a program of its own, one for every pool size), grows every
+attractor table when one overflows, and moves a draining pool to one :data:`SHRINK`
+times smaller once its busy lanes fit (down to :data:`TAIL_LANES`), so the bookkeeping
+of the last rounds covers few idle lanes.
 
 :func:`run_pools` labels the states of ``V`` parameter sets (the values of a sweep) in
 one pool: each cell carries its value's row, each lane integrates with its row's
