@@ -255,6 +255,22 @@ def test_escape_rate_of_exponential_departures_is_within_its_error():
     assert escape_rate(np.zeros(10, int), 32, stage)[0] == 0.0  # nothing left: no rate (an infinite lifetime)
 
 
+def test_a_saddle_left_within_the_burn_in_has_no_measured_lifetime():
+    """Every point gone within the burn-in stages: the rate is infinite and the lifetime is
+    unmeasurable (NaN, printed as shorter than the burn-in), not 0 and not infinite; no
+    point gone: an infinite lifetime, printed as beyond the run; else 1 / kappa."""
+    from jaxgear.analysis._saddles import SADDLE_BURN_IN, escape_rate, mean_lifetime
+
+    gone = escape_rate(np.full(10, SADDLE_BURN_IN), 32, 63)
+    assert gone[0] == np.inf and np.isnan(mean_lifetime(*gone)[0])
+    assert mean_lifetime(0.0, np.nan)[0] == np.inf
+    life, err = mean_lifetime(1 / 500, 1e-4)
+    assert life == pytest.approx(500) and err == pytest.approx(1e-4 * 500**2)
+    saddle = dict(points=np.zeros((3, 2)), lifetime_error=np.nan, starts=1024, periods=2016, left=1.0)
+    assert "below about 252 periods" in jaxgear.ChaoticSaddle(lifetime=np.nan, **saddle).describe()
+    assert "beyond about 2016 periods" in jaxgear.ChaoticSaddle(lifetime=np.inf, **saddle).describe()
+
+
 def _gear_on_a_chaotic_transient(**options):
     """The paper preset at b = 1.15 on 5 x 3 x 6 cells: its cells wander on a chaotic saddle
     for thousands of periods (a lifetime of about 5,000) before they settle on the one P-6

@@ -576,8 +576,7 @@ def _choose_candidate(o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes,
                 & (s.age < o.max_periods))  # past it, a lane on a chaotic saddle has been tried often enough
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
     return s._replace(phase=jnp.where(found, Phase.CANDIDATE, s.phase).astype(jnp.int32),
-                      candidate=jnp.asarray(l0, jnp.int32), cand_y=s.Y[:, l0], cand_row=s.row[l0], cand_label=jnp.asarray(-1, jnp.int32),
-                      cand_charge=jnp.asarray(0, jnp.int32))
+                      candidate=jnp.asarray(l0, jnp.int32), cand_y=s.Y[:, l0], cand_row=s.row[l0])
 
 
 class Candidate(NamedTuple):
@@ -599,8 +598,8 @@ class Candidate(NamedTuple):
 
 def candidate_of(s: PoolState) -> Candidate:
     """The pool's candidate (fields of its state: no computation)."""
-    return Candidate(phase=s.phase, y=s.cand_y, row=s.cand_row, rounds=s.rounds, attractors=s.attractors, table=s.table, overflow=s.overflow,
-                     dropped=s.dropped, label=s.cand_label, charge=s.cand_charge)
+    return Candidate(phase=s.phase, y=s.cand_y, row=s.cand_row, rounds=s.rounds, attractors=s.attractors,
+                     table=s.table, overflow=s.overflow, dropped=s.dropped, label=s.cand_label, charge=s.cand_charge)
 
 
 def with_candidate(s: PoolState, c: Candidate) -> PoolState:
@@ -685,7 +684,7 @@ def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Ca
 def _round_head(o: PoolOptions, boxes: Boxes | None, s: PoolState):
     """A round's decisions up to its candidate (see the module): each lane's label among
     the known attractors (capture, recurrence, a run of box hits), new cycles registered,
-    the candidate chosen. Returns the state and the labels."""
+    the candidate chosen. Returns the state, the labels and the lanes' status."""
     lanes = _lane_status(o, s)
     label = _match_known(o, s, lanes)
     # the capture radius follows its value's table: computed for every value in the
@@ -695,7 +694,7 @@ def _round_head(o: PoolOptions, boxes: Boxes | None, s: PoolState):
     tables, radius, label, overflow = _register_new(o, s, lanes, label, radius)
     s = s._replace(attractors=tables, radius=radius, overflow=overflow)
     if boxes is None:
-        return s, label
+        return s, label, lanes
     kinds = slot_kind(s.attractors.codes, o.max_period)  # (V, A)
     on_saddle = kinds[s.row, jnp.maximum(s.hit_att, 0)] == SlotKind.SADDLE
     hit = lanes.live & (label < 0) & (s.hit_att >= 0) & (s.hits >= boxes.options.hits) & ~on_saddle
@@ -703,19 +702,18 @@ def _round_head(o: PoolOptions, boxes: Boxes | None, s: PoolState):
     # the values with a chaotic saddle before the candidate: their cells' lanes may still
     # be on that long transient
     s = s._replace(saddle_rows=jnp.any(kinds == SlotKind.SADDLE, axis=1))
-    return _choose_candidate(o, boxes, s, lanes, label), label
+    return _choose_candidate(o, boxes, s, lanes, label), label, lanes
 
 
-def _round_tail(o: PoolOptions, boxes: Boxes | None, s: PoolState, label, X, Xrow, n) -> PoolState:
+def _round_tail(o: PoolOptions, boxes: Boxes | None, s: PoolState, label, lanes: _Lanes, X, Xrow, n) -> PoolState:
     """The rest of a round's decisions: the characterised candidate's lane takes its label
     and its periods, escaped, labelled and timed-out lanes write their cells' labels, freed
     lanes refill."""
-    lanes = _lane_status(o, s)  # unchanged by the candidate
     limit = o.max_periods
     if boxes is not None:
         l0, done = s.candidate, s.phase == Phase.CHARACTERISED
         label = label.at[l0].set(jnp.where(done & (s.cand_label >= 0), s.cand_label, label[l0])).astype(jnp.int32)
-        s = s._replace(tried=jnp.where(done, s.tried.at[l0].set(s.age[l0]), s.tried),
+        s = s._replace(tried=s.tried.at[l0].set(jnp.where(done, s.age[l0], s.tried[l0])),
                        age=s.age.at[l0].add(jnp.where(done, s.cand_charge, 0)),
                        phase=jnp.asarray(Phase.READY, jnp.int32))
         limit = jnp.where(s.saddle_rows[s.row], o.saddle_limit, o.max_periods)
@@ -795,8 +793,8 @@ def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: 
     if boxes is None:  # no candidates: whole rounds
         def body(c):
             s, r = c
-            s, label = _round_head(o, boxes, periods(s))
-            return compacted(_round_tail(o, boxes, s, label, X, Xrow, n)), r + 1
+            s, label, lanes = _round_head(o, boxes, periods(s))
+            return compacted(_round_tail(o, boxes, s, label, lanes, X, Xrow, n)), r + 1
 
         cond = lambda c: between_rounds(*c)  # noqa: E731
     else:
@@ -807,12 +805,15 @@ def run_rounds(s: PoolState, system, params, integrator, o: PoolOptions, boxes: 
             s = periods(s, jnp.where(fresh, o.round_periods, 0))
 
             def head(s):  # a new round's decisions, up to its candidate
-                s, label = _round_head(o, boxes, s)
+                s, label, _ = _round_head(o, boxes, s)
                 return s._replace(pending=label)
+
+            def tail(s):  # the lanes' status is the head's: the candidate changes none of what it reads
+                return _round_tail(o, boxes, s, s.pending, _lane_status(o, s), X, Xrow, n)
 
             s = _unless_ring(fresh, head, s)
             stopped = s.phase == Phase.CANDIDATE
-            s = _unless_ring(~stopped, lambda s: _round_tail(o, boxes, s, s.pending, X, Xrow, n), s)
+            s = _unless_ring(~stopped, tail, s)
             return jax.lax.cond(~stopped, compacted, lambda s: s, s), r + (~stopped).astype(jnp.int32)
 
         def cond(c):  # a round characterised is finished first

@@ -31,7 +31,7 @@ from ._boxes import FinePartition, cell_keys
 from ._cloud import continue_states, escaped, flat_cloud, settled_lanes
 from ._result import ChaoticSaddle
 
-__all__ = ["SADDLE_STARTS", "SADDLE_STAGES", "saddle_lifetimes"]
+__all__ = ["SADDLE_STARTS", "SADDLE_STAGES", "saddle_lifetimes", "escape_rate", "mean_lifetime"]
 
 SADDLE_STARTS = 1024
 """Points of a saddle's cloud continued to measure its escape rate."""
@@ -89,6 +89,18 @@ def escape_rate(stage_left: np.ndarray, stages: int, stage_periods: int, burn_in
     return kappa, err
 
 
+def mean_lifetime(kappa: float, error: float) -> tuple[float, float]:
+    """The mean lifetime ``1 / kappa`` (periods) and its standard error ``error / kappa**2``
+    from an escape rate and its error (:func:`escape_rate`): ``inf`` when no point left
+    (``kappa = 0``), NaN when every point had left within the burn-in (``kappa = inf``: a
+    lifetime too short to measure); the error NaN where the lifetime is not finite."""
+    if math.isinf(kappa):
+        return math.nan, math.nan
+    if kappa <= 0:
+        return math.inf, math.nan
+    return 1.0 / kappa, error / kappa**2
+
+
 def saddle_lifetimes(system, params, integrator, partition: FinePartition, saddles, attractors, *, periods: int,
                      max_period: int, bound: float) -> tuple[ChaoticSaddle, ...]:
     """A :class:`~jaxgear.ChaoticSaddle` per cloud of ``saddles`` (``(m, dim)`` each, the
@@ -114,11 +126,7 @@ def saddle_lifetimes(system, params, integrator, partition: FinePartition, saddl
                              jnp.asarray(bound, jnp.float64))
             now = np.asarray(left)
             stage_left[now & (stage_left == 0)] = stage
-        kappa, err = escape_rate(stage_left, SADDLE_STAGES, stage_periods)
-        # (kappa inf: every point left within the burn-in, a lifetime too short to measure)
-        lifetime = math.nan if math.isinf(kappa) else 1.0 / kappa if kappa > 0 else math.inf
-        out.append(ChaoticSaddle(points=cloud, lifetime=lifetime,
-                                 lifetime_error=err / kappa**2 if kappa > 0 and math.isfinite(kappa) else math.nan,
-                                 starts=SADDLE_STARTS, periods=SADDLE_STAGES * stage_periods,
+        lifetime, error = mean_lifetime(*escape_rate(stage_left, SADDLE_STAGES, stage_periods))
+        out.append(ChaoticSaddle(points=cloud, lifetime=lifetime, lifetime_error=error, starts=SADDLE_STARTS, periods=SADDLE_STAGES * stage_periods,
                                  left=float(np.mean(stage_left > 0))))
     return tuple(out)
