@@ -302,20 +302,21 @@ def test_without_the_longer_run_the_transient_leaves_cells_unresolved():
     assert cut.n_unresolved >= 0.3 * cut.n_cells
 
 
-@pytest.mark.slow  # about 3 min on one core: to whichever worker is free (its file's other tests run elsewhere)
+@pytest.mark.slow  # about 2 min on one core: to whichever worker is free (its file's other tests run elsewhere)
 @pytest.mark.spread
 def test_backlash_scan_leaves_no_value_unresolved_and_one_type_per_attractor():
-    """The backlash scan of the paper preset from 1.0 to 3.0 in steps of 0.05 on 10 x 6 x 12
-    cells (a basin sweep): no value leaves more than 1 % of its cells unresolved (b = 1.15,
-    a long chaotic transient, left 60 % before saddle_periods), and the chaotic attractor
-    that the sweep follows from about b = 1.2 to 2.7 keeps one type, chaotic, at every value."""
-    values = np.round(np.arange(1.0, 3.0001, 0.05), 10)
+    """The backlash scan of the paper preset from 1.0 to 3.0 in steps of 0.1, and b = 1.15,
+    on 10 x 6 x 12 cells (a basin sweep): no value leaves more than 1 % of its cells
+    unresolved (b = 1.15, a long chaotic transient, left 60 % before saddle_periods), and the
+    chaotic attractor that the sweep follows from about b = 1.2 to 2.7 keeps one type,
+    chaotic, at every value."""
+    values = np.union1d(np.round(np.arange(1.0, 3.0001, 0.1), 10), [1.15])
     s = jaxgear.basin_sweep(jaxgear.REDUCED, jaxgear.paper_params(), "b", values, jaxgear.CellGrid.paper((10, 6, 12)),
                             runner=jaxgear.Runner(progress=False), uncertainty=0)
     assert np.all(s.unresolved_share <= 0.01), dict(zip(values[s.unresolved_share > 0.01],
                                                         s.unresolved_share[s.unresolved_share > 0.01]))
     kinds = np.asarray(s.attractor_type)
-    band = [g for g in range(s.shares.shape[1]) if np.sum(s.present[:, g] & (kinds[:, g] == AttractorType.CHAOTIC)) >= 10]
+    band = [g for g in range(s.shares.shape[1]) if np.sum(s.present[:, g] & (kinds[:, g] == AttractorType.CHAOTIC)) >= 6]
     assert band, "no chaotic attractor followed over the band"
     for g in band:
         at = s.present[:, g]
