@@ -89,25 +89,3 @@ def test_a_candidate_is_characterised_by_one_program_for_every_pool_size():
         q = jg.analyze_global(jg.DUFFING, chaotic, large, method=jg.Direct(integrator=jg.RK4(58), pilot=0),
                               progress=False, uncertainty=0)
     assert any(a.period == 0 for a in q.attractors) and len(pools) >= 1 and again == [], (pools, again)
-
-
-def test_candidates_are_looked_for_once_every_few_rounds(monkeypatch):
-    """A round looks for a candidate only when its number is a multiple of
-    ``CANDIDATE_EVERY`` (the draining pool's slow transients had one in every round, each a
-    cloud of hundreds of periods): every stop of the chaotic Duffing's analysis is at such a
-    round, and the chaotic attractor is still found."""
-    from jaxgear.analysis import _lanes, _placement
-
-    stops = []
-    characterise = _placement.OneDevice.characterise
-
-    def recorded(self, s, *args):
-        stops.append(int(s.rounds))
-        return characterise(self, s, *args)
-
-    monkeypatch.setattr(_placement.OneDevice, "characterise", recorded)
-    chaotic = jg.DuffingParams(delta=0.15, alpha=-1.0, beta=1.0, gamma=0.3, omega=1.0)
-    r = jg.analyze_global(jg.DUFFING, chaotic, jg.CellGrid.box([(-2, 2), (-2, 2)], (16, 16)),
-                          method=jg.Direct(integrator=jg.RK4(58)), progress=False, uncertainty=0)
-    assert any(a.period == 0 for a in r.attractors)
-    assert stops and all(k % _lanes.CANDIDATE_EVERY == 0 for k in stops), stops

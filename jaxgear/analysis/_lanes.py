@@ -26,10 +26,9 @@ Attractors that never repeat a point (quasi-periodic, chaotic) are found by recu
 on a fine partition of the state space (:mod:`jaxgear.analysis._recurrence`, Datseris &
 Wagemakers 2022) when the pool is given :class:`Boxes`: every period a lane's point
 looks up its box in a device hash table of the known attractors' boxes and counts its
-consecutive hits on one attractor (enough hits decide it); once every
-:data:`CANDIDATE_EVERY` rounds the oldest lane still undecided after ``transient``
-periods, and not approaching a cycle (its repetition errors within a box and shrinking),
-is the candidate. The round stops there
+consecutive hits on one attractor (enough hits decide it); once per round the oldest
+lane still undecided after ``transient`` periods, and not approaching a cycle (its
+repetition errors within a box and shrinking), is the candidate. The round stops there
 (:class:`Phase`): the pool's program returns, and a program of its own with no lane axis
 (:func:`characterise`: one for every pool size, and most of the recurrence machinery's
 code, so the pool's programs stay small) integrates a cloud of its trajectory; the next
@@ -99,16 +98,6 @@ more often loses more to its cost than it saves)."""
 
 MOVE_CHUNK = 1024
 """Lanes moved per step of a compaction (:func:`compact`)."""
-
-CANDIDATE_EVERY = 4
-"""A round looks for a candidate for a new attractor of boxes only when its number is a
-multiple of this (every 20 periods with the default ``round_periods``). A candidate's
-cloud is one short batch integrated for hundreds of periods: on a CPU it costs as much as
-several rounds of a draining pool, and most candidates are slow transients that approach
-a cycle within the cloud's first stage. A lane is retried only ``transient`` periods
-after its last try anyway, so this delays an attractor of boxes by at most a few rounds
-(with a candidate in every round, the paper preset's analysis and its label uncertainty
-characterised 137, all rejected: about 1.5 s of a 7.6 s call; 44 now, 0.5 s)."""
 
 
 class Boxes(eqx.Module):
@@ -578,8 +567,7 @@ def _choose_candidate(o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes,
     """The round's candidate for a new attractor of boxes (at most one in the pool): the
     oldest live undecided lane past the transient (and as long since its last try), in no
     run of box hits, not recurring and not approaching a cycle (among the oldest such lanes,
-    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`), in a round whose number is a
-    multiple of :data:`CANDIDATE_EVERY`. With one, the round stops there
+    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`). With one, the round stops there
     (``Phase.CANDIDATE``) to have it characterised (:func:`characterise`)."""
     opt, part = boxes.options, boxes.partition
     M = o.max_period
@@ -587,7 +575,6 @@ def _choose_candidate(o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes,
                 & (s.age - s.tried >= opt.transient) & (s.hits == 0)
                 & (s.age < o.max_periods))  # past it, a lane on a chaotic saddle has been tried often enough
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
-    found = found & (s.rounds % CANDIDATE_EVERY == 0)
     return s._replace(phase=jnp.where(found, Phase.CANDIDATE, s.phase).astype(jnp.int32),
                       candidate=jnp.asarray(l0, jnp.int32), cand_y=s.Y[:, l0], cand_row=s.row[l0])
 
