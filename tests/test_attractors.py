@@ -399,8 +399,8 @@ def _check_one_torus(r, omega):
     assert len(pts) > 500 and np.all((1.8 < radius) & (radius < 2.2))
     ang = np.sort(np.arctan2(pts[:, 1], pts[:, 0]))
     assert np.max(np.diff(np.concatenate([ang, [ang[0] + 2 * np.pi]]))) < 0.1  # no gap: the whole curve
-    # a curve of the map: Kaplan-Yorke dimension 1 (lambda_1 = 0) or 0 (lambda_1 < 0 by round-off)
-    assert a.kaplan_yorke == (pytest.approx(1.0, abs=1e-6) if lam[0] >= 0 else 0.0)
+    # a curve of the map: Kaplan-Yorke dimension 1 (lambda_1 = 0, to its error) or 0 (lambda_1 < 0 by round-off)
+    assert a.kaplan_yorke == (pytest.approx(1.0, abs=max(1e-6, 3 * err[0] / abs(lam[1]))) if lam[0] >= 0 else 0.0)
 
 
 VDP_GRID = jaxgear.CellGrid.box([(-3.0, 3.0), (-3.0, 3.0)], [4, 4])  # (no cell centre at the origin)
@@ -416,6 +416,24 @@ def test_unlocked_van_der_pol_is_quasi_periodic():
     rho = _rotation_number(omega)
     assert abs(rho - GOLDEN) < 1e-5
     q = np.arange(1, 101)
+    assert np.min(np.abs(rho * q - np.round(rho * q))) > 1e-3
+    r = jaxgear.analyze_global(VAN_DER_POL, VanDerPolParams(mu=VDP_MU, F=VDP_F, omega=omega), VDP_GRID, METHOD,
+                               progress=False, uncertainty=0)
+    _check_one_torus(r, omega)
+
+
+@pytest.mark.parametrize("omega", [1.617, GOLDEN])
+def test_torus_at_a_generic_frequency_is_found(omega):
+    """The same oscillator at forcing frequencies next to the unlocked one (1.617) and at
+    the golden mean itself (0.618, a torus that wraps slowly: its curve crosses about 280
+    boxes): one quasi-periodic attractor takes every cell, as at the neighbouring value of
+    :func:`test_unlocked_van_der_pol_is_quasi_periodic`. A torus keeps a candidate's copies
+    together, so its first cloud came back to only 55-70 % of its boxes (below
+    accept_share) and every cell was left unresolved; the continuation of such a cloud
+    (jaxgear.analysis._cloud.CONTINUE_SHARE) finds it. Rotation number (scipy) off every
+    p/q with q <= 20, so the motion is not a locked cycle."""
+    rho = _rotation_number(omega)
+    q = np.arange(1, 21)
     assert np.min(np.abs(rho * q - np.round(rho * q))) > 1e-3
     r = jaxgear.analyze_global(VAN_DER_POL, VanDerPolParams(mu=VDP_MU, F=VDP_F, omega=omega), VDP_GRID, METHOD,
                                progress=False, uncertainty=0)

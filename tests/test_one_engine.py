@@ -31,7 +31,7 @@ the count of decided cells."""
 LOOPS = {"while_loop", "fori_loop"}
 NOT_OVER_LANES = {
     ("_boxes.py", "insert"): "one insertion after the other over the distinct keys",
-    ("_cloud.py", "attractor_cloud"): "the stages of one candidate's cloud",
+    ("_cloud.py", "staged_cloud"): "the stages of one candidate's cloud",
 }
 """The loops of the recurrence modules, none over the lanes of a pool."""
 MAIN_LOOP = re.compile(r"kernel|refill|decide|rounds?$|period$|main|register|characteri[sz]e", re.I)

@@ -66,6 +66,7 @@ from .._batching import power_of_two_at_least
 from ._boxes import CellTable, FinePartition, empty_table, insert, lookup, row_keys, track_hits
 from ._cloud import (
     CLOUD_STAGES,
+    CONTINUE_SHARE,
     attractor_cloud,
     escaped,
     flat_cloud,
@@ -74,6 +75,7 @@ from ._cloud import (
     oldest_off_cycle,
     overlap_shares,
     recurrence_share,
+    staged_cloud,
     verification_starts,
     verify_length,
 )
@@ -611,7 +613,9 @@ def with_candidate(s: PoolState, c: Candidate) -> PoolState:
 def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Candidate) -> Candidate:
     """A round's candidate (at ``Phase.CANDIDATE``, else ``c`` unchanged). Its cloud
     (:func:`~jaxgear.analysis._cloud.attractor_cloud`, staged, stopped on a cycle or
-    an escape) is accepted when it recurs in its own boxes; it then joins the attractor of
+    an escape) is accepted when it recurs in its own boxes (a cloud that falls short of
+    ``accept_share`` by little, as on a torus, is continued once:
+    :data:`~jaxgear.analysis._cloud.CONTINUE_SHARE`); it then joins the attractor of
     boxes (or the saddle) of its value that it overlaps, or takes a new slot; its boxes
     enter the table and the lane takes the attractor's label (its cloud's periods are
     charged to it).
@@ -639,7 +643,16 @@ def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Ca
         cloud, ran = attractor_cloud(system, p0, integrator, c.y, periods=P, lanes=opt.cloud_lanes,
                                      key=jax.random.fold_in(jax.random.PRNGKey(0), c.rounds), stages=CLOUD_STAGES,
                                      stop=stop)
-        ok = (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (recurrence_share(part, cloud) >= opt.accept_share)
+        share = recurrence_share(part, cloud)
+        longer = ((ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share < opt.accept_share)
+                  & (share >= CONTINUE_SHARE))
+
+        def continued(_):  # a torus's copies stay together: the continuation against the whole cloud
+            more, extra = staged_cloud(system, p0, integrator, cloud[-1], periods=P, stages=CLOUD_STAGES, stop=stop)
+            return more, ran + extra, recurrence_share(part, jnp.concatenate([cloud, more]))
+
+        cloud, ran, share = jax.lax.cond(longer, continued, lambda _: (cloud, ran, share), None)
+        ok = (ran == jnp.where(longer, 2 * P, P)) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share >= opt.accept_share)
         second = flat_cloud(cloud[P // 2:])  # (dim, m)
         second_keys = row_keys(part, second, jnp.full(second.shape[1], v0, jnp.int32), V)
         over = overlap_shares(c.table, second_keys, A)
