@@ -749,3 +749,27 @@ def test_a_smooth_basin_boundary_has_uncertainty_exponent_one():
     u = label_uncertainty(DUFFING, p, grid, r.labels, r.attractors, method, samples=grid.n_cells, perturbation=10.0)
     assert u.alpha_reason is None and u.alpha_range[1] >= 999 * u.alpha_range[0], u
     assert abs(u.alpha - 1.0) <= 3 * u.alpha_error and u.alpha_error < 0.2, u
+
+
+@pytest.mark.slow  # about 25 s on 2 cores: an analysis and two label uncertainties of the gear model
+def test_label_uncertainty_looks_for_no_new_set_where_the_result_has_none(monkeypatch):
+    """A result with cycles only and no chaotic saddle (the paper preset on 10 x 6 x 12
+    cells): the label uncertainty's pools choose no candidate for a new attractor of boxes
+    once they are told the result's saddles (none), and give the labels of the pools that
+    look for one, whose every candidate there is a slow transient with a rejected cloud:
+    the same step and start fractions."""
+    from jaxgear.analysis import _placement, label_uncertainty
+
+    p, grid = jaxgear.paper_params(), jaxgear.CellGrid.paper((10, 6, 12))
+    r = jaxgear.analyze_global(jaxgear.REDUCED, p, grid, progress=False, uncertainty=0)
+    assert r.attractors and all(0 < a.period <= r.method.max_period for a in r.attractors) and not r.saddles
+    calls = []
+    characterise = _placement.OneDevice.characterise
+    monkeypatch.setattr(_placement.OneDevice, "characterise", lambda self, *a: calls.append(1) or characterise(self, *a))
+    looking = label_uncertainty(jaxgear.REDUCED, p, grid, r.labels, r.attractors, r.method, samples=256)
+    n_looking = len(calls)
+    calls.clear()
+    told = label_uncertainty(jaxgear.REDUCED, p, grid, r.labels, r.attractors, r.method, samples=256,
+                             saddles=r.saddles)
+    assert n_looking > 0 and calls == []
+    assert (told.step, told.start_fractions) == (looking.step, looking.start_fractions)

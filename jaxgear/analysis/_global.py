@@ -122,7 +122,7 @@ def with_label_uncertainty(result: GlobalResult, system, params, method: Abstrac
     ``method``, the method that produced the result)."""
     direct = Direct.like(method)
     u = label_uncertainty(system, params, result.grid, result.labels, result.attractors, direct, samples=samples,
-                          progress=progress)
+                          saddles=result.saddles, progress=progress)
     return dataclasses.replace(result, uncertainty=u)
 
 
@@ -161,7 +161,7 @@ def analyze_global_values(system: ForcedSystem, params_list, grid: CellGrid, met
     if uncertainty and pooled:
         us = label_uncertainties(system, [params_list[i] for i in pooled], grid, [results[i].labels for i in pooled],
                                  [results[i].attractors for i in pooled], Direct.like(method), samples=uncertainty,
-                                 progress=progress)
+                                 saddles_list=[results[i].saddles for i in pooled], progress=progress)
         for i, u in zip(pooled, us):
             results[i] = dataclasses.replace(results[i], uncertainty=u)
     for i in pooled:

@@ -20,9 +20,18 @@ result's attractors as the known ones:
   fractal one. It is fitted over the scaling range of :func:`~jaxgear.scaling_range`
   (moves well below a cell, where ``f`` has not saturated), or not at all: NaN with the
   reason ``"no scaling range: ..."``.
+
+The pools know every attractor of the result. Where the result has no attractor found by
+its boxes (quasi-periodic, chaotic, or a cycle longer than ``max_period``) and no chaotic
+saddle, they look for no new attractor of boxes (no lane becomes a candidate,
+:func:`~jaxgear.analysis._lanes.characterise`): each candidate there is a slow
+transient whose cloud is rejected, which changes no label but costs a cloud (about a
+third of the pools' time on the paper preset).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -46,7 +55,7 @@ size, where ``f(eps)`` saturates)."""
 
 def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attractors, direct, *,
                       samples: int = DEFAULT_SAMPLES, perturbation: float = DEFAULT_PERTURBATION, seed: int = 0,
-                      progress: bool = False) -> LabelUncertainty:
+                      saddles=None, progress: bool = False) -> LabelUncertainty:
     """The label uncertainty of a result (see the module): a
     :class:`~jaxgear.analysis.LabelUncertainty` with ``samples``, ``step`` and ``start``
     (shares of the sampled cells whose label changes), ``perturbation`` (cell widths),
@@ -59,17 +68,21 @@ def label_uncertainty(system, params, grid: CellGrid, labels: np.ndarray, attrac
         attractors: the result's :class:`~jaxgear.analysis.Attractor` objects.
         direct: the :class:`~jaxgear.Direct` method whose pool and options are used (its
             integrator is the result's).
+        saddles: the result's chaotic saddles (``GlobalResult.saddles``), or ``None`` (not
+            known: new attractors of boxes are looked for, see the module).
     """
     return label_uncertainties(system, [params], grid, [labels], [attractors], direct, samples=samples,
-                               perturbation=perturbation, seed=seed, progress=progress)[0]
+                               perturbation=perturbation, seed=seed, saddles_list=None if saddles is None else [saddles],
+                               progress=progress)[0]
 
 
 def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attractors_list, direct, *,
                         samples: int = DEFAULT_SAMPLES, perturbation: float = DEFAULT_PERTURBATION, seed: int = 0,
-                        progress: bool = False) -> list[LabelUncertainty]:
+                        saddles_list=None, progress: bool = False) -> list[LabelUncertainty]:
     """:func:`label_uncertainty` of several results on one grid (one per parameter set of
-    ``params_list``), each pool run once for all of them: one per result, each
-    equal to :func:`label_uncertainty` of that result alone."""
+    ``params_list``; ``saddles_list``: the saddles of each, or ``None``), each pool run once
+    for all of them: one per result, each equal to :func:`label_uncertainty` of that result
+    alone."""
     check_int(samples, "samples", 1)
     check_number(perturbation, "perturbation", 0)
     n = grid.n_cells
@@ -92,6 +105,10 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
     idss = [np.array([a.id for a in atts if 0 <= int(a.period) <= direct.max_period], dtype=np.int64)
             for atts in attractors_list]
     boxes = direct.boxes(grid.centres())
+    if boxes is not None and not _sets_of_boxes(attractors_list, saddles_list, direct.max_period):
+        # no lane past max_periods is a candidate: none is (see the module)
+        boxes = dataclasses.replace(boxes, options=dataclasses.replace(boxes.options,
+                                                                       transient=direct.pool_options().max_periods))
 
     def relabel(X, integrator, name, like=0):
         """The labels of the states ``X`` under every value (one pool), in the result's ids."""
@@ -127,3 +144,11 @@ def label_uncertainties(system, params_list, grid: CellGrid, labels_list, attrac
                                     perturbations=tuple(float(e) for e in scales),
                                     start_fractions=tuple(float(x) for x in f), **fit))
     return out
+
+
+def _sets_of_boxes(attractors_list, saddles_list, max_period: int) -> bool:
+    """Whether a result may hold a set the pools find by its boxes: an attractor of period
+    0 or above ``max_period`` (found by its boxes), a chaotic saddle, or saddles not known."""
+    if saddles_list is None or any(len(s) for s in saddles_list):
+        return True
+    return any(int(a.period) == 0 or int(a.period) > max_period for atts in attractors_list for a in atts)
