@@ -643,16 +643,18 @@ def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Ca
         cloud, ran = attractor_cloud(system, p0, integrator, c.y, periods=P, lanes=opt.cloud_lanes,
                                      key=jax.random.fold_in(jax.random.PRNGKey(0), c.rounds), stages=CLOUD_STAGES,
                                      stop=stop)
-        share = recurrence_share(part, cloud)
-        longer = ((ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share < opt.accept_share)
-                  & (share >= CONTINUE_SHARE))
+        def ran_out(cloud, ran):  # to its end, its last stage off a cycle
+            return (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:])
+
+        whole, share = ran_out(cloud, ran), recurrence_share(part, cloud)
+        longer = whole & (share < opt.accept_share) & (share >= CONTINUE_SHARE)
 
         def continued(_):  # a torus's copies stay together: the continuation against the whole cloud
             more, extra = staged_cloud(system, p0, integrator, cloud[-1], periods=P, stages=CLOUD_STAGES, stop=stop)
-            return more, ran + extra, recurrence_share(part, jnp.concatenate([cloud, more]))
+            return more, ran + extra, ran_out(more, extra), recurrence_share(part, jnp.concatenate([cloud, more]))
 
-        cloud, ran, share = jax.lax.cond(longer, continued, lambda _: (cloud, ran, share), None)
-        ok = (ran == jnp.where(longer, 2 * P, P)) & ~stop(cloud[P - P // CLOUD_STAGES:]) & (share >= opt.accept_share)
+        cloud, ran, whole, share = jax.lax.cond(longer, continued, lambda _: (cloud, ran, whole, share), None)
+        ok = whole & (share >= opt.accept_share)
         second = flat_cloud(cloud[P // 2:])  # (dim, m)
         second_keys = row_keys(part, second, jnp.full(second.shape[1], v0, jnp.int32), V)
         over = overlap_shares(c.table, second_keys, A)
