@@ -45,7 +45,14 @@ from ._gearset import GearSet
 from ._io import save_result
 from ._model import nplanet_switching, reduced_switching
 from ._params import GearParams, params_to_dict
-from ._poincare import LOCATE_BISECTIONS, locate_sign_changes, sample_trajectory, stroboscopic_map, stroboscopic_orbit
+from ._poincare import (
+    LOCATE_BISECTIONS,
+    locate_sign_changes,
+    one_period,
+    sample_trajectory,
+    stroboscopic_map,
+    stroboscopic_orbit,
+)
 from ._system import ForcedSystem, check_system
 from ._version import __version__
 from .analysis import Attractor
@@ -451,9 +458,8 @@ class _Stretch:
 
 
 def _small_batch(X: np.ndarray) -> np.ndarray:
-    """The starts ``X (n, dim)`` padded to the analysis's small batches
-    (:data:`~jaxgear._batching.SMALL_BATCH`): the cycles' samples share the compiled
-    program of the section points."""
+    """The starts ``X (n, dim)`` padded to a power of two of at least
+    :data:`~jaxgear._batching.SMALL_BATCH` rows (one compiled shape for a few starts)."""
     return pad_rows(X, power_of_two_at_least(len(X), SMALL_BATCH))
 
 
@@ -629,9 +635,12 @@ def gear_views(system: ForcedSystem, params, attractors, gear_set: GearSet | Non
         # one period from every point of every cycle, one batch; a cycle's stretch is its k
         # periods end to end (each ends on the next point to the cycle's residual)
         X = np.concatenate([starts[i] for i in cyc])
-        ts, xs = sample_trajectory(system, params, _small_batch(X), periods=1,
-                                   samples_per_period=s, integrator=integrator)
-        ts, xs = np.asarray(ts), np.asarray(xs)
+        if integrator.crossing_stepper is integrator and int(integrator.steps_per_period) == s:
+            ts, xs, _ = one_period(system, params, X, integrator)  # one sample per step: the analysis's program
+        else:
+            ts, xs = sample_trajectory(system, params, _small_batch(X), periods=1,
+                                       samples_per_period=s, integrator=integrator)
+            ts, xs = np.asarray(ts), np.asarray(xs)
         T = float(ts[-1] - ts[0])
         row = 0
         for i in cyc:

@@ -6,7 +6,9 @@
 - :func:`section_map` — the paper's hyperplane section Σ = {x_i = 0}: integrate whole
   periods, then on to the next crossing of Σ in a chosen direction, located to
   round-off by a safeguarded Newton iteration on the length of the last step;
-- :func:`sample_trajectory` — dense samples over some periods, for figures.
+- :func:`sample_trajectory` — dense samples over some periods, for figures;
+- :func:`one_period` — one period from each of a few states: the samples at every step
+  and the map's Jacobian, what the points of a cycle need.
 
 All take states of shape ``(..., dim)`` (any batch), parameters as a pytree (a change
 of value does not recompile), an integrator object (default
@@ -21,16 +23,17 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ._batching import SMALL_BATCH
+from ._batching import SMALL_BATCH, pad_rows, power_of_two_at_least
 from ._checks import check_choice, check_int, check_number
 from ._status import Status
 from ._system import ForcedSystem, check_state_shape
 from .integrate import AbstractIntegrator, batch_field, resolve_integrator
 
 __all__ = ["stroboscopic_map", "stroboscopic_orbit", "section_map", "SectionHit", "sample_trajectory",
-           "section_kernel", "check_periods", "locate_sign_changes", "LOCATE_BISECTIONS"]
+           "one_period", "section_kernel", "check_periods", "locate_sign_changes", "LOCATE_BISECTIONS"]
 
 
 def check_periods(periods, name: str = "periods", minimum: int = 1) -> int:
@@ -258,6 +261,50 @@ def sample_trajectory(system: ForcedSystem, params, x0: Float[ArrayLike, "*batch
     integrator = resolve_integrator(integrator)
     return _sample_kernel(system, params, jnp.asarray(x0, jnp.float64), jnp.asarray(t0, jnp.float64),
                           periods, samples_per_period, integrator)
+
+
+@functools.partial(jax.jit, static_argnames=("system", "integrator"))
+def _one_period_kernel(system, params, X, integrator):
+    """See :func:`one_period`; ``X (n, dim)`` already padded."""
+    n, dim = X.shape
+    Y = jnp.repeat(X, dim, axis=0).T  # (dim, n dim)
+    T = jnp.tile(jnp.eye(dim, dtype=X.dtype), (1, n))  # (dim, n dim): lane i dim + j moves along e_j
+    t0 = jnp.asarray(0.0, jnp.float64)
+    stepper = integrator.crossing_stepper
+
+    def samples(Y):
+        return stepper.trajectory(system, params, Y, t0, 1, int(stepper.steps_per_period))
+
+    if stepper is integrator:  # a fixed-step method: its last sample is P (the steps of `advance`)
+        (ts, Ys), (_, dYs) = jax.jvp(samples, (Y,), (T,))
+        dP = dYs[-1]
+    else:
+        ts, Ys = samples(Y)
+        _, dP = jax.jvp(lambda Y: integrator.advance(system, params, Y, t0, 1), (Y,), (T,))
+    xs = jnp.moveaxis(Ys[:, :, ::dim], 2, 0)  # (n, s + 1, dim): lane i dim is X[i]
+    return ts, xs, dP.T.reshape(n, dim, dim).transpose(0, 2, 1)  # [i, :, j] = d P(X[i]) / d x_j
+
+
+def one_period(system, params, X, integrator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One forcing period from each state of ``X (n, dim)`` (from ``t = 0``), in one
+    compiled program: what the points of a cycle need.
+
+    Returns ``(ts (s + 1,), samples (n, s + 1, dim), jacobians (n, dim, dim))``: the
+    samples at every step of the integrator's ``crossing_stepper`` (``s`` its steps per
+    period; they bracket the section crossings and the contact changes) and ``D P(x)`` of
+    the integrator's one-period stroboscopic map, by forward-mode autodiff (the
+    kink-aware step's derivatives come from its pure-JAX steps: exact at the backlash
+    kinks). Lane ``i dim + j`` starts at ``X[i]`` with the tangent ``e_j`` (the lanes of a
+    batch are independent): the step's derivative is traced once, and for a fixed-step
+    integrator the same ``jax.jvp`` gives the samples and the derivative (its last sample
+    is the map: the steps and step times of ``advance``). The rows are padded to a
+    power of two of at least :data:`~jaxgear._batching.SMALL_BATCH` lanes, so every
+    call of a process with the same integrator shares one program."""
+    X = np.asarray(X, np.float64)
+    n, dim = X.shape
+    rows = pad_rows(X, power_of_two_at_least(n, max(1, SMALL_BATCH // dim)))
+    ts, xs, J = _one_period_kernel(system, params, jax.device_put(rows), integrator)
+    return np.asarray(ts), np.asarray(xs)[:n], np.asarray(J)[:n]
 
 
 LOCATE_BISECTIONS = 48

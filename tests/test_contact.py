@@ -157,9 +157,10 @@ def test_views_of_several_attractors_equal_views_of_each_and_compile_once(p2_vie
     p2 = attractor(P2_POINTS, 2, id=0)
     p2_rot = attractor(P2_POINTS[::-1], 2, id=2)
     jg.gear_views(SPUR, P2_PARAMS, [p2], meshes=spec)  # warm: the programs of one P-2
-    with count_compilations("_sample_kernel") as sampling, count_compilations("_locate") as bisection:
+    with count_compilations("_sample_kernel") as sampling, count_compilations("_one_period") as one, \
+            count_compilations("_locate") as bisection:
         views = jg.gear_views(SPUR, P2_PARAMS, [p1, p2, p2_rot], meshes=spec)
-    assert sampling == [], "a new period compiled a new sampling program"
+    assert sampling == [] and one == [], "a new period compiled a new sampling program"
     assert len(bisection) <= 1, bisection
     assert [v.attractor_id for v in views] == [1, 0, 2]
     one = gear_view(SPUR, P2_PARAMS, p1, meshes=spec)
@@ -170,6 +171,39 @@ def test_views_of_several_attractors_equal_views_of_each_and_compile_once(p2_vie
                           "te_rms", "te_ptp", "force_max"):
                 assert getattr(m, field) == pytest.approx(getattr(r, field), rel=1e-9, abs=1e-12), field
     assert views[1].period == 2 and views[0].period == 1
+
+
+def test_an_analysis_and_the_gear_view_of_its_cycles_share_one_program_of_one_period():
+    """A cycle's section points and Floquet multipliers come from one program (one jvp of a
+    period sampled at every step): an analysis compiles it once, with no separate sampling
+    or derivative program, and the gear view of its cycles (one sample per step of the same
+    integrator) compiles no sampling program of its own."""
+    from tests.conftest import count_compilations
+
+    method = jg.Direct(integrator=jg.RK4(54))  # a step count no other test compiles
+    grid = jg.CellGrid.box([(-1.5, 1.5), (-2, 2)], (8, 8), names=("x", "v"))
+    with count_compilations("_one_period") as one, count_compilations("_sample_kernel") as sampling:
+        r = jg.analyze_global(SPUR, P2_PARAMS, grid, method=method, progress=False, uncertainty=0)
+    cycles = [a for a in r.attractors if a.period > 0]
+    assert cycles and all(len(a.section_points) for a in cycles)
+    assert len(one) == 1 and sampling == [], (one, sampling)
+    spec = MeshSpec(force=spur_force, static_force=0.1)
+    with count_compilations("_one_period") as again, count_compilations("_sample_kernel") as sampling:
+        views = jg.gear_views(SPUR, P2_PARAMS, cycles, meshes=spec, samples_per_period=54,
+                              integrator=method.integrator)
+    assert again == [] and sampling == [] and len(views) == len(cycles), (again, sampling)
+    from jaxgear._poincare import one_period  # its samples: those of sample_trajectory, its last one P
+
+    X = np.asarray(cycles[0].points)
+    ts, xs, J = one_period(SPUR, P2_PARAMS, X, method.integrator)
+    t_ref, x_ref = jg.sample_trajectory(SPUR, P2_PARAMS, X, samples_per_period=54, integrator=method.integrator)
+    np.testing.assert_allclose(ts, t_ref, rtol=1e-15)
+    np.testing.assert_allclose(xs, x_ref, rtol=1e-12, atol=1e-13)
+    h = 1e-6  # and the Jacobian: central differences of the map
+    fd = [(jg.stroboscopic_map(SPUR, P2_PARAMS, X[0] + h * e, integrator=method.integrator)
+           - jg.stroboscopic_map(SPUR, P2_PARAMS, X[0] - h * e, integrator=method.integrator)) / (2 * h)
+          for e in np.eye(2)]
+    np.testing.assert_allclose(J[0], np.stack(fd, axis=1), rtol=1e-6, atol=1e-8)
 
 
 def test_aperiodic_run_of_the_gear_model_reads_design_forces_and_units():

@@ -32,7 +32,7 @@ from ._diagnostics import warn_if_unreliable
 from ._direct import Direct
 from ._fractal import basin_entropy
 from ._method import AbstractGlobalMethod, method_from_name
-from ._orbits import exact_cycle_multipliers, long_cycles, section_points_of
+from ._orbits import cycle_sections_and_multipliers, long_cycles
 from ._result import SINK, UNRESOLVED, Attractor, GlobalResult
 from ._tori import joined_tori
 from ._uncertainty import DEFAULT_SAMPLES, label_uncertainties, label_uncertainty
@@ -354,11 +354,10 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
         out_labels[labels == old] = new
     sec_idx = _section_index(system, method)
     attractors = []
-    secs = section_points_of(system, params, [raw[old][0] if raw[old][1] > 0 else np.zeros((0, system.dim))
-                                              for old in order], method.integrator, sec_idx, method.direction)
     periodic = [old for old in order if raw[old][1] > 0]
-    mults = dict(zip(periodic, exact_cycle_multipliers(system, params, [raw[old][:2] for old in periodic],
-                                                       method.integrator)))
+    secs, mults = cycle_sections_and_multipliers(system, params, [raw[old][0] for old in periodic],
+                                                 method.integrator, sec_idx, method.direction)
+    secs, mults = dict(zip(periodic, secs)), dict(zip(periodic, mults))
     mus = {old: float(np.abs(m).max()) if np.all(np.isfinite(m)) else np.inf for old, m in mults.items()}
     kinds, spectra = attractor_exponents(system, params, [raw[old][:2] for old in order], method.integrator,
                                          [mults.get(old) for old in order])
@@ -369,7 +368,7 @@ def _assemble(system, params, grid, method, labels, raw, cycles, mean_periods, r
                              saddles=saddles)
     for new, old in enumerate(order):
         pts, per, res = raw[old]
-        sec = secs[new]
+        sec = secs.get(old, np.zeros((0, system.dim)))
         attractors.append(Attractor(id=new, period=int(per), points=np.asarray(pts, dtype=float),
                                     section_points=np.asarray(sec, dtype=float), cell_count=int(counts[old]),
                                     share=float(counts[old]) / n, residual=float(res),

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import functools
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._batching import SMALL_BATCH, pad_rows, power_of_two_at_least
-from .._poincare import LOCATE_BISECTIONS, locate_sign_changes, sample_trajectory, stroboscopic_orbit
+from .._poincare import LOCATE_BISECTIONS, locate_sign_changes, one_period, stroboscopic_orbit
 
-__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "exact_cycle_multipliers", "section_points_of",
-           "advance_states"]
+__all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "cycle_multipliers_of",
+           "cycle_sections_and_multipliers", "advance_states"]
 
 
 def detect_period(orbit: np.ndarray, max_period: int, tol: float) -> np.ndarray:
@@ -138,44 +136,17 @@ def largest_multipliers(system, params, cycles, integrator, max_period: int | No
                      for mu in cycle_multipliers(system, params, cycles, integrator, max_period)])
 
 
-@functools.partial(jax.jit, static_argnames=("system", "integrator"))
-def _period_jacobians(system, params, X, integrator):
-    """``D P(x)`` of the one-period stroboscopic map at each state of ``X (n, dim)``:
-    ``(n, dim, dim)``, by forward-mode autodiff through the integrator (the kink-aware
-    step's derivatives come from its pure-JAX steps: exact at the backlash kinks).
-
-    One ``jax.jvp`` of the batched map: lane ``i dim + j`` starts at ``X[i]`` with the
-    tangent ``e_j`` (the lanes of a batch are independent), so the step's derivative is
-    traced once, without the two ``vmap`` s of ``vmap(jacfwd(.))`` that turn its
-    conditionals into selects (a third of the trace and compile time, equal to round-off)."""
-    n, dim = X.shape
-    Y = jnp.repeat(X, dim, axis=0).T  # (dim, n dim)
-    T = jnp.tile(jnp.eye(dim, dtype=X.dtype), (1, n))  # (dim, n dim): lane i dim + j moves along e_j
-
-    def period(Y):
-        return integrator.advance(system, params, Y, jnp.asarray(0.0), 1)
-
-    _, dY = jax.jvp(period, (Y,), (T,))
-    return dY.T.reshape(n, dim, dim).transpose(0, 2, 1)  # [i, :, j] = d P(X[i]) / d x_j
-
-
-def exact_cycle_multipliers(system, params, cycles, integrator) -> list[np.ndarray]:
-    """The Floquet multipliers of each cycle ``(points (k, dim) in cycle order, k)``: the
-    eigenvalues of the monodromy matrix ``D P(p_(k-1)) ... D P(p_0)`` of the k-fold map, the
-    product of the one-period Jacobians at its points (autodiff, one batch for every point
-    of every cycle: exact to round-off, even for multipliers near 0). Returns one complex
-    ``(dim,)`` array per cycle (``inf`` where not finite)."""
-    if not cycles:
-        return []
-    pts = [np.asarray(p, np.float64).reshape(int(k), -1) for p, k in cycles]
-    X = np.concatenate(pts)
-    rows = _pad_rows(X, max(1, SMALL_BATCH // X.shape[1]))  # the lanes of the samples' batch: one traced step
-    J = np.asarray(_period_jacobians(system, params, jax.device_put(rows), integrator))[: len(X)]
+def cycle_multipliers_of(cycles, jacobians) -> list[np.ndarray]:
+    """The Floquet multipliers of each cycle (``cycles``: point arrays ``(k, dim)`` in cycle
+    order; ``jacobians``: ``D P`` at every point of every cycle, in that order, from
+    :func:`one_period`): the eigenvalues of the monodromy matrix ``D P(p_(k-1)) ... D P(p_0)``
+    of the k-fold map (exact to round-off, even for multipliers near 0). Returns one
+    complex ``(dim,)`` array per cycle (``inf`` where not finite)."""
     out, start = [], 0
-    for p in pts:
+    for p in cycles:
         M = np.eye(p.shape[1])
         for j in range(len(p)):
-            M = J[start + j] @ M
+            M = jacobians[start + j] @ M
         start += len(p)
         out.append(np.linalg.eigvals(M) if np.all(np.isfinite(M)) else np.full(p.shape[1], np.inf + 0j))
     return out
@@ -208,50 +179,49 @@ def cycle_multipliers(system, params, cycles, integrator, max_period: int | None
     return out
 
 
-def section_points_of(system, params, cycles, integrator, index, direction) -> list[np.ndarray]:
-    """Crossings of Σ = {x_index = 0} over the k periods of each periodic orbit (``cycles``:
-    a list of stroboscopic point arrays ``(k, dim)`` in cycle order), in time order:
-    ``[(m, dim)]``. ``direction`` > 0 keeps upward crossings, < 0 downward, 0 both.
+def cycle_sections_and_multipliers(system, params, cycles, integrator, index, direction
+                                   ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The section points and the Floquet multipliers of each periodic orbit (``cycles``: a
+    list of stroboscopic point arrays ``(k, dim)``, ``k >= 1``, in cycle order), from one
+    :func:`one_period` of every point of every cycle.
 
-    Every point of every cycle is integrated one period in one batch with the
-    integrator's fixed-step stepper, one sample per step; each step over which ``x_index``
-    changes sign is bisected to the crossing
-    (:func:`~jaxgear._poincare.locate_sign_changes`, to round-off of the step's length),
-    the programs the gear view's samples and contact changes use."""
+    - Section points: the crossings of Σ = {x_index = 0} over the k periods, in time order,
+      ``(m, dim)`` (``direction`` > 0 keeps upward crossings, < 0 downward, 0 both; none
+      where ``index`` is None or the cycle is not finite). Each step of the samples over
+      which ``x_index`` changes sign is bisected to the crossing
+      (:func:`~jaxgear._poincare.locate_sign_changes`, to round-off of the step's length),
+      the program the gear view's contact changes use.
+    - Multipliers: :func:`cycle_multipliers_of` the cycle's one-period Jacobians, complex
+      ``(dim,)`` (``inf`` where not finite).
+    """
+    if not cycles:
+        return [], []
+    pts = [np.asarray(p, np.float64).reshape(len(p), system.dim) for p in cycles]
+    ts, xs, J = one_period(system, params, np.concatenate(pts), integrator)
+    mults = cycle_multipliers_of(pts, J)
     empty = np.zeros((0, system.dim))
-    if index is None:
-        return [empty for _ in cycles]
-    ok = [len(p) > 0 and bool(np.all(np.isfinite(p))) for p in cycles]
-    rows = [np.asarray(p, np.float64) for p, good in zip(cycles, ok) if good]
-    if not rows:
-        return [empty for _ in cycles]
-    X = np.concatenate(rows)
+    ok = np.concatenate([np.full(len(p), bool(np.all(np.isfinite(p)))) for p in pts])
+    if index is None or not ok.any():
+        return [empty for _ in pts], mults
     stepper, direction = integrator.crossing_stepper, int(np.sign(direction))
-    s = int(stepper.steps_per_period)
-    ts, xs = sample_trajectory(system, params, _pad_rows(X, SMALL_BATCH), periods=1, samples_per_period=s,
-                               integrator=stepper)
-    ts, xs = np.asarray(ts), np.asarray(xs)[: len(X)]  # (n, s + 1, dim)
     g0, g1 = xs[:, :-1, index], xs[:, 1:, index]
     up, down = (g0 < 0) & (g1 >= 0), (g0 > 0) & (g1 <= 0)
-    hits = up if direction > 0 else down if direction < 0 else (up | down)
+    hits = (up if direction > 0 else down if direction < 0 else (up | down)) & ok[:, None]
     lane, step = np.nonzero(hits)  # by state (cycle order), then time
     found = np.zeros((0, system.dim))
     if len(lane):
         n = len(lane)
         size = power_of_two_at_least(n, SMALL_BATCH)
         lp, sp = pad_rows(lane, size), pad_rows(step, size)
-        n_sw = 0 if system.switching is None else int(np.shape(system.switching(0.0, jnp.asarray(X[0]), params))[0])
+        n_sw = 0 if system.switching is None else int(np.shape(system.switching(0.0, jnp.asarray(pts[0][0]),
+                                                                                     params))[0])
         _, Z = locate_sign_changes(system, stepper, LOCATE_BISECTIONS, params, jnp.asarray(ts[sp]),
                                    jnp.asarray(xs[lp, sp]).T, jnp.asarray(ts[sp + 1] - ts[sp]),
                                    jnp.full(size, n_sw + int(index), jnp.int32), jnp.asarray(g0[lp, sp] > 0))
         found = np.array(np.asarray(Z).T[:n])
     found[:, index] = 0.0  # on Σ by definition (the bisection leaves round-off)
-    out, start = [], 0
-    for p, good in zip(cycles, ok):
-        if not good:
-            out.append(empty)
-            continue
-        k = len(p)
-        out.append(found[(lane >= start) & (lane < start + k)])
-        start += k
-    return out
+    sections, start = [], 0
+    for p in pts:
+        sections.append(found[(lane >= start) & (lane < start + len(p))])
+        start += len(p)
+    return sections, mults
