@@ -28,8 +28,9 @@ Wagemakers 2022) when the pool is given :class:`Boxes`: every period a lane's po
 looks up its box in a device hash table of the known attractors' boxes and counts its
 consecutive hits on one attractor (enough hits decide it); once per round the oldest
 lane still undecided after ``transient`` periods, and not approaching a cycle (its
-repetition errors within a box and shrinking), is the candidate. The round stops there
-(:class:`Phase`): the pool's program returns, and a program of its own with no lane axis
+repetition errors within a box and shrinking), is the candidate (none for a while after
+one that was a brief transient). The round stops there (:class:`Phase`): the pool's
+program returns, and a program of its own with no lane axis
 (:func:`characterise`: one for every pool size, and most of the recurrence machinery's
 code, so the pool's programs stay small) integrates a cloud of its trajectory; the next
 call of the pool's program finishes the round. When the cloud recurs in its own boxes it
@@ -229,6 +230,7 @@ class PoolState(NamedTuple):
     clock: jax.Array  # () int32
     attractors: AttractorTable  # the attractor table of each parameter row (value)
     radius: jax.Array  # (V,) capture radius
+    quiet: jax.Array  # (V,) int32 clock before which the value has no candidate (after a brief transient's cloud)
     n_active: jax.Array  # () int32 lanes [0, n_active) may be busy
     overflow: jax.Array  # () bool: a new attractor found no free slot
     rounds: jax.Array  # () int32 rounds run
@@ -315,7 +317,8 @@ def init_pool(L: int, M: int, X, Xrow, attractors: AttractorTable, boxes: Boxes 
         labels=jnp.full(n, NOT_DONE, jnp.int32), used=jnp.zeros(n, jnp.int32), next_cell=take,
         n_done=jnp.asarray(0, jnp.int32), clock=jnp.asarray(0, jnp.int32),
         attractors=attractors._replace(counts=jnp.asarray(attractors.counts, jnp.int32)),
-        radius=jnp.zeros(attractors.n_values, jnp.float64), n_active=take, overflow=jnp.asarray(False),
+        radius=jnp.zeros(attractors.n_values, jnp.float64), quiet=jnp.zeros(attractors.n_values, jnp.int32),
+        n_active=take, overflow=jnp.asarray(False),
         rounds=jnp.asarray(0, jnp.int32), table=_seeded_table(boxes, attractors, M), hit_att=jnp.full(L, -1, jnp.int32),
         hits=jnp.zeros(L, jnp.int32), misses=jnp.zeros(L, jnp.int32), tried=jnp.zeros(L, jnp.int32),
         dropped=jnp.asarray(0, jnp.int32), phase=jnp.asarray(Phase.READY, jnp.int32),
@@ -569,12 +572,13 @@ def _choose_candidate(o: PoolOptions, boxes: Boxes, s: PoolState, lanes: _Lanes,
     """The round's candidate for a new attractor of boxes (at most one in the pool): the
     oldest live undecided lane past the transient (and as long since its last try), in no
     run of box hits, not recurring and not approaching a cycle (among the oldest such lanes,
-    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`). With one, the round stops there
+    :func:`~jaxgear.analysis._cloud.oldest_off_cycle`), of a value not quiet
+    (``PoolState.quiet``: see :func:`characterise`). With one, the round stops there
     (``Phase.CANDIDATE``) to have it characterised (:func:`characterise`)."""
     opt, part = boxes.options, boxes.partition
     M = o.max_period
     eligible = (lanes.live & (label < 0) & (lanes.per > M) & (s.age >= opt.transient)
-                & (s.age - s.tried >= opt.transient) & (s.hits == 0)
+                & (s.age - s.tried >= opt.transient) & (s.hits == 0) & (s.clock >= s.quiet[s.row])
                 & (s.age < o.max_periods))  # past it, a lane on a chaotic saddle has been tried often enough
     l0, found = oldest_off_cycle(eligible, s.age, lambda i: _back(s.hist[:, :, i], s.clock, 0, 2 * M), part.width, M)
     return s._replace(phase=jnp.where(found, Phase.CANDIDATE, s.phase).astype(jnp.int32),
@@ -589,6 +593,8 @@ class Candidate(NamedTuple):
     phase: jax.Array  # () int32 Phase: characterised only at Phase.CANDIDATE
     y: jax.Array  # (dim,) the candidate's state
     row: jax.Array  # () int32 its value
+    clock: jax.Array  # () int32 the pool's clock
+    quiet: jax.Array  # (V,) int32 the pool's quiet clock per value (PoolState.quiet)
     rounds: jax.Array  # () int32 rounds run (its cloud's random key)
     attractors: AttractorTable
     table: CellTable
@@ -600,14 +606,15 @@ class Candidate(NamedTuple):
 
 def candidate_of(s: PoolState) -> Candidate:
     """The pool's candidate (fields of its state: no computation)."""
-    return Candidate(phase=s.phase, y=s.cand_y, row=s.cand_row, rounds=s.rounds, attractors=s.attractors,
-                     table=s.table, overflow=s.overflow, dropped=s.dropped, label=s.cand_label, charge=s.cand_charge)
+    return Candidate(phase=s.phase, y=s.cand_y, row=s.cand_row, clock=s.clock, quiet=s.quiet, rounds=s.rounds,
+                     attractors=s.attractors, table=s.table, overflow=s.overflow, dropped=s.dropped, label=s.cand_label,
+                     charge=s.cand_charge)
 
 
 def with_candidate(s: PoolState, c: Candidate) -> PoolState:
     """The pool with its candidate characterised (``c`` from :func:`characterise`)."""
-    return s._replace(phase=c.phase, attractors=c.attractors, table=c.table, overflow=c.overflow, dropped=c.dropped,
-                      cand_label=c.label, cand_charge=c.charge)
+    return s._replace(phase=c.phase, attractors=c.attractors, quiet=c.quiet, table=c.table, overflow=c.overflow,
+                      dropped=c.dropped, cand_label=c.label, cand_charge=c.charge)
 
 
 def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Candidate) -> Candidate:
@@ -626,7 +633,13 @@ def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Ca
     of them settle on a cycle, escape or reach another known set, it is a chaotic saddle
     (a long transient, not an attractor): its slot is a ``SlotKind.SADDLE``, its
     boxes enter the table (lanes visiting them are no candidates again) and the lane
-    integrates on."""
+    integrates on.
+
+    A cloud that reached a cycle within its first stage was a brief transient: its value
+    has no candidate for as many periods of the pool (``PoolState.quiet``), so a value
+    whose slow cells are many brief transients (the paper preset: 79 such clouds in one
+    analysis, 5 with the quiet periods) does not pay a cloud for each, while a longer
+    transient (a chaotic saddle, whose clouds run longer) keeps its candidates."""
     opt, part = boxes.options, boxes.partition
     M, V = o.max_period, c.attractors.n_values
     mark, saddle = slot_code(SlotKind.BOXES, M), slot_code(SlotKind.SADDLE, M)
@@ -647,6 +660,8 @@ def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Ca
             return (ran == P) & ~stop(cloud[P - P // CLOUD_STAGES:])
 
         whole, share = ran_out(cloud, ran), recurrence_share(part, cloud)
+        S = P // CLOUD_STAGES
+        brief = (ran == S) & near_periodic(part, cloud[:S], M)  # a short transient: on a cycle within one stage
         longer = whole & (share < opt.accept_share) & (share >= CONTINUE_SHARE)
 
         def continued(_):  # a torus's copies stay together: the continuation against the whole cloud
@@ -689,6 +704,7 @@ def characterise(system, params, integrator, o: PoolOptions, boxes: Boxes, c: Ca
             clouds=jnp.where(new, tables.clouds.at[v0, slot].set(pts), tables.clouds),
             counts=tables.counts.at[v0].add(new.astype(jnp.int32)))
         return c._replace(phase=jnp.asarray(Phase.CHARACTERISED, jnp.int32), attractors=tables,
+                          quiet=jnp.where(brief, c.quiet.at[v0].set(c.clock + S), c.quiet),
                           overflow=c.overflow | (ok & ~joins & ~room), table=table, dropped=c.dropped + dropped,
                           label=jnp.where(attractor, slot, -1).astype(jnp.int32),
                           charge=jnp.where(attractor, charged, 0).astype(jnp.int32))
