@@ -39,7 +39,8 @@ class PoolOptions(eqx.Module):
             follows the whole cycle is captured (state units), or ``None``: a quarter of
             the smallest distance between two known attractors' points, at most 1 % of
             their scale.
-        lanes: lanes of the pool (memory is bounded by it).
+        lanes: lanes of the pool (memory is bounded by it); on a CPU at most as many as keep
+            its ring of points in the cache (:func:`~jaxgear.analysis._pool.pool_lanes`).
         pilot: states of the pilot pool that runs first (0: none).
     """
 
