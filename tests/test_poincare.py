@@ -192,8 +192,9 @@ def test_no_recompilation_when_parameter_values_change():
     h2 = jg.section_map(COUNTING, p2, x, periods=1)
     assert TRACES["n"] == n_first
     assert np.all(np.asarray(h2.status) == STATUS_OK)
-    # a new program (here another integrator: cheap to compile) does trace the field: the counter works
-    jg.stroboscopic_map(COUNTING, P, x, periods=1, integrator=jg.RK4(8))
+    # a new program at other shapes (here three states and another integrator: cheap to
+    # compile) does trace the field: the counter works (the field is traced once per shapes)
+    jg.stroboscopic_map(COUNTING, P, X0[:3], periods=1, integrator=jg.RK4(8))
     assert TRACES["n"] > n_first
 
 

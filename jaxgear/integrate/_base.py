@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -43,12 +44,18 @@ def check_steps_per_period(value, name: str = "steps_per_period") -> int:
     return check_int(value, name, 1)
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def batch_field(system, params, t, Y):
     """The vector field on a batch ``Y (dim, n)``: ``dY/dt (dim, n)``.
 
     ``t`` is a scalar (time-only terms, such as the mesh stiffness and errors of the gear
     models, are then computed once for the whole batch) or an ``(n,)`` array (one time
     per lane).
+
+    A ``jit`` of its own, though always called inside a kernel: a step evaluates the field
+    many times at the same shapes (four stages, the kink-aware step's sub-steps), and
+    JAX traces a jitted function once per shapes and reuses it, where a plain function is
+    traced at every call (the compiled kernel inlines it: the same program).
     """
     in_t = None if jnp.ndim(t) == 0 else 0
     return jax.vmap(system.vector_field, in_axes=(in_t, 1, None), out_axes=1)(t, Y, params)

@@ -79,14 +79,17 @@ def _has_breaks(system, params) -> bool:
     return system.time_breaks is not None and jax.eval_shape(system.time_breaks, params).shape[0] > 0
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def _switching(system, params, t, Y):
-    """Switching functions on a batch: ``(m, n)`` (``m = 0`` without any)."""
+    """Switching functions on a batch: ``(m, n)`` (``m = 0`` without any). Jitted, as
+    :func:`~jaxgear.integrate.batch_field` is, so a step traces it once per shapes."""
     if system.switching is None:
         return jnp.zeros((0, Y.shape[1]), Y.dtype)
     in_t = None if jnp.ndim(t) == 0 else 0
     return jax.vmap(system.switching, in_axes=(in_t, 1, None), out_axes=1)(t, Y, params)
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def _switching_rate(system, params, t, Y, F):
     """Time derivative of the switching functions along the flow, ``ds/dt = s_t + s_x f``: ``(m, n)``.
     ``t`` is a scalar (time-only terms and their rates once for the batch) or ``(n,)``."""
@@ -124,6 +127,12 @@ def _field(system, params, t, Y, t_lo=None, t_hi=None, sides=None):
         t = jnp.clip(t, t_lo, t_hi)
     if sides is None or system.piece_field is None:
         return batch_field(system, params, t, Y)
+    return _piece_field(system, params, t, Y, sides)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _piece_field(system, params, t, Y, sides):
+    """The system's ``piece_field`` on a batch (jitted, as :func:`~jaxgear.integrate.batch_field`)."""
     in_t = None if jnp.ndim(t) == 0 else 0
     return jax.vmap(system.piece_field, in_axes=(in_t, 1, None, 1), out_axes=1)(t, Y, params, sides)
 
