@@ -278,9 +278,10 @@ def _one_period_kernel(system, params, X, integrator):
     if stepper is integrator:  # a fixed-step method: its last sample is P (the steps of `advance`)
         (ts, Ys), (_, dYs) = jax.jvp(samples, (Y,), (T,))
         dP = dYs[-1]
-    else:
+    else:  # its `flow` is the map's differentiable form (an adaptive solve's forward-mode adjoint)
         ts, Ys = samples(Y)
-        _, dP = jax.jvp(lambda Y: integrator.advance(system, params, Y, t0, 1), (Y,), (T,))
+        flow = jax.vmap(lambda y: integrator.flow(system, params, y, t0, 1), in_axes=1, out_axes=1)
+        _, dP = jax.jvp(flow, (Y,), (T,))
     xs = jnp.moveaxis(Ys[:, :, ::dim], 2, 0)  # (n, s + 1, dim): lane i dim is X[i]
     return ts, xs, dP.T.reshape(n, dim, dim).transpose(0, 2, 1)  # [i, :, j] = d P(X[i]) / d x_j
 

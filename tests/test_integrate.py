@@ -169,3 +169,21 @@ def test_integrator_validation():
         jg.RK4(0)
     with pytest.raises(ValueError, match="integrator"):
         jg.stroboscopic_map(REDUCED, jg.paper_params(), np.zeros(4), integrator="rk4")
+
+
+def test_an_analysis_with_the_adaptive_integrator_has_its_cycles_multipliers():
+    """``analyze_global`` with ``jg.Adaptive`` (the reference integrator) gives each cycle its
+    Floquet multipliers, from the jvp of its own map's forward-mode solve (the jvp of the
+    reverse-mode solve that ``advance`` runs raised an error). Independent check: the forced
+    Duffing oscillator's two P-1 cycles each have a complex pair of multipliers, whose
+    modulus is ``exp(-delta T / 2)`` by Liouville's formula (the field's divergence is
+    ``-delta``); each cycle crosses the section."""
+    p = jg.DuffingParams(delta=0.1, alpha=1.0, beta=1.0, gamma=0.3, omega=1.4)
+    grid = jg.CellGrid.box([(-3, 3), (-3, 3)], (4, 4))
+    r = jg.analyze_global(jg.DUFFING, p, grid, jg.Direct(integrator=jg.Adaptive(rtol=1e-9, atol=1e-9)),
+                          progress=False, uncertainty=0)
+    assert [a.period for a in r.attractors] == [1, 1]
+    want = np.exp(-0.1 * (2 * np.pi / 1.4) / 2)
+    for a in r.attractors:
+        assert abs(a.multiplier - want) < 1e-7, (a.multiplier, want)
+        assert len(a.section_points) > 0
