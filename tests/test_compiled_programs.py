@@ -89,4 +89,3 @@ def test_a_candidate_is_characterised_by_one_program_for_every_pool_size():
         q = jg.analyze_global(jg.DUFFING, chaotic, large, method=jg.Direct(integrator=jg.RK4(58), pilot=0),
                               progress=False, uncertainty=0)
     assert any(a.period == 0 for a in q.attractors) and len(pools) >= 1 and again == [], (pools, again)
-

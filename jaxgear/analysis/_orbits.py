@@ -213,8 +213,7 @@ def cycle_sections_and_multipliers(system, params, cycles, integrator, index, di
         n = len(lane)
         size = power_of_two_at_least(n, SMALL_BATCH)
         lp, sp = pad_rows(lane, size), pad_rows(step, size)
-        n_sw = 0 if system.switching is None else int(np.shape(system.switching(0.0, jnp.asarray(pts[0][0]),
-                                                                                     params))[0])
+        n_sw = 0 if system.switching is None else jax.eval_shape(system.switching, 0.0, pts[0][0], params).shape[0]
         _, Z = locate_sign_changes(system, stepper, LOCATE_BISECTIONS, params, jnp.asarray(ts[sp]),
                                    jnp.asarray(xs[lp, sp]).T, jnp.asarray(ts[sp + 1] - ts[sp]),
                                    jnp.full(size, n_sw + int(index), jnp.int32), jnp.asarray(g0[lp, sp] > 0))

@@ -63,8 +63,8 @@ same per lane at every size. A GPU keeps the ``lanes`` it is given."""
 
 def pool_lanes(lanes: int, dim: int, max_period: int) -> int:
     """The lanes of a pool given at most ``lanes``: on a CPU no more than
-    :data:`CPU_RING_BYTES` of ring hold (whole thousands of lanes, at least
-    :data:`TAIL_LANES`); ``lanes`` on other platforms."""
+    :data:`CPU_RING_BYTES` of ring hold (a multiple of :data:`TAIL_LANES`, at least one);
+    ``lanes`` on other platforms."""
     if local_devices()[0].platform != "cpu":
         return int(lanes)
     ring = 2 * (2 * int(max_period) + 1) * int(dim) * 8
