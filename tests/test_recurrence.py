@@ -228,6 +228,27 @@ def test_oldest_off_cycle_picks_the_oldest_lane_not_settling():
     lane, found = _cloud.oldest_off_cycle(jnp.arange(L2) >= 8, jnp.asarray(ages2), lambda i: jnp.asarray(ring2)[:, :, i],
                                        width, M)  # now it is among the pool's oldest eligible lanes
     assert bool(found) and int(lane) == L2 - 1
+    # no eligible lane: no candidate, and the lane the search over none would give (the first)
+    lane, found = _cloud.oldest_off_cycle(jnp.zeros(L, bool), jnp.asarray(ages), lambda i: jnp.asarray(ring)[:, :, i],
+                                       width, M)
+    assert not bool(found) and int(lane) == 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_rows_minimum_is_numpy_s_with_ties_infinities_and_nans(seed):
+    """The pool's nearest cycle point per lane (``_min_rows``, one pass over the rows)
+    gives numpy's ``min`` and ``argmin`` over the rows: the first row on ties, a NaN first,
+    rows of infinities (the slots past a cycle's period)."""
+    from jaxgear.analysis._lanes import _min_rows
+
+    rng = np.random.default_rng(seed)
+    d = rng.integers(0, 4, (16, 500)).astype(np.float64)  # many ties
+    d[rng.random(d.shape) < 0.05] = np.nan
+    d[rng.random(d.shape) < 0.2] = np.inf
+    d[:, :3] = np.inf  # a lane with no valid row
+    best, arg = _min_rows(jnp.asarray(d))
+    np.testing.assert_array_equal(np.asarray(best), np.min(d, axis=0))
+    np.testing.assert_array_equal(np.asarray(arg), np.argmin(d, axis=0))
 
 
 def test_overlap_shares_match_clouds_by_boxes():

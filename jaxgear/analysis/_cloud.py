@@ -197,10 +197,16 @@ def oldest_off_cycle(eligible, age, ring, width, max_period: int):
     indices ``(K,)`` giving their last points ``(2 max_period, dim, K)`` newest first (so
     only those lanes' points are read)."""
     K = min(CANDIDATE_POOL, age.shape[0])
-    oldest, lanes = jax.lax.top_k(jnp.where(eligible, age, -1), K)  # oldest first
-    ok = (oldest >= 0) & ~near_cycle_lanes(ring(lanes), width, max_period)
-    j = jnp.argmax(ok)
-    return lanes[j].astype(jnp.int32), ok[j]
+
+    def search(_):
+        oldest, lanes = jax.lax.top_k(jnp.where(eligible, age, -1), K)  # oldest first
+        ok = (oldest >= 0) & ~near_cycle_lanes(ring(lanes), width, max_period)
+        j = jnp.argmax(ok)
+        return lanes[j].astype(jnp.int32), ok[j]
+
+    # in most rounds no lane is eligible (its value quiet, or every lane in its transient or
+    # tried since): no sort of the lanes then (the result is top_k's of no eligible lane)
+    return jax.lax.cond(jnp.any(eligible), search, lambda _: (jnp.int32(0), jnp.asarray(False)), None)
 
 
 SETTLED = 1e-3

@@ -439,6 +439,17 @@ def _lane_status(o: PoolOptions, s: PoolState) -> _Lanes:
     return _Lanes(esc=esc, live=live, per=per, rec=live & (per <= M))
 
 
+def _min_rows(d):
+    """``(jnp.min(d, axis=0), jnp.argmin(d, axis=0))`` of ``d (M, L)`` for a small static
+    ``M``, the first row on ties and a NaN first, as those give them: one elementwise pass
+    over the rows (XLA runs an argmin over the rows as a reduction several times slower)."""
+    best, arg = d[0], jnp.zeros(d.shape[1], jnp.int32)
+    for i in range(1, d.shape[0]):
+        take = (d[i] < best) | (jnp.isnan(d[i]) & ~jnp.isnan(best))
+        best, arg = jnp.where(take, d[i], best), jnp.where(take, i, arg)
+    return best, arg
+
+
 def _cycle_distances(s: PoolState, P, m, k):
     """The largest distance of the lanes' last ``k`` points to the cycle ``P (M, dim)``
     followed back from ``P[m]`` (``m (L,)``: the cycle point nearest the newest point),
@@ -448,15 +459,16 @@ def _cycle_distances(s: PoolState, P, m, k):
     g = s.clock
     kk = jnp.maximum(k, 1)
 
-    def point(j, dists):
-        d_now, d_bef = dists
-        q = jnp.take(P, jnp.mod(m - j, kk), axis=0).T  # (dim, L)
+    def point(j, c):
+        d_now, d_bef, i = c  # i = (m - j) mod k: the cycle point j periods back
+        q = jnp.take(P, i, axis=0).T  # (dim, L)
         w_now = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j, axis=0, keepdims=False)
         w_bef = jax.lax.dynamic_index_in_dim(s.hist, g % H + H - j - k, axis=0, keepdims=False)
-        return jnp.maximum(d_now, _sqdist(w_now, q)), jnp.maximum(d_bef, _sqdist(w_bef, q))
+        return (jnp.maximum(d_now, _sqdist(w_now, q)), jnp.maximum(d_bef, _sqdist(w_bef, q)),
+                jnp.where(i == 0, kk - 1, i - 1))
 
     zero = jnp.zeros(s.cell.shape[0])
-    d_now, d_bef = jax.lax.fori_loop(0, k, point, (zero, zero))
+    d_now, d_bef, _ = jax.lax.fori_loop(0, k, point, (zero, zero, jnp.mod(m, kk)))
     d_now = jnp.where(s.age >= k, jnp.sqrt(d_now), jnp.inf)
     d_bef = jnp.where(s.age >= 2 * k, jnp.sqrt(d_bef), jnp.inf)
     return d_now, d_bef
@@ -472,11 +484,11 @@ def _match_slot(o: PoolOptions, s: PoolState, lanes: _Lanes, v, a, label):
     k = slot_period(s.attractors.codes[v, a], o.max_period)  # 0 for a set of boxes: it is matched by its boxes
     valid = jnp.arange(o.max_period, dtype=jnp.int32) < k
     dn = jnp.where(valid[:, None], jnp.sqrt(_sqdist(s.Y[None], P[:, :, None])), jnp.inf)  # (M, L)
-    m = jnp.argmin(dn, axis=0).astype(jnp.int32)  # the newest point is near P[m] ...
+    d_min, m = _min_rows(dn)  # the newest point is near P[m] ...
     d_now, d_bef = _cycle_distances(s, P, m, k)
     cap = lanes.live & (k > 0) & (d_now <= s.radius[v]) & ((d_now <= d_bef) | ~jnp.isfinite(d_bef))
     scale = 1.0 + jnp.max(jnp.where(valid[:, None], jnp.abs(P), 0.0))
-    same = lanes.rec & (k > 0) & (lanes.per == k) & (jnp.min(dn, axis=0) <= o.merge_tol * scale)
+    same = lanes.rec & (k > 0) & (lanes.per == k) & (d_min <= o.merge_tol * scale)
     hit = cap | same
     if s.attractors.n_values > 1:
         hit = hit & (s.row == v)  # the lanes of value v; a lane's label is a slot of its value's table
