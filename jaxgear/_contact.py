@@ -52,6 +52,7 @@ from ._poincare import (
     sample_trajectory,
     stroboscopic_map,
     stroboscopic_orbit,
+    switching_count,
 )
 from ._system import ForcedSystem, check_system
 from ._version import __version__
@@ -386,7 +387,7 @@ def _layout(system: ForcedSystem, params, x0, meshes: MeshSpec | None) -> _Layou
     if system.switching is None:
         raise ValueError(f"{system.name}: the gear view reads each mesh from the system's switching functions "
                          "(ForcedSystem(switching=...), a pair X - b, X + b per mesh); this system declares none.")
-    n_sw = int(jax.eval_shape(system.switching, 0.0, jnp.asarray(x0), params).shape[0])  # no computation
+    n_sw = switching_count(system, params)
     gear = isinstance(params, GearParams) and system.switching in (reduced_switching, nplanet_switching)
     names: tuple[str, ...]
     if gear and system.switching is reduced_switching:

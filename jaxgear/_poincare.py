@@ -33,7 +33,8 @@ from ._system import ForcedSystem, check_state_shape
 from .integrate import AbstractIntegrator, batch_field, resolve_integrator
 
 __all__ = ["stroboscopic_map", "stroboscopic_orbit", "section_map", "SectionHit", "sample_trajectory",
-           "one_period", "section_kernel", "check_periods", "locate_sign_changes", "LOCATE_BISECTIONS"]
+           "one_period", "section_kernel", "check_periods", "locate_sign_changes", "switching_count",
+           "LOCATE_BISECTIONS"]
 
 
 def check_periods(periods, name: str = "periods", minimum: int = 1) -> int:
@@ -311,6 +312,16 @@ def one_period(system, params, X, integrator) -> tuple[np.ndarray, np.ndarray, n
 LOCATE_BISECTIONS = 48
 """Bisection steps of :func:`locate_sign_changes` by default: the bracket shrinks by
 ``2**48``, to round-off of a step's length."""
+
+
+def switching_count(system, params) -> int:
+    """The number of the system's switching functions (0 without them), from their shape
+    (``jax.eval_shape``: nothing is computed): the index of the coordinate functions in
+    :func:`surfaces`."""
+    if system.switching is None:
+        return 0
+    state = jax.ShapeDtypeStruct((system.dim,), jnp.float64)
+    return int(jax.eval_shape(system.switching, 0.0, state, params).shape[0])
 
 
 def surfaces(system, params, t, Z):

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import SMALL_BATCH, pad_rows, power_of_two_at_least
-from .._poincare import LOCATE_BISECTIONS, locate_sign_changes, one_period, stroboscopic_orbit
+from .._poincare import LOCATE_BISECTIONS, locate_sign_changes, one_period, stroboscopic_orbit, switching_count
 
 __all__ = ["detect_period", "follow", "refine_orbits", "largest_multipliers", "cycle_multipliers", "cycle_multipliers_of",
            "cycle_sections_and_multipliers", "advance_states"]
@@ -213,10 +213,10 @@ def cycle_sections_and_multipliers(system, params, cycles, integrator, index, di
         n = len(lane)
         size = power_of_two_at_least(n, SMALL_BATCH)
         lp, sp = pad_rows(lane, size), pad_rows(step, size)
-        n_sw = 0 if system.switching is None else jax.eval_shape(system.switching, 0.0, pts[0][0], params).shape[0]
         _, Z = locate_sign_changes(system, stepper, LOCATE_BISECTIONS, params, jnp.asarray(ts[sp]),
                                    jnp.asarray(xs[lp, sp]).T, jnp.asarray(ts[sp + 1] - ts[sp]),
-                                   jnp.full(size, n_sw + int(index), jnp.int32), jnp.asarray(g0[lp, sp] > 0))
+                                   jnp.full(size, switching_count(system, params) + int(index), jnp.int32),
+                                   jnp.asarray(g0[lp, sp] > 0))
         found = np.array(np.asarray(Z).T[:n])
     found[:, index] = 0.0  # on Σ by definition (the bisection leaves round-off)
     sections, start = [], 0
